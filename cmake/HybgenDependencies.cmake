@@ -1,0 +1,11 @@
+# Every dependency comes from a Debian package; nothing is downloaded.
+find_package(PkgConfig REQUIRED)
+pkg_check_modules(GINAC REQUIRED IMPORTED_TARGET ginac>=1.8)
+find_package(PNG REQUIRED)
+find_package(OpenMP REQUIRED COMPONENTS CXX)
+find_package(CLI11 REQUIRED)
+find_package(nlohmann_json 3.10 REQUIRED)
+find_package(OpenSSL REQUIRED COMPONENTS Crypto)
+if(HYBGEN_BUILD_TESTS)
+  find_package(GTest REQUIRED)
+endif()

@@ -1,0 +1,32 @@
+#pragma once
+/// \file check.hpp
+/// Stage 2 (check): AST -> Model. Resolves every name, turns expressions into
+/// exact GiNaC expressions, evaluates defaults, and rejects anything wrong with
+/// a located ModelError. Also applies `--set KEY=VALUE` overrides.
+
+#include <string>
+#include <vector>
+
+#include "hybgen/gen/ast.hpp"
+#include "hybgen/gen/model.hpp"
+#include "hybgen/gen/source.hpp"
+
+namespace hybgen::gen {
+
+/// Stage 2: check the AST of `src` and build the Model. Throws ModelError.
+Model check(const ModelAst& ast, const SourceText& src);
+
+/// Apply `KEY=VALUE` overrides: a parameter name, or one of grid, t_end, dt,
+/// method, tol, max_events, and `domain.X=[a,b]`. Throws UsageError.
+void apply_overrides(Model& model, const std::vector<std::string>& sets);
+
+/// The simulation settings `--set` accepts (for help texts and errors).
+const std::vector<std::string>& setting_names();
+
+/// Parse a grid literal such as "75x75" (UsageError if malformed).
+std::vector<long> parse_grid(const std::string& text);
+
+/// Exact rational of a decimal literal ("0.25" -> 1/4, "1e-3" -> 1/1000).
+GiNaC::numeric exact_number(const std::string& literal);
+
+}  // namespace hybgen::gen

@@ -1,0 +1,456 @@
+// Stage 3 (derive): Model -> HybridSystem IR. See derive.hpp for the maths.
+
+#include "hybgen/gen/derive.hpp"
+
+#include <cmath>
+#include <random>
+
+namespace hybgen::gen {
+
+using GiNaC::ex;
+using GiNaC::matrix;
+
+std::size_t expr_size(const ex& e) {
+  std::size_t n = 1;
+  for (std::size_t i = 0; i < e.nops(); ++i) n += expr_size(e.op(i));
+  return n;
+}
+
+ex simplify(const ex& e) {
+  ex best = e;
+  std::size_t best_size = expr_size(e);
+  auto consider = [&](const ex& c) {
+    std::size_t s = expr_size(c);
+    if (s < best_size) best = c, best_size = s;
+  };
+  try {
+    consider(e.expand());
+    if (best_size < 4000) consider(GiNaC::normal(e));
+  } catch (const std::exception&) {
+    // simplification is best effort; the unsimplified expression is exact
+  }
+  return best;
+}
+
+namespace {
+
+/// All symbols occurring in e.
+void collect_symbols(const ex& e, GiNaC::exset& out) {
+  if (GiNaC::is_a<GiNaC::symbol>(e)) {
+    out.insert(e);
+    return;
+  }
+  for (std::size_t i = 0; i < e.nops(); ++i) collect_symbols(e.op(i), out);
+}
+
+}  // namespace
+
+bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
+  if (e.is_zero()) return true;
+  GiNaC::exset syms(symbols.begin(), symbols.end());
+  collect_symbols(e, syms);
+  std::mt19937_64 rng(0x5eed);
+  std::uniform_int_distribution<int> num(-97, 97), den(1, 89);
+  for (int trial = 0; trial < 4; ++trial) {
+    GiNaC::exmap at;
+    for (const auto& s : syms) {
+      int n = num(rng);
+      if (n == 0) n = 13;
+      at[s] = GiNaC::numeric(n, den(rng));
+    }
+    try {
+      ex v = e.subs(at);
+      if (!GiNaC::is_a<GiNaC::numeric>(v)) {
+        GiNaC::Digits = 40;
+        v = GiNaC::evalf(v);
+        GiNaC::Digits = 17;
+        if (!GiNaC::is_a<GiNaC::numeric>(v)) return false;
+        if (GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(v)) > GiNaC::numeric(1, 1000000000) *
+                                                               GiNaC::numeric(1, 1000000000) *
+                                                               GiNaC::numeric(1, 100000))
+          return false;
+      } else if (!GiNaC::ex_to<GiNaC::numeric>(v).is_zero()) {
+        return false;
+      }
+    } catch (const std::exception&) {
+      GiNaC::Digits = 17;
+      continue;  // a pole at this point: try another
+    }
+  }
+  return true;
+}
+
+namespace {
+
+std::vector<ex> jacobian(const std::vector<ex>& f, const std::vector<ex>& x) {
+  std::vector<ex> J;
+  J.reserve(f.size() * x.size());
+  for (const auto& fi : f)
+    for (const auto& xj : x) J.push_back(simplify(fi.diff(GiNaC::ex_to<GiNaC::symbol>(xj))));
+  return J;
+}
+
+ex substitute_state(const ex& e, const std::vector<ex>& from, const std::vector<ex>& to) {
+  GiNaC::exmap m;
+  for (std::size_t i = 0; i < from.size(); ++i) m[from[i]] = to[i];
+  return e.subs(m, GiNaC::subs_options::no_pattern);
+}
+
+std::vector<ex> substitute_state(const std::vector<ex>& es, const std::vector<ex>& from,
+                                 const std::vector<ex>& to) {
+  std::vector<ex> out;
+  for (const auto& e : es) out.push_back(substitute_state(e, from, to));
+  return out;
+}
+
+/// Numeric evaluation at a point with parameters at their defaults.
+class Evaluator {
+ public:
+  explicit Evaluator(const Model& m) : m_(m) {
+    for (const auto& p : m.params) params_[p.symbol] = GiNaC::numeric(p.value_d);
+  }
+  double operator()(const ex& e, const std::vector<double>& x) const {
+    GiNaC::exmap at = params_;
+    for (std::size_t i = 0; i < x.size(); ++i) at[m_.state_symbols[i]] = GiNaC::numeric(x[i]);
+    try {
+      ex v = GiNaC::evalf(e.subs(at));
+      if (!GiNaC::is_a<GiNaC::numeric>(v)) return std::nan("");
+      const auto& n = GiNaC::ex_to<GiNaC::numeric>(v);
+      if (!n.is_real()) return std::nan("");
+      return n.to_double();
+    } catch (const std::exception&) {
+      return std::nan("");
+    }
+  }
+
+ private:
+  const Model& m_;
+  GiNaC::exmap params_;
+};
+
+bool holds(const Condition& c, double v) {
+  if (c.op == "<") return v < 0;
+  if (c.op == "<=") return v <= 0;
+  if (c.op == ">") return v > 0;
+  return v >= 0;
+}
+
+}  // namespace
+
+HybridSystem derive(const Model& m, const SourceText& src) {
+  HybridSystem sys;
+  sys.model = &m;
+  const auto& X = m.state_symbols;
+  const std::size_t n = X.size();
+  std::vector<ex> all_symbols = X;
+  for (const auto& p : m.params) all_symbols.push_back(p.symbol);
+
+  // Modes: vector field and divergence.
+  for (const auto& ms : m.modes) {
+    IrMode mode;
+    mode.name = ms.name;
+    mode.where = ms.where;
+    if (ms.hamiltonian) {
+      const ex& H = *ms.hamiltonian;
+      mode.hamiltonian = H;
+      mode.flow.assign(n, ex(0));
+      for (std::size_t k = 0; k < ms.coordinates.size(); ++k) {
+        auto qi = static_cast<std::size_t>(ms.coordinates[k]);
+        auto pi = static_cast<std::size_t>(ms.momenta[k]);
+        mode.flow[qi] = simplify(H.diff(GiNaC::ex_to<GiNaC::symbol>(X[pi])));
+        mode.flow[pi] = simplify(-H.diff(GiNaC::ex_to<GiNaC::symbol>(X[qi])));
+      }
+    } else {
+      for (const auto& f : ms.flow) mode.flow.push_back(simplify(f));
+    }
+    ex div = 0;
+    for (std::size_t i = 0; i < n; ++i) div += mode.flow[i].diff(GiNaC::ex_to<GiNaC::symbol>(X[i]));
+    mode.divergence = simplify(div);
+    if (is_identically_zero(mode.divergence, all_symbols)) mode.divergence = 0;
+    sys.modes.push_back(std::move(mode));
+  }
+
+  // Guards.
+  for (const auto& gs : m.guards) {
+    IrGuard g;
+    g.name = gs.name;
+    g.from = gs.from;
+    g.to = gs.to;
+    g.direction = gs.direction;
+    g.surface = simplify(gs.surface);
+    for (const auto& xi : X) g.gradient.push_back(simplify(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(xi))));
+    const IrMode& before = sys.modes[static_cast<std::size_t>(gs.from)];
+    const IrMode& after = sys.modes[static_cast<std::size_t>(gs.to)];
+    const std::string where = "guard '" + gs.name + "'";
+
+    // The reset map Δ.
+    switch (gs.reset_kind) {
+      case ResetDecl::Kind::Identity:
+        g.reset = X;
+        break;
+      case ResetDecl::Kind::Explicit:
+        for (const auto& c : gs.reset) g.reset.push_back(simplify(c));
+        break;
+      case ResetDecl::Kind::Elastic:
+      case ResetDecl::Kind::Restitution: {
+        const ModeSpec& ms = m.modes[static_cast<std::size_t>(gs.from)];
+        const ex& H = *ms.hamiltonian;
+        const std::size_t k = ms.momenta.size();
+        std::vector<ex> q, p;
+        for (int i : ms.coordinates) q.push_back(X[static_cast<std::size_t>(i)]);
+        for (int i : ms.momenta) p.push_back(X[static_cast<std::size_t>(i)]);
+        // M⁻¹ = ∂²H/∂p∂p must not depend on p, and H − ½pᵀM⁻¹p must not either.
+        matrix Minv(static_cast<unsigned>(k), static_cast<unsigned>(k));
+        for (std::size_t i = 0; i < k; ++i)
+          for (std::size_t j = 0; j < k; ++j)
+            Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) = simplify(
+                H.diff(GiNaC::ex_to<GiNaC::symbol>(p[i])).diff(GiNaC::ex_to<GiNaC::symbol>(p[j])));
+        ex kinetic = 0;
+        for (std::size_t i = 0; i < k; ++i)
+          for (std::size_t j = 0; j < k; ++j)
+            kinetic += p[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * p[j] / 2;
+        ex potential = simplify(H - kinetic);
+        bool natural = true;
+        for (const auto& pk : p) {
+          for (std::size_t i = 0; i < k * k; ++i)
+            if (!is_identically_zero(Minv.op(i).diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
+              natural = false;
+          if (!is_identically_zero(potential.diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
+            natural = false;
+        }
+        if (!natural)
+          throw src.error(gs.reset_loc,
+                          "an elastic/restitution reset needs a natural Hamiltonian "
+                          "½ pᵀM(q)⁻¹p + V(q) in mode '" + ms.name +
+                              "' (quadratic in the momenta with no linear terms)");
+        for (const auto& pk : p)
+          if (!is_identically_zero(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
+            throw src.error(gs.surface_loc,
+                            "the surface of " + where +
+                                " depends on the momenta; an elastic/restitution reset needs a "
+                                "surface in the coordinates only");
+        std::vector<ex> ds;
+        for (const auto& qi : q) ds.push_back(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(qi)));
+        ex den = 0, vn = 0;
+        for (std::size_t i = 0; i < k; ++i)
+          for (std::size_t j = 0; j < k; ++j) {
+            den += ds[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * ds[j];
+            vn += ds[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * p[j];
+          }
+        if (is_identically_zero(den, all_symbols))
+          throw src.error(gs.surface_loc, "the surface of " + where + " has M⁻¹(ds, ds) ≡ 0");
+        g.reset = X;
+        for (std::size_t i = 0; i < k; ++i)
+          g.reset[static_cast<std::size_t>(ms.momenta[i])] =
+              simplify(p[i] - (1 + gs.restitution) * vn / den * ds[i]);
+        break;
+      }
+    }
+    g.reset_jacobian = jacobian(g.reset, X);
+
+    // Δ⁻¹: closed form when Δ is affine in the variables it changes.
+    std::vector<std::size_t> changed;
+    for (std::size_t i = 0; i < n; ++i)
+      if (!is_identically_zero(g.reset[i] - X[i], all_symbols)) changed.push_back(i);
+    bool affine = true;
+    for (std::size_t i : changed)
+      for (std::size_t a : changed)
+        for (std::size_t b : changed)
+          if (!is_identically_zero(g.reset_jacobian[i * n + a].diff(GiNaC::ex_to<GiNaC::symbol>(X[b])),
+                                   all_symbols))
+            affine = false;
+    if (changed.empty()) {
+      g.has_inverse = true;
+      g.reset_inverse = X;
+    } else if (affine) {
+      const auto c = static_cast<unsigned>(changed.size());
+      matrix A(c, c), rhs(c, 1), unknowns(c, 1);
+      for (unsigned i = 0; i < c; ++i) {
+        ex b = g.reset[changed[i]];
+        for (unsigned j = 0; j < c; ++j) {
+          A(i, j) = g.reset_jacobian[changed[i] * n + changed[j]];
+          b -= A(i, j) * X[changed[j]];
+        }
+        rhs(i, 0) = X[changed[i]] - simplify(b);
+        unknowns(i, 0) = GiNaC::realsymbol("hybgen_u" + std::to_string(i));
+      }
+      ex detA = simplify(A.determinant());
+      if (is_identically_zero(detA, all_symbols))
+        throw src.error(gs.reset_loc, "the reset of " + where +
+                                          " is not invertible (its Jacobian is singular); hybgen "
+                                          "needs an invertible reset");
+      matrix sol = A.solve(unknowns, rhs, GiNaC::solve_algo::gauss);
+      g.reset_inverse = X;
+      for (unsigned i = 0; i < c; ++i) g.reset_inverse[changed[i]] = simplify(sol(i, 0));
+      g.has_inverse = true;
+      // Verify Δ(Δ⁻¹(y)) = y exactly.
+      auto round_trip = substitute_state(g.reset, X, g.reset_inverse);
+      for (std::size_t i = 0; i < n; ++i)
+        if (!is_identically_zero(round_trip[i] - X[i], all_symbols))
+          throw InternalError("inverse reset of " + where + " failed verification");
+    } else {
+      g.has_inverse = false;
+      sys.warnings.push_back(where + ": the reset is not affine in the variables it changes; its "
+                                     "inverse is computed numerically (Newton) at run time");
+    }
+
+    // Hybrid Jacobian J = ∇sᵀ adj(DΔ) X⁺(Δx) / ∇sᵀ X⁻(x).
+    matrix DD(static_cast<unsigned>(n), static_cast<unsigned>(n));
+    for (std::size_t i = 0; i < n * n; ++i)
+      DD(static_cast<unsigned>(i / n), static_cast<unsigned>(i % n)) = g.reset_jacobian[i];
+    matrix adj(static_cast<unsigned>(n), static_cast<unsigned>(n));
+    for (unsigned i = 0; i < n; ++i)
+      for (unsigned j = 0; j < n; ++j) {
+        // adj(A)_{ij} = (−1)^{i+j} M_{ji} (minor deleting row j, column i).
+        matrix minor(static_cast<unsigned>(n - 1), static_cast<unsigned>(n - 1));
+        for (unsigned r = 0, rr = 0; r < n; ++r) {
+          if (r == j) continue;
+          for (unsigned s = 0, ss = 0; s < n; ++s) {
+            if (s == i) continue;
+            minor(rr, ss++) = DD(r, s);
+          }
+          ++rr;
+        }
+        ex det = n == 1 ? ex(1) : minor.determinant(GiNaC::determinant_algo::laplace);
+        adj(i, j) = ((i + j) % 2 ? -det : det);
+      }
+    std::vector<ex> Xplus = substitute_state(after.flow, X, g.reset);
+    ex num = 0, den = 0;
+    for (unsigned i = 0; i < n; ++i) {
+      ex row = 0;
+      for (unsigned j = 0; j < n; ++j) row += adj(i, j) * Xplus[j];
+      num += g.gradient[i] * row;
+      den += g.gradient[i] * before.flow[i];
+    }
+    den = simplify(den);
+    if (is_identically_zero(den, all_symbols))
+      throw src.error(gs.surface_loc, "the flow of mode '" + before.name +
+                                          "' is tangent to the surface of " + where +
+                                          " everywhere (∇s·X ≡ 0): it never crosses it");
+    g.hybrid_jacobian = simplify(num / den);
+    if (is_identically_zero(g.hybrid_jacobian, all_symbols))
+      throw src.error(gs.reset_loc, "the hybrid Jacobian of " + where +
+                                        " is identically zero: the reset collapses the flux "
+                                        "through the guard");
+
+    // Restrict J to S when s is linear in some x_k with a state-free coefficient.
+    g.hybrid_jacobian_on_surface = g.hybrid_jacobian;
+    for (std::size_t k = 0; k < n; ++k) {
+      ex c = g.gradient[k];
+      bool state_free = true;
+      for (const auto& xi : X)
+        if (c.has(xi)) state_free = false;
+      if (!state_free || is_identically_zero(c, all_symbols)) continue;
+      ex solution = simplify(X[k] - g.surface / c);
+      if (solution.has(X[k])) continue;
+      g.hybrid_jacobian_on_surface =
+          simplify(g.hybrid_jacobian.subs(GiNaC::exmap{{X[k], solution}}));
+      g.surface_note = m.state[k] + " = " + "(solved from s = 0)";
+      break;
+    }
+    sys.guards.push_back(std::move(g));
+  }
+
+  // Numerical checks on sampled points of each guard surface (parameters at
+  // their defaults, inside the simulation domain).
+  if (m.sim.present) {
+    Evaluator eval(m);
+    std::mt19937_64 rng(12345);
+    for (std::size_t gi = 0; gi < sys.guards.size(); ++gi) {
+      const IrGuard& g = sys.guards[gi];
+      const GuardSpec& gs = m.guards[gi];
+      const std::string where = "guard '" + g.name + "'";
+      const IrMode& before = sys.modes[static_cast<std::size_t>(g.from)];
+      const IrMode& after = sys.modes[static_cast<std::size_t>(g.to)];
+      ex lie = 0;
+      for (std::size_t i = 0; i < n; ++i) lie += g.gradient[i] * before.flow[i];
+      int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0;
+      for (int trial = 0; trial < 400 && crossing < 60; ++trial) {
+        std::vector<double> x(n);
+        for (std::size_t i = 0; i < n; ++i)
+          x[i] = std::uniform_real_distribution<double>(m.sim.lo[i], m.sim.hi[i])(rng);
+        std::size_t axis = std::uniform_int_distribution<std::size_t>(0, n - 1)(rng);
+        // Scan the axis for a sign change of s, then bisect.
+        const int pieces = 16;
+        double a = m.sim.lo[axis], fa = std::nan("");
+        bool found = false;
+        for (int k = 0; k <= pieces && !found; ++k) {
+          double b = m.sim.lo[axis] + (m.sim.hi[axis] - m.sim.lo[axis]) * k / pieces;
+          x[axis] = b;
+          double fb = eval(g.surface, x);
+          if (k > 0 && std::isfinite(fa) && std::isfinite(fb) && (fa <= 0) != (fb <= 0)) {
+            double lo = a, hi = b, flo = fa;
+            for (int it = 0; it < 60; ++it) {
+              double mid = 0.5 * (lo + hi);
+              x[axis] = mid;
+              double fm = eval(g.surface, x);
+              if ((fm <= 0) == (flo <= 0)) lo = mid, flo = fm; else hi = mid;
+            }
+            x[axis] = 0.5 * (lo + hi);
+            found = true;
+          }
+          a = b;
+          fa = fb;
+        }
+        if (!found) continue;
+        bool inside = true;
+        for (const auto& c : m.sim.support)
+          if (!holds(c, eval(c.expr, x))) inside = false;
+        for (const auto& c : before.where)
+          if (!holds(c, eval(c.expr, x))) inside = false;
+        if (!inside) continue;
+        ++on_surface;
+        double rate = eval(lie, x);
+        if (!(g.direction == Direction::Decreasing ? rate < 0 : rate > 0)) continue;
+        ++crossing;
+        std::vector<double> y(n);
+        for (std::size_t i = 0; i < n; ++i) y[i] = eval(g.reset[i], x);
+        double J = eval(g.hybrid_jacobian, x);
+        if (std::isfinite(J) && std::fabs(J) < 1e-300) ++jzero;
+        // H.5: does Δ(x) lie on a guard of the target mode that fires at once?
+        for (std::size_t hj = 0; hj < sys.guards.size(); ++hj) {
+          const IrGuard& h = sys.guards[hj];
+          if (h.from != g.to) continue;
+          double sv = eval(h.surface, y);
+          double scale = 1;
+          for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(y[i]));
+          if (!(std::fabs(sv) <= 1e-9 * scale)) continue;
+          double r = 0;
+          for (std::size_t i = 0; i < n; ++i) {
+            r += eval(h.gradient[i], y) * eval(after.flow[i], y);
+          }
+          if (h.direction == Direction::Decreasing ? r < 0 : r > 0) {
+            ++retrigger;
+            break;
+          }
+        }
+      }
+      if (on_surface == 0) {
+        sys.warnings.push_back(where + ": the surface does not meet the simulation domain (with the "
+                                       "parameters at their defaults)");
+      } else if (crossing == 0) {
+        sys.warnings.push_back(where + ": at every sampled point of the surface inside the domain "
+                                       "the flow of mode '" + before.name + "' crosses it in the "
+                                       "other direction, so the guard never fires there");
+      } else {
+        if (jzero == crossing)
+          throw src.error(gs.reset_loc, "the hybrid Jacobian of " + where +
+                                            " is zero at every sampled crossing point");
+        if (retrigger == crossing)
+          throw src.error(gs.reset_loc,
+                          "the reset of " + where +
+                              " lands on a guard surface where the flow triggers that guard "
+                              "again at once (beating: the paper's hypothesis H.5, S ∩ Δ(S) = ∅, "
+                              "fails)");
+        if (retrigger > 0)
+          sys.warnings.push_back(where + ": at " + std::to_string(retrigger) + " of " +
+                                 std::to_string(crossing) +
+                                 " sampled crossings the reset lands on a guard that fires again "
+                                 "at once (H.5)");
+      }
+    }
+  }
+  return sys;
+}
+
+}  // namespace hybgen::gen

@@ -1,0 +1,65 @@
+#pragma once
+/// \file model.hpp
+/// The contract between generated kernels and the runtime: a generated model
+/// is a struct with static members satisfying `HybridModel`. The runtime is
+/// templated over it and never sees GiNaC.
+///
+/// Conventions (DESIGN.md): state x ∈ ℝᴺ, parameters `par` ∈ ℝᴾ (run-time
+/// values, defaults in `param_defaults`), modes 0..M-1, guards 0..G-1.
+/// A guard g fires in mode `guards[g].from` when s_g(x) crosses 0 in its
+/// direction; the state jumps to Δ_g(x) and the mode becomes `guards[g].to`.
+/// The transfer rule across it is u⁺(Δx) = u⁻(x) / |J_g(x)| (paper Thm 3.11,
+/// with |J| because J may be negative when orientation flips).
+
+#include <array>
+#include <concepts>
+#include <cstddef>
+
+namespace hybgen::rt {
+
+/// Static description of one guard.
+struct GuardInfo {
+  int from;                  ///< Source mode index.
+  int to;                    ///< Target mode index.
+  int direction;             ///< -1: s decreases through 0; +1: s increases through 0.
+  bool has_inverse;          ///< Whether `reset_inverse` is a closed form (else Newton).
+};
+
+/// What the runtime needs of a generated model. All functions are pure; `x`
+/// has `n_state` entries, `par` has `n_param` entries.
+template <class M>
+concept HybridModel = requires(int i, const double* x, const double* par, double* out) {
+  { M::n_state } -> std::convertible_to<int>;
+  { M::n_param } -> std::convertible_to<int>;
+  { M::n_mode } -> std::convertible_to<int>;
+  { M::n_guard } -> std::convertible_to<int>;
+  M::name;            // const char*: model name
+  M::state_names;     // std::array<const char*, n_state>
+  M::param_names;     // std::array<const char*, n_param>
+  M::param_defaults;  // std::array<double, n_param>
+  M::mode_names;      // std::array<const char*, n_mode>
+  M::guard_names;     // std::array<const char*, n_guard>
+  M::guards;          // std::array<GuardInfo, n_guard>
+  /// X_mode(x) into out[0..N).
+  { M::flow(i, x, par, out) } -> std::same_as<void>;
+  /// div X_mode(x) = Σ ∂Xⁱ/∂xⁱ.
+  { M::divergence(i, x, par) } -> std::same_as<double>;
+  /// s_g(x); the guard surface is s_g = 0.
+  { M::guard_surface(i, x, par) } -> std::same_as<double>;
+  /// ∇s_g(x) into out[0..N).
+  { M::guard_gradient(i, x, par, out) } -> std::same_as<void>;
+  /// Δ_g(x) into out[0..N).
+  { M::reset(i, x, par, out) } -> std::same_as<void>;
+  /// Δ_g⁻¹(y) into out[0..N) when `guards[g].has_inverse`; otherwise unused.
+  { M::reset_inverse(i, x, par, out) } -> std::same_as<void>;
+  /// DΔ_g(x), row-major N×N, into out[0..N*N) (for Newton inverses and checks).
+  { M::reset_jacobian(i, x, par, out) } -> std::same_as<void>;
+  /// Hybrid Jacobian J_g(x) at x ∈ S_g (DESIGN.md formula).
+  { M::hybrid_jacobian(i, x, par) } -> std::same_as<double>;
+  /// Initial density of mode `i` at x (already 0 outside the support/region).
+  { M::initial_density(i, x, par) } -> std::same_as<double>;
+  /// Whether x is in the state space (the `support` relations).
+  { M::in_support(x, par) } -> std::same_as<bool>;
+};
+
+}  // namespace hybgen::rt
