@@ -223,7 +223,7 @@ GiNaC::numeric exact_number(const std::string& literal) {
   if (!value.is_zero()) {
     double d = value.to_double();
     if (!std::isfinite(d) || d == 0.0)
-      throw std::invalid_argument("number '" + literal + "' is not a finite double");
+      throw std::invalid_argument("number '" + literal + "' is out of range (not a finite double)");
   }
   return value;
 }
@@ -264,11 +264,22 @@ Model check(const ModelAst& ast, const SourceText& src) {
     declared[name] = loc;
   };
 
+  // Names of states and parameters, checked in source order so that an error
+  // points at the later of two declarations.
+  {
+    std::vector<std::pair<SourceLoc, std::pair<std::string, const char*>>> decls;
+    for (const auto& st : ast.states) decls.push_back({st.loc, {st.name, "state variable"}});
+    for (const auto& p : ast.params) decls.push_back({p.loc, {p.name, "parameter"}});
+    std::stable_sort(decls.begin(), decls.end(), [](const auto& a, const auto& b) {
+      return a.first.line != b.first.line ? a.first.line < b.first.line : a.first.col < b.first.col;
+    });
+    for (const auto& [loc, d] : decls) declare(d.first, loc, d.second);
+  }
+
   // States.
   if (ast.states.empty()) throw src.error({1, 1}, "the model declares no state variables (write e.g. 'state x, p')");
   std::map<std::string, ex> state_scope;
   for (const auto& s : ast.states) {
-    declare(s.name, s.loc, "state variable");
     ex sym = GiNaC::realsymbol(s.name);
     m.state.push_back(s.name);
     m.state_symbols.push_back(sym);
@@ -278,7 +289,6 @@ Model check(const ModelAst& ast, const SourceText& src) {
   // Parameters: defaults may use earlier parameters only.
   std::map<std::string, ex> param_scope, param_values;
   for (const auto& p : ast.params) {
-    declare(p.name, p.loc, "parameter");
     Converter conv(src, param_values, "the default of parameter '" + p.name + "'");
     ex value = conv.convert(p.value);
     auto d = to_finite_double(value);

@@ -1,0 +1,43 @@
+#pragma once
+/// \file build.hpp
+/// Stage 5 (build): generated sources -> runner executable, compiled against
+/// the runtime and cached by a content hash of everything that affects it
+/// (kernel header, runner source, runtime headers, compiler identity, flags,
+/// generator version). Concurrent builds of the same model are safe: each
+/// compiles to a private temporary name and renames into place.
+
+#include <string>
+
+#include "hybgen/gen/emit.hpp"
+
+namespace hybgen::gen {
+
+/// Result of a build.
+struct BuildResult {
+  std::string executable;  ///< Path of the runner.
+  std::string directory;   ///< Cache entry directory.
+  std::string key;         ///< Content hash (cache key).
+  bool cached = false;     ///< Whether an existing runner was reused.
+  double seconds = 0;      ///< Wall time spent building.
+};
+
+/// Options of a build.
+struct BuildOptions {
+  std::string cache_dir;      ///< Cache root ("" = default_cache_dir()).
+  bool werror = false;        ///< Compile with -Werror (tests).
+  bool verbose = false;       ///< Print the compiler command.
+};
+
+/// The default cache root: $HYBGEN_CACHE, else $XDG_CACHE_HOME/hybgen, else
+/// ~/.cache/hybgen.
+std::string default_cache_dir();
+
+/// The compiler flags a runner is built with (part of the cache key).
+std::string runner_flags(bool werror);
+
+/// Stage 5: build (or reuse) the runner of `files`. Throws BuildError (exit 4)
+/// with the compiler log's path when compilation fails.
+BuildResult build_runner(const GeneratedFiles& files, const std::string& model_name,
+                         const BuildOptions& options);
+
+}  // namespace hybgen::gen
