@@ -1,0 +1,856 @@
+// Stage 1 (parse): .model text -> AST.
+//
+// A hand-written lexer that produces tokens on demand (so that errors are
+// reported in source order), and a recursive-descent parser in the style of
+// GiNaC's ginac/parser/parser.h: one method per grammar rule of
+// docs/model-language.md, each with its rule written above it.
+
+#include "hybgen/gen/parse.hpp"
+
+#include <algorithm>
+#include <cstddef>
+#include <deque>
+#include <iterator>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace hybgen::gen {
+
+namespace {
+
+/// Deepest nesting of parentheses, signs and powers in one expression.
+constexpr int kMaxNesting = 256;
+/// Deepest expression tree (a sum of N terms is N levels deep).
+constexpr int kMaxHeight = 512;
+/// Largest node count of one grid axis.
+constexpr long kMaxGridCount = 100000000;
+
+/// The statement keywords (used to explain a missing '}').
+constexpr std::string_view kStatementKeywords[] = {"model", "parameter", "state",
+                                                   "mode",  "guard",     "simulation"};
+
+bool is_digit(char c) {
+  return c >= '0' && c <= '9';
+}
+bool is_ident_start(char c) {
+  return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || c == '_';
+}
+bool is_ident_char(char c) {
+  return is_ident_start(c) || is_digit(c);
+}
+
+bool is_statement_keyword(std::string_view word) {
+  return std::find(std::begin(kStatementKeywords), std::end(kStatementKeywords), word) !=
+         std::end(kStatementKeywords);
+}
+
+/// "3:12".
+std::string loc_str(SourceLoc loc) {
+  return std::to_string(loc.line) + ":" + std::to_string(loc.col);
+}
+
+/// `value` as `digits` upper-case hexadecimal digits.
+std::string hex(unsigned long value, int digits) {
+  static constexpr char kHex[] = "0123456789ABCDEF";
+  std::string s(static_cast<std::size_t>(digits), '0');
+  for (int i = digits - 1; i >= 0; --i) {
+    s[static_cast<std::size_t>(i)] = kHex[value & 15U];
+    value >>= 4U;
+  }
+  return s;
+}
+
+/// `text` shortened for a message.
+std::string shorten(const std::string& text) {
+  constexpr std::size_t kMax = 40;
+  return text.size() <= kMax ? text : text.substr(0, kMax) + "...";
+}
+
+// ---------------------------------------------------------------------------
+// Lexer
+// ---------------------------------------------------------------------------
+
+/// Token kinds.
+enum class Tok {
+  End,     ///< End of the text.
+  Error,   ///< A lexical error; `text` is the message.
+  Ident,   ///< [A-Za-z_][A-Za-z0-9_]*
+  Number,  ///< 12, 0.25, .5, 1e-3, 2.5E+2
+  Grid,    ///< 75x75, 33x33x33
+  Punct,   ///< An operator or punctuation; `text` is its spelling.
+};
+
+/// One token with the position of its first character.
+struct Token {
+  Tok kind = Tok::End;  ///< Kind.
+  std::string text;     ///< Spelling (the message for Tok::Error).
+  SourceLoc loc;        ///< Position of the first character.
+};
+
+/// Splits the text into tokens, one at a time. Never reads out of bounds.
+class Lexer {
+ public:
+  explicit Lexer(std::string_view text) : text_(text) {}
+
+  /// The next token; Tok::End forever after the end or after an error.
+  Token next() {
+    if (failed_) return {Tok::End, "", loc_at(pos_)};
+    skip_space_and_comments();
+    const std::size_t start = pos_;
+    if (start >= text_.size()) return {Tok::End, "", loc_at(start)};
+    const char c = text_[start];
+    if (is_ident_start(c)) {
+      std::size_t p = start;
+      while (p < text_.size() && is_ident_char(text_[p])) ++p;
+      return make(Tok::Ident, start, p);
+    }
+    if (is_digit(c) || (c == '.' && start + 1 < text_.size() && is_digit(text_[start + 1])))
+      return lex_number(start);
+    const char d = start + 1 < text_.size() ? text_[start + 1] : '\0';
+    if ((c == '*' && d == '*') || (c == '<' && d == '=') || (c == '>' && d == '='))
+      return make(Tok::Punct, start, start + 2);
+    if (std::string_view("+-*/^()[]{},;:'=<>").find(c) != std::string_view::npos)
+      return make(Tok::Punct, start, start + 1);
+    return bad_character(start);
+  }
+
+ private:
+  SourceLoc loc_at(std::size_t pos) const {
+    return {line_, static_cast<int>(pos - line_start_ + 1)};
+  }
+
+  Token make(Tok kind, std::size_t begin, std::size_t end) {
+    pos_ = end;
+    return {kind, std::string(text_.substr(begin, end - begin)), loc_at(begin)};
+  }
+
+  Token error(std::size_t pos, std::string message) {
+    failed_ = true;
+    return {Tok::Error, std::move(message), loc_at(pos)};
+  }
+
+  // Whitespace is ' ', \t, \r, \n, \f, \v; comments run from '#' or '//' to
+  // the end of the line.
+  void skip_space_and_comments() {
+    while (pos_ < text_.size()) {
+      const char c = text_[pos_];
+      if (c == '\n') {
+        ++pos_;
+        ++line_;
+        line_start_ = pos_;
+      } else if (c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v') {
+        ++pos_;
+      } else if (c == '#' || (c == '/' && pos_ + 1 < text_.size() && text_[pos_ + 1] == '/')) {
+        while (pos_ < text_.size() && text_[pos_] != '\n') ++pos_;
+      } else {
+        return;
+      }
+    }
+  }
+
+  // NUMBER := ( digits [ '.' digits* ] | '.' digits ) [ ('e'|'E') ['+'|'-'] digits ]
+  // GRID   := digits 'x' digits { 'x' digits }
+  Token lex_number(std::size_t start) {
+    const std::size_t n = text_.size();
+    std::size_t p = start;
+    bool integer = true;
+    while (p < n && is_digit(text_[p])) ++p;
+    if (p < n && text_[p] == '.') {
+      integer = false;
+      ++p;
+      while (p < n && is_digit(text_[p])) ++p;
+    }
+    if (p < n && (text_[p] == 'e' || text_[p] == 'E')) {
+      std::size_t q = p + 1;
+      if (q < n && (text_[q] == '+' || text_[q] == '-')) ++q;
+      if (q < n && is_digit(text_[q])) {
+        integer = false;
+        p = q;
+        while (p < n && is_digit(text_[p])) ++p;
+      } else if (q > p + 1) {
+        return error(start, "malformed number '" + std::string(text_.substr(start, q - start)) +
+                                "': the exponent needs digits");
+      }
+      // Otherwise the 'e' is a letter after the number: reported below.
+    }
+    if (integer && p + 1 < n && text_[p] == 'x' && is_digit(text_[p + 1])) {
+      while (p + 1 < n && text_[p] == 'x' && is_digit(text_[p + 1])) {
+        ++p;
+        while (p < n && is_digit(text_[p])) ++p;
+      }
+      if (p < n && (is_ident_char(text_[p]) || text_[p] == '.')) {
+        std::size_t q = p;
+        while (q < n && (is_ident_char(text_[q]) || text_[q] == '.')) ++q;
+        return error(start, "malformed grid literal '" +
+                                shorten(std::string(text_.substr(start, q - start))) +
+                                "' (expected e.g. 75x75)");
+      }
+      return make(Tok::Grid, start, p);
+    }
+    if (p < n && is_ident_start(text_[p])) {
+      std::size_t q = p;
+      while (q < n && is_ident_char(text_[q])) ++q;
+      const std::string number(text_.substr(start, p - start));
+      const std::string letters(text_.substr(p, q - p));
+      return error(start, "a number is followed by letters: '" + shorten(number + letters) +
+                              "' (write " + shorten(number + "*" + letters) + ")");
+    }
+    if (p < n && (text_[p] == '.' || is_digit(text_[p]))) {
+      std::size_t q = p;
+      while (q < n && (text_[q] == '.' || is_ident_char(text_[q]))) ++q;
+      return error(
+          start, "malformed number '" + shorten(std::string(text_.substr(start, q - start))) + "'");
+    }
+    return make(Tok::Number, start, p);
+  }
+
+  // Any other byte: say which character it is.
+  Token bad_character(std::size_t start) {
+    const auto u = static_cast<unsigned char>(text_[start]);
+    if (u < 0x20 || u == 0x7F) return error(start, "unexpected control character 0x" + hex(u, 2));
+    if (u < 0x80) return error(start, std::string("unexpected character '") + text_[start] + "'");
+    // Non-ASCII: show the whole UTF-8 sequence and its code point.
+    std::size_t len = u >= 0xF8 ? 1 : u >= 0xF0 ? 4 : u >= 0xE0 ? 3 : u >= 0xC0 ? 2 : 1;
+    bool ok = len > 1 && start + len <= text_.size();
+    unsigned long cp = u & (len == 2 ? 0x1FU : len == 3 ? 0x0FU : 0x07U);
+    for (std::size_t k = 1; ok && k < len; ++k) {
+      const auto b = static_cast<unsigned char>(text_[start + k]);
+      if ((b & 0xC0U) != 0x80U) ok = false;
+      cp = (cp << 6U) | (b & 0x3FU);
+    }
+    if (!ok)
+      return error(start,
+                   "unexpected byte 0x" + hex(u, 2) + " (only ASCII is allowed outside comments)");
+    return error(start, "unexpected character '" + std::string(text_.substr(start, len)) + "' (U+" +
+                            hex(cp, cp > 0xFFFF ? 6 : 4) +
+                            "; only ASCII is allowed outside comments)");
+  }
+
+  std::string_view text_;
+  std::size_t pos_ = 0;
+  std::size_t line_start_ = 0;
+  int line_ = 1;
+  bool failed_ = false;
+};
+
+// ---------------------------------------------------------------------------
+// Parser
+// ---------------------------------------------------------------------------
+
+/// An expression being built: its node, where its text starts (including
+/// enclosing parentheses) and the height of its tree.
+struct Parsed {
+  std::shared_ptr<Expr> node;  ///< The node (still mutable while parsing).
+  SourceLoc start;             ///< First character, '(' included.
+  int height = 1;              ///< Levels of the tree.
+};
+
+/// Recursive-descent parser; one method per grammar rule.
+class Parser {
+ public:
+  explicit Parser(const SourceText& src) : src_(src), lexer_(src.text()) {}
+
+  // model := { statement [';'] }
+  ModelAst parse_model() {
+    ModelAst ast;
+    ast.path = src_.path();
+    while (tok().kind != Tok::End) {
+      parse_statement(ast);
+      if (at_punct(";")) take();
+    }
+    return ast;
+  }
+
+ private:
+  // --- Tokens ------------------------------------------------------------
+
+  /// The k-th token ahead (0: the current one). Does not report lexical errors.
+  const Token& peek(std::size_t k) {
+    while (buf_.size() <= k) buf_.push_back(lexer_.next());
+    return buf_[k];
+  }
+
+  /// The current token; reports a lexical error when it is one.
+  const Token& tok() {
+    const Token& t = peek(0);
+    if (t.kind == Tok::Error) fail(t.loc, t.text);
+    return t;
+  }
+
+  /// Consume the current token.
+  Token take() {
+    tok();
+    Token t = std::move(buf_.front());
+    buf_.pop_front();
+    return t;
+  }
+
+  bool at_punct(std::string_view p) {
+    const Token& t = tok();
+    return t.kind == Tok::Punct && t.text == p;
+  }
+
+  bool at_word(std::string_view w) {
+    const Token& t = tok();
+    return t.kind == Tok::Ident && t.text == w;
+  }
+
+  static bool is_punct(const Token& t, std::string_view p) {
+    return t.kind == Tok::Punct && t.text == p;
+  }
+
+  [[noreturn]] void fail(SourceLoc loc, const std::string& message) const {
+    throw src_.error(loc, message);
+  }
+
+  static std::string describe(const Token& t) {
+    if (t.kind == Tok::End) return "end of file";
+    return "'" + shorten(t.text) + "'";
+  }
+
+  /// "expected EXPECTED, found TOKEN" at the current token.
+  [[noreturn]] void unexpected(const std::string& expected) {
+    const Token& t = tok();
+    if (t.kind == Tok::Grid)
+      fail(t.loc, "grid literal '" + shorten(t.text) + "' is only valid after 'grid'");
+    fail(t.loc, "expected " + expected + ", found " + describe(t));
+  }
+
+  /// Consume punctuation `p` or fail with "expected 'p' CONTEXT, found ...".
+  Token expect_punct(std::string_view p, const std::string& context) {
+    if (!at_punct(p)) unexpected("'" + std::string(p) + "' " + context);
+    return take();
+  }
+
+  /// Consume an identifier or fail with "expected WHAT, found ...".
+  Name expect_name(const std::string& what) {
+    if (tok().kind != Tok::Ident) unexpected(what);
+    Token t = take();
+    return {std::move(t.text), t.loc};
+  }
+
+  std::string unterminated(SourceLoc open) const {
+    return "unterminated block: '{' at " + loc_str(open) + " has no matching '}'";
+  }
+
+  /// An identifier that starts no item of block `what`.
+  [[noreturn]] void unknown_item(const Token& t, const std::string& what,
+                                 const std::string& expected, SourceLoc open) {
+    if (is_statement_keyword(t.text))
+      fail(t.loc, "unknown item '" + t.text + "' in " + what + " (is the '}' closing the '{' at " +
+                      loc_str(open) + " missing?)");
+    fail(t.loc,
+         "unknown item '" + shorten(t.text) + "' in " + what + " (expected " + expected + ")");
+  }
+
+  /// `'{' { ITEM [';'] } '}'`, calling `item(open)` for each item.
+  template <class Item>
+  void parse_block(const std::string& context, Item item) {
+    const SourceLoc open = expect_punct("{", context).loc;
+    while (!at_punct("}")) {
+      if (tok().kind == Tok::End) fail(tok().loc, unterminated(open));
+      item(open);
+      if (at_punct(";")) take();
+    }
+    take();
+  }
+
+  // --- Statements ----------------------------------------------------------
+
+  // statement := 'model' IDENT
+  //            | 'parameter' IDENT '=' expr { ',' IDENT '=' expr }
+  //            | 'state' IDENT { ',' IDENT }
+  //            | 'mode' IDENT '{' { mode_item [';'] } '}'
+  //            | 'guard' IDENT '{' { guard_item [';'] } '}'
+  //            | 'simulation' '{' { sim_item [';'] } '}'
+  void parse_statement(ModelAst& ast) {
+    const Token& t = tok();
+    if (t.kind != Tok::Ident)
+      unexpected("a statement (model, parameter, state, mode, guard or simulation)");
+    if (t.text == "model") return parse_model_statement(ast);
+    if (t.text == "parameter") return parse_parameter_statement(ast);
+    if (t.text == "state") return parse_state_statement(ast);
+    if (t.text == "mode") return parse_mode_statement(ast);
+    if (t.text == "guard") return parse_guard_statement(ast);
+    if (t.text == "simulation") return parse_simulation_statement(ast);
+    fail(t.loc, "unknown statement '" + shorten(t.text) +
+                    "' (expected model, parameter, state, mode, guard or simulation)");
+  }
+
+  // statement := 'model' IDENT
+  void parse_model_statement(ModelAst& ast) {
+    const Token kw = take();
+    if (ast.name)
+      fail(kw.loc, "the model is named twice (first at " + loc_str(ast.name->loc) + ")");
+    ast.name = expect_name("a model name after 'model'");
+  }
+
+  // statement := 'parameter' IDENT '=' expr { ',' IDENT '=' expr }
+  void parse_parameter_statement(ModelAst& ast) {
+    take();
+    std::string after = "'parameter'";
+    for (;;) {
+      Name name = expect_name("a parameter name after " + after);
+      expect_punct("=", "after parameter name '" + name.name + "'");
+      ExprPtr value = parse_expr().node;
+      ast.params.push_back({std::move(name.name), name.loc, std::move(value)});
+      if (!at_punct(",")) break;
+      take();
+      after = "','";
+    }
+  }
+
+  // statement := 'state' IDENT { ',' IDENT }
+  void parse_state_statement(ModelAst& ast) {
+    take();
+    ast.states = parse_name_list("a state variable name", "'state'");
+  }
+
+  // IDENT { ',' IDENT }   (after `state`, `coordinates`, `momenta`)
+  std::vector<Name> parse_name_list(const std::string& what, const std::string& after) {
+    std::vector<Name> names;
+    names.push_back(expect_name(what + " after " + after));
+    while (at_punct(",")) {
+      take();
+      names.push_back(expect_name(what + " after ','"));
+    }
+    return names;
+  }
+
+  // statement := 'mode' IDENT '{' { mode_item [';'] } '}'
+  void parse_mode_statement(ModelAst& ast) {
+    take();
+    ModeDecl mode;
+    mode.name = expect_name("a mode name after 'mode'");
+    parse_block("after mode name '" + mode.name.name + "'",
+                [&](SourceLoc open) { parse_mode_item(mode, open); });
+    ast.modes.push_back(std::move(mode));
+  }
+
+  // mode_item := IDENT '\'' '=' expr
+  //            | 'hamiltonian' expr
+  //            | 'coordinates' IDENT { ',' IDENT }
+  //            | 'momenta' IDENT { ',' IDENT }
+  //            | 'where' relation
+  void parse_mode_item(ModeDecl& mode, SourceLoc open) {
+    const std::string what = "mode '" + mode.name.name + "'";
+    const std::string items = "x' = ..., hamiltonian, coordinates, momenta or where";
+    if (tok().kind != Tok::Ident) unexpected("an item of " + what + " (" + items + ")");
+    const Token t = tok();
+    if (is_punct(peek(1), "'")) {
+      take();
+      take();
+      expect_punct("=", "after " + t.text + "'");
+      ExprPtr rhs = parse_expr().node;
+      mode.flows.push_back({{t.text, t.loc}, std::move(rhs)});
+    } else if (t.text == "hamiltonian") {
+      if (mode.hamiltonian)
+        fail(t.loc, what + " has a second hamiltonian (the first is at " +
+                        loc_str(mode.hamiltonian_loc) + ")");
+      take();
+      mode.hamiltonian = parse_expr().node;
+      mode.hamiltonian_loc = t.loc;
+    } else if (t.text == "coordinates" || t.text == "momenta") {
+      std::vector<Name>& list = t.text == "coordinates" ? mode.coordinates : mode.momenta;
+      if (!list.empty())
+        fail(t.loc,
+             what + " names its " + t.text + " twice (first at " + loc_str(list.front().loc) + ")");
+      take();
+      list = parse_name_list("a state variable name", "'" + t.text + "'");
+    } else if (t.text == "where") {
+      take();
+      mode.where.push_back(parse_relation("'where'"));
+    } else if (is_punct(peek(1), "=")) {
+      fail(t.loc, "unknown item '" + shorten(t.text) + "' in " + what + " (write " +
+                      shorten(t.text) + "' = ... for a flow equation)");
+    } else {
+      unknown_item(t, what, items, open);
+    }
+  }
+
+  // statement := 'guard' IDENT '{' { guard_item [';'] } '}'
+  void parse_guard_statement(ModelAst& ast) {
+    take();
+    GuardDecl guard;
+    guard.name = expect_name("a guard name after 'guard'");
+    parse_block("after guard name '" + guard.name.name + "'",
+                [&](SourceLoc open) { parse_guard_item(guard, open); });
+    ast.guards.push_back(std::move(guard));
+  }
+
+  // guard_item := 'from' IDENT [ 'to' IDENT ]
+  //             | 'to' IDENT
+  //             | 'when' expr '=' expr direction
+  //             | 'reset' reset
+  void parse_guard_item(GuardDecl& guard, SourceLoc open) {
+    const std::string what = "guard '" + guard.name.name + "'";
+    if (tok().kind != Tok::Ident) unexpected("an item of " + what + " (from, to, when or reset)");
+    const Token t = tok();
+    auto parse_to = [&]() {
+      const Token kw = take();
+      if (guard.to)
+        fail(kw.loc,
+             what + " names its target mode twice (first at " + loc_str(guard.to->loc) + ")");
+      guard.to = expect_name("a mode name after 'to'");
+    };
+    if (t.text == "from") {
+      if (guard.from)
+        fail(t.loc,
+             what + " names its source mode twice (first at " + loc_str(guard.from->loc) + ")");
+      take();
+      guard.from = expect_name("a mode name after 'from'");
+      if (at_word("to")) parse_to();
+    } else if (t.text == "to") {
+      parse_to();
+    } else if (t.text == "when") {
+      if (guard.has_when)
+        fail(t.loc, what + " has a second 'when' (the first surface is at " +
+                        loc_str(guard.when.loc) + ")");
+      take();
+      Parsed lhs = parse_expr();
+      if (at_punct("<") || at_punct("<=") || at_punct(">") || at_punct(">="))
+        fail(tok().loc,
+             "a guard surface is written 'when L = R' followed by 'decreasing' or "
+             "'increasing', not with '" +
+                 tok().text + "'");
+      expect_punct("=", "in the guard surface 'when L = R'");
+      if (at_punct("=")) fail(tok().loc, "write '=', not '==', in the guard surface");
+      Parsed rhs = parse_expr();
+      guard.when = {std::move(lhs.node), "=", std::move(rhs.node), lhs.start};
+      guard.has_when = true;
+      parse_direction(guard);
+    } else if (t.text == "reset") {
+      if (guard.has_reset)
+        fail(t.loc,
+             what + " has a second reset (the first is at " + loc_str(guard.reset.loc) + ")");
+      take();
+      guard.reset.loc = t.loc;
+      parse_reset(guard.reset);
+      guard.has_reset = true;
+    } else {
+      unknown_item(t, what, "from, to, when or reset", open);
+    }
+  }
+
+  // direction := 'decreasing' | 'increasing'
+  void parse_direction(GuardDecl& guard) {
+    if (at_word("decreasing")) {
+      guard.direction = Direction::Decreasing;
+    } else if (at_word("increasing")) {
+      guard.direction = Direction::Increasing;
+    } else {
+      unexpected("'decreasing' or 'increasing' after the guard surface");
+    }
+    guard.direction_loc = take().loc;
+  }
+
+  // reset := 'identity' | 'elastic' | 'restitution' expr
+  //        | '(' expr { ',' expr } ')'
+  void parse_reset(ResetDecl& reset) {
+    if (at_word("identity")) {
+      take();
+      reset.kind = ResetDecl::Kind::Identity;
+    } else if (at_word("elastic")) {
+      take();
+      reset.kind = ResetDecl::Kind::Elastic;
+    } else if (at_word("restitution")) {
+      take();
+      reset.kind = ResetDecl::Kind::Restitution;
+      reset.coefficient = parse_expr().node;
+    } else if (at_punct("(")) {
+      reset.kind = ResetDecl::Kind::Explicit;
+      reset.components_loc = take().loc;
+      for (;;) {
+        reset.components.push_back(parse_expr().node);
+        if (at_punct(")")) break;
+        if (!at_punct(","))
+          unexpected("',' or ')' in the reset components (opened at " +
+                     loc_str(reset.components_loc) + ")");
+        take();
+      }
+      take();
+    } else {
+      unexpected("identity, elastic, restitution COEFFICIENT or (e1, ..., eN) after 'reset'");
+    }
+  }
+
+  // statement := 'simulation' '{' { sim_item [';'] } '}'
+  void parse_simulation_statement(ModelAst& ast) {
+    const Token kw = take();
+    if (ast.simulation)
+      fail(kw.loc,
+           "a second simulation block (the first is at " + loc_str(ast.simulation->loc) + ")");
+    SimulationDecl sim;
+    sim.loc = kw.loc;
+    parse_block("after 'simulation'", [&](SourceLoc open) { parse_sim_item(sim, open); });
+    ast.simulation = std::move(sim);
+  }
+
+  // sim_item := 'domain' IDENT 'in' '[' expr ',' expr ']'
+  //           | 'grid' GRID
+  //           | 'initial' [ IDENT ':' ] expr
+  //           | 'support' relation
+  //           | IDENT ( expr | IDENT )
+  void parse_sim_item(SimulationDecl& sim, SourceLoc open) {
+    if (tok().kind != Tok::Ident)
+      unexpected("an item of the simulation block (domain, grid, initial, support or a setting)");
+    const Token t = tok();
+    if (t.text == "domain") return parse_domain(sim);
+    if (t.text == "grid") return parse_grid(sim);
+    if (t.text == "initial") return parse_initial(sim);
+    if (t.text == "support") {
+      take();
+      sim.support.push_back(parse_relation("'support'"));
+      return;
+    }
+    if (is_statement_keyword(t.text))
+      unknown_item(t, "the simulation block", "domain, grid, initial, support or a setting", open);
+    parse_setting(sim);
+  }
+
+  // sim_item := 'domain' IDENT 'in' '[' expr ',' expr ']'
+  void parse_domain(SimulationDecl& sim) {
+    take();
+    DomainDecl domain;
+    domain.var = expect_name("a state variable name after 'domain'");
+    const std::string where = "domain '" + domain.var.name + "'";
+    if (!at_word("in")) unexpected("'in' after 'domain " + domain.var.name + "'");
+    take();
+    expect_punct("[", "after 'domain " + domain.var.name + " in'");
+    domain.lo = parse_expr().node;
+    expect_punct(",", "between the ends of " + where);
+    domain.hi = parse_expr().node;
+    expect_punct("]", "after the upper end of " + where);
+    sim.domains.push_back(std::move(domain));
+  }
+
+  // sim_item := 'grid' GRID       (GRID: 75x75, 33x33x33, or one integer N)
+  void parse_grid(SimulationDecl& sim) {
+    const Token kw = take();
+    if (sim.grid) fail(kw.loc, "the grid is given twice (first at " + loc_str(sim.grid->loc) + ")");
+    const Token& t = tok();
+    const bool integer = t.kind == Tok::Number && std::all_of(t.text.begin(), t.text.end(),
+                                                              [](char c) { return is_digit(c); });
+    if (t.kind != Tok::Grid && !integer)
+      unexpected("a grid size after 'grid' (e.g. 75x75, or one integer N)");
+    const Token g = take();
+    GridDecl grid;
+    grid.loc = g.loc;
+    std::size_t i = 0;
+    while (i < g.text.size()) {
+      std::size_t j = i;
+      while (j < g.text.size() && is_digit(g.text[j])) ++j;
+      const std::string digits = g.text.substr(i, j - i);
+      const SourceLoc at{g.loc.line, g.loc.col + static_cast<int>(i)};
+      const std::size_t first = std::min(digits.find_first_not_of('0'), digits.size());
+      long count = 0;
+      if (digits.size() - first > 9) {
+        count = kMaxGridCount + 1;
+      } else {
+        for (std::size_t k = first; k < digits.size(); ++k) count = count * 10 + (digits[k] - '0');
+      }
+      if (count <= 0) fail(at, "a grid count must be a positive integer, found '" + digits + "'");
+      if (count > kMaxGridCount)
+        fail(at, "grid count '" + shorten(digits) + "' is too large (at most " +
+                     std::to_string(kMaxGridCount) + ")");
+      grid.counts.push_back(count);
+      i = j + 1;  // skip the 'x'
+    }
+    sim.grid = std::move(grid);
+  }
+
+  // sim_item := 'initial' [ IDENT ':' ] expr
+  void parse_initial(SimulationDecl& sim) {
+    InitialDecl initial;
+    initial.loc = take().loc;
+    if (tok().kind == Tok::Ident && is_punct(peek(1), ":")) {
+      initial.mode = expect_name("a mode name");
+      take();
+    }
+    initial.density = parse_expr().node;
+    sim.initial.push_back(std::move(initial));
+  }
+
+  // sim_item := IDENT ( expr | IDENT )
+  // A value that is one identifier not followed by an operator or '(' is a
+  // word (and also kept as a Symbol expression); anything else an expression.
+  void parse_setting(SimulationDecl& sim) {
+    Setting setting;
+    setting.key = expect_name("a setting name");
+    const Token& t = tok();
+    const Token& after = peek(1);
+    const bool continues =
+        after.kind == Tok::Punct &&
+        (after.text == "+" || after.text == "-" || after.text == "*" || after.text == "/" ||
+         after.text == "^" || after.text == "**" || after.text == "(");
+    if (t.kind == Tok::Ident && !continues) setting.word = t.text;
+    const bool starts_expr =
+        t.kind == Tok::Number || t.kind == Tok::Ident ||
+        (t.kind == Tok::Punct && (t.text == "(" || t.text == "+" || t.text == "-"));
+    if (!starts_expr) unexpected("a value for setting '" + setting.key.name + "'");
+    Parsed value = parse_expr();
+    setting.value = std::move(value.node);
+    setting.value_loc = value.start;
+    sim.settings.push_back(std::move(setting));
+  }
+
+  // relation := expr ( '<' | '<=' | '>' | '>=' ) expr
+  Relation parse_relation(const std::string& after) {
+    Parsed lhs = parse_expr();
+    if (at_punct("="))
+      fail(tok().loc,
+           "a condition after " + after + " compares with '<', '<=', '>' or '>=', not '='");
+    if (!(at_punct("<") || at_punct("<=") || at_punct(">") || at_punct(">=")))
+      unexpected("'<', '<=', '>' or '>=' in the condition after " + after);
+    std::string op = take().text;
+    Parsed rhs = parse_expr();
+    return {std::move(lhs.node), std::move(op), std::move(rhs.node), lhs.start};
+  }
+
+  // --- Expressions ---------------------------------------------------------
+
+  /// Counts nesting (every `unary`) and fails beyond kMaxNesting.
+  class NestingGuard {
+   public:
+    NestingGuard(Parser& parser, SourceLoc loc) : parser_(parser) {
+      if (++parser_.nesting_ > kMaxNesting)
+        parser_.fail(loc, "expression is nested too deeply (more than " +
+                              std::to_string(kMaxNesting) + " levels)");
+    }
+    ~NestingGuard() { --parser_.nesting_; }
+    NestingGuard(const NestingGuard&) = delete;
+    NestingGuard& operator=(const NestingGuard&) = delete;
+
+   private:
+    Parser& parser_;
+  };
+
+  /// A leaf node for token `t`.
+  static Parsed leaf(Expr::Kind kind, const Token& t) {
+    auto node = std::make_shared<Expr>();
+    node->kind = kind;
+    node->loc = t.loc;
+    node->text = t.text;
+    return {std::move(node), t.loc, 1};
+  }
+
+  /// An inner node; `at` is where to report a too-deep tree.
+  Parsed inner(Expr::Kind kind, std::string text, SourceLoc loc, SourceLoc start,
+               std::vector<Parsed> args, SourceLoc at) const {
+    auto node = std::make_shared<Expr>();
+    node->kind = kind;
+    node->loc = loc;
+    node->text = std::move(text);
+    int height = 0;
+    for (Parsed& a : args) {
+      height = std::max(height, a.height);
+      node->args.push_back(std::move(a.node));
+    }
+    if (height + 1 > kMaxHeight)
+      fail(at, "expression is too long or too deeply nested (more than " +
+                   std::to_string(kMaxHeight) + " levels of operations)");
+    return {std::move(node), start, height + 1};
+  }
+
+  /// A Binary node `lhs OP rhs`, positioned at the start of `lhs`.
+  Parsed binary(const Token& op, Parsed lhs, Parsed rhs) const {
+    const SourceLoc start = lhs.start;
+    std::vector<Parsed> args;
+    args.push_back(std::move(lhs));
+    args.push_back(std::move(rhs));
+    return inner(Expr::Kind::Binary, op.text == "**" ? "^" : op.text, start, start, std::move(args),
+                 op.loc);
+  }
+
+  // expr := term { ('+' | '-') term }
+  Parsed parse_expr() {
+    Parsed lhs = parse_term();
+    while (at_punct("+") || at_punct("-")) {
+      const Token op = take();
+      Parsed rhs = parse_term();
+      lhs = binary(op, std::move(lhs), std::move(rhs));
+    }
+    return lhs;
+  }
+
+  // term := unary { ('*' | '/') unary }
+  Parsed parse_term() {
+    Parsed lhs = parse_unary();
+    while (at_punct("*") || at_punct("/")) {
+      const Token op = take();
+      Parsed rhs = parse_unary();
+      lhs = binary(op, std::move(lhs), std::move(rhs));
+    }
+    return lhs;
+  }
+
+  // unary := ('-' | '+') unary | power
+  Parsed parse_unary() {
+    const NestingGuard guard(*this, tok().loc);
+    if (at_punct("-") || at_punct("+")) {
+      const Token op = take();
+      std::vector<Parsed> args;
+      args.push_back(parse_unary());
+      return inner(Expr::Kind::Unary, op.text, op.loc, op.loc, std::move(args), op.loc);
+    }
+    return parse_power();
+  }
+
+  // power := primary [ ('^' | '**') unary ]    (right-associative)
+  Parsed parse_power() {
+    Parsed base = parse_primary();
+    if (at_punct("^") || at_punct("**")) {
+      const Token op = take();
+      Parsed exponent = parse_unary();
+      return binary(op, std::move(base), std::move(exponent));
+    }
+    return base;
+  }
+
+  // primary := NUMBER | IDENT | IDENT '(' expr { ',' expr } ')' | '(' expr ')'
+  Parsed parse_primary() {
+    const Token& t = tok();
+    if (t.kind == Tok::Number) return leaf(Expr::Kind::Number, take());
+    if (t.kind == Tok::Ident) {
+      const Token name = take();
+      if (!at_punct("(")) return leaf(Expr::Kind::Symbol, name);
+      const SourceLoc open = take().loc;
+      std::vector<Parsed> args;
+      for (;;) {
+        args.push_back(parse_expr());
+        if (at_punct(")")) break;
+        if (!at_punct(","))
+          unexpected("',' or ')' in the call of '" + name.text + "' (opened at " + loc_str(open) +
+                     ")");
+        take();
+      }
+      take();
+      return inner(Expr::Kind::Call, name.text, name.loc, name.loc, std::move(args), name.loc);
+    }
+    if (is_punct(t, "(")) {
+      const SourceLoc open = take().loc;
+      Parsed e = parse_expr();
+      if (!at_punct(")")) unexpected("')' to close the '(' at " + loc_str(open));
+      take();
+      e.start = open;
+      return e;
+    }
+    unexpected("an expression");
+  }
+
+  const SourceText& src_;
+  Lexer lexer_;
+  std::deque<Token> buf_;
+  int nesting_ = 0;
+};
+
+}  // namespace
+
+ModelAst parse(const SourceText& src) {
+  return Parser(src).parse_model();
+}
+
+}  // namespace hybgen::gen
