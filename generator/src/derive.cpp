@@ -128,11 +128,12 @@ class Evaluator {
   GiNaC::exmap params_;
 };
 
-bool holds(const Condition& c, double v) {
-  if (c.op == "<") return v < 0;
-  if (c.op == "<=") return v <= 0;
-  if (c.op == ">") return v > 0;
-  return v >= 0;
+/// Whether x is in the closure of {c} (with a small tolerance): guard points
+/// lie on the boundaries of mode regions, which strict relations exclude.
+bool holds_closure(const Condition& c, double v) {
+  constexpr double tol = 1e-9;
+  if (c.op == "<" || c.op == "<=") return v <= tol;
+  return v >= -tol;
 }
 
 }  // namespace
@@ -378,13 +379,16 @@ HybridSystem derive(const Model& m, const SourceText& src) {
           double b = m.sim.lo[axis] + (m.sim.hi[axis] - m.sim.lo[axis]) * k / pieces;
           x[axis] = b;
           double fb = eval(g.surface, x);
-          if (k > 0 && std::isfinite(fa) && std::isfinite(fb) && (fa <= 0) != (fb <= 0)) {
+          if (fb == 0.0) {  // exactly on the surface (e.g. a surface on the domain's edge)
+            found = true;
+          } else if (k > 0 && std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 &&
+                     (fa < 0) != (fb < 0)) {
             double lo = a, hi = b, flo = fa;
             for (int it = 0; it < 60; ++it) {
               double mid = 0.5 * (lo + hi);
               x[axis] = mid;
               double fm = eval(g.surface, x);
-              if ((fm <= 0) == (flo <= 0)) lo = mid, flo = fm; else hi = mid;
+              if ((fm < 0) == (flo < 0)) lo = mid, flo = fm; else hi = mid;
             }
             x[axis] = 0.5 * (lo + hi);
             found = true;
@@ -395,9 +399,9 @@ HybridSystem derive(const Model& m, const SourceText& src) {
         if (!found) continue;
         bool inside = true;
         for (const auto& c : m.sim.support)
-          if (!holds(c, eval(c.expr, x))) inside = false;
+          if (!holds_closure(c, eval(c.expr, x))) inside = false;
         for (const auto& c : before.where)
-          if (!holds(c, eval(c.expr, x))) inside = false;
+          if (!holds_closure(c, eval(c.expr, x))) inside = false;
         if (!inside) continue;
         ++on_surface;
         double rate = eval(lie, x);

@@ -38,7 +38,7 @@ std::string derive_text(const HybridSystem& sys);
 std::string derive_latex(const HybridSystem& sys);
 
 /// `hybgen derive --format json` (DESIGN.md contract).
-nlohmann::json derive_json(const HybridSystem& sys);
+nlohmann::ordered_json derive_json(const HybridSystem& sys);
 
 /// C++ identifier for the model's struct (the model name, sanitised).
 std::string model_struct_name(const std::string& model_name);

@@ -1,0 +1,500 @@
+// Stage 4 (emit): IR -> kernel header + report, and the derive renderings.
+//
+// Builder in the style of CasADi's code generator: separate buffers for the
+// provenance header, the static tables and each kernel, assembled at the end.
+
+#include "hybgen/gen/emit.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <sstream>
+
+#include "hybgen/gen/dag.hpp"
+#include "hybgen/gen/derive.hpp"
+#include "hybgen/gen/fs.hpp"
+
+#ifndef HYBGEN_VERSION
+#define HYBGEN_VERSION "0.0.0"
+#endif
+
+namespace hybgen::gen {
+
+using GiNaC::ex;
+
+const char* generator_version() { return HYBGEN_VERSION; }
+
+std::string model_struct_name(const std::string& model_name) {
+  std::string s;
+  for (char c : model_name) s += std::isalnum(static_cast<unsigned char>(c)) ? c : '_';
+  if (s.empty() || std::isdigit(static_cast<unsigned char>(s[0]))) s = "m_" + s;
+  return s;
+}
+
+namespace {
+
+std::string fmt_double(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.17g", v);
+  std::string s = buf;
+  if (s.find_first_of(".eEn") == std::string::npos) s += ".0";
+  return s;
+}
+
+std::string quoted(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    out += c;
+  }
+  return out + "\"";
+}
+
+const char* direction_word(Direction d) {
+  return d == Direction::Decreasing ? "decreasing" : "increasing";
+}
+
+/// Prints GiNaC expressions deterministically through one DAG.
+class Printer {
+ public:
+  explicit Printer(const Model& m) : tex_(m.tex) {}
+  std::string ginac(const ex& e) { return dag_.to_ginac(dag_.import(e)); }
+  std::string latex(const ex& e) { return dag_.to_latex(dag_.import(e), tex_); }
+  NodeId node(const ex& e) { return dag_.import(e); }
+  ExprDag& dag() { return dag_; }
+  /// "+ latex" / "- latex(-e)" for a term of a sum.
+  std::string signed_term(const ex& e) {
+    std::string s = latex(e);
+    if (!GiNaC::is_a<GiNaC::add>(e) && !s.empty() && s[0] == '-') return " - " + latex(-e);
+    if (GiNaC::is_a<GiNaC::add>(e)) return " + \\left(" + s + "\\right)";
+    return " + " + s;
+  }
+
+ private:
+  ExprDag dag_;
+  std::map<std::string, std::string> tex_;
+};
+
+/// The kernel-header builder: one buffer per kernel.
+class HeaderBuilder {
+ public:
+  HeaderBuilder(const HybridSystem& sys, Printer& pr) : sys_(sys), m_(*sys.model), pr_(pr) {
+    for (std::size_t i = 0; i < m_.state.size(); ++i) bind_[m_.state[i]] = "x[" + std::to_string(i) + "]";
+    for (std::size_t j = 0; j < m_.params.size(); ++j) bind_[m_.params[j].name] = "par[" + std::to_string(j) + "]";
+  }
+
+  /// A kernel `static void NAME(int k, const double* x, const double* par, double* out)`
+  /// switching on k; `outputs(k)` gives the expressions for case k.
+  void vector_kernel(const std::string& doc, const std::string& name, std::size_t cases,
+                     const std::function<std::vector<ex>(std::size_t)>& outputs) {
+    std::ostringstream os;
+    os << "  /// " << doc << "\n";
+    os << "  static void " << name << "(int k, const double* x, const double* par, double* out) {\n";
+    os << "    (void)x;\n    (void)par;\n    (void)out;\n";
+    os << "    switch (k) {\n";
+    for (std::size_t c = 0; c < cases; ++c) {
+      std::vector<CAssignment> as;
+      auto es = outputs(c);
+      for (std::size_t i = 0; i < es.size(); ++i)
+        as.push_back({"out[" + std::to_string(i) + "]", pr_.node(es[i])});
+      os << "      case " << c << ": {\n" << emit_c_block(pr_.dag(), as, bind_, "        ")
+         << "        break;\n      }\n";
+    }
+    os << "      default:\n        break;\n    }\n  }\n\n";
+    kernels_ += os.str();
+  }
+
+  /// A kernel `static double NAME(int k, const double* x, const double* par)`.
+  void scalar_kernel(const std::string& doc, const std::string& name, std::size_t cases,
+                     const std::function<ex(std::size_t)>& value) {
+    std::ostringstream os;
+    os << "  /// " << doc << "\n";
+    os << "  static double " << name << "(int k, const double* x, const double* par) {\n";
+    os << "    (void)x;\n    (void)par;\n";
+    os << "    double r = 0.0;\n    switch (k) {\n";
+    for (std::size_t c = 0; c < cases; ++c) {
+      std::vector<CAssignment> as{{"r", pr_.node(value(c))}};
+      os << "      case " << c << ": {\n" << emit_c_block(pr_.dag(), as, bind_, "        ")
+         << "        break;\n      }\n";
+    }
+    os << "      default:\n        break;\n    }\n    return r;\n  }\n\n";
+    kernels_ += os.str();
+  }
+
+  /// Emit `conds` as a boolean test into `os` (returns the C condition).
+  std::string conditions(std::ostringstream& os, const std::vector<Condition>& conds,
+                         const std::string& indent, const std::string& var) {
+    if (conds.empty()) return "true";
+    std::vector<CAssignment> as;
+    for (std::size_t i = 0; i < conds.size(); ++i) {
+      os << indent << "double " << var << i << " = 0.0;\n";
+      as.push_back({var + std::to_string(i), pr_.node(conds[i].expr)});
+    }
+    os << emit_c_block(pr_.dag(), as, bind_, indent, var + "t");
+    std::string test;
+    for (std::size_t i = 0; i < conds.size(); ++i)
+      test += (i ? " && " : "") + var + std::to_string(i) + " " + conds[i].op + " 0.0";
+    return test;
+  }
+
+  void density_kernels() {
+    const auto& sim = m_.sim;
+    std::ostringstream os;
+    os << "  /// Whether x lies in the state space (the model's `support` relations).\n";
+    os << "  static bool in_support(const double* x, const double* par) {\n";
+    os << "    (void)x;\n    (void)par;\n";
+    std::string test = conditions(os, sim.support, "    ", "c");
+    os << "    return " << test << ";\n  }\n\n";
+    os << "  /// Initial density of mode k at x (0 outside the support and the mode's region).\n";
+    os << "  static double initial_density(int k, const double* x, const double* par) {\n";
+    os << "    (void)x;\n    (void)par;\n";
+    os << "    if (!in_support(x, par)) return 0.0;\n";
+    os << "    double r = 0.0;\n    switch (k) {\n";
+    for (std::size_t c = 0; c < sys_.modes.size(); ++c) {
+      os << "      case " << c << ": {\n";
+      std::string region = conditions(os, sys_.modes[c].where, "        ", "w");
+      ex u0 = c < sim.initial.size() ? sim.initial[c] : ex(0);
+      if (region != "true") os << "        if (!(" << region << ")) return 0.0;\n";
+      os << emit_c_block(pr_.dag(), {{"r", pr_.node(u0)}}, bind_, "        ")
+         << "        break;\n      }\n";
+    }
+    os << "      default:\n        break;\n    }\n    return r;\n  }\n\n";
+    kernels_ += os.str();
+  }
+
+  std::string assemble() {
+    const std::string sname = model_struct_name(m_.name);
+    const std::size_t n = m_.state.size();
+    std::ostringstream os;
+    os << "// Generated by hybgen " << generator_version() << " -- DO NOT EDIT.\n";
+    os << "// model: " << m_.name << "\n";
+    os << "// source sha256: " << m_.source_hash << "\n";
+    os << "// Regenerate with `hybgen generate` from the model file; a golden test diffs this file.\n";
+    os << "#pragma once\n\n#include <array>\n#include <cmath>\n\n#include <hybgen/rt/model.hpp>\n\n";
+    os << "namespace hybgen_model {\n\n";
+    os << "/// Kernels of the hybrid system '" << m_.name << "' (see report.md for the derivation).\n";
+    os << "struct " << sname << " {\n";
+    os << "  /// Model name.\n  static constexpr const char* name = " << quoted(m_.name) << ";\n";
+    os << "  /// Number of state variables.\n  static constexpr int n_state = " << n << ";\n";
+    os << "  /// Number of parameters.\n  static constexpr int n_param = " << m_.params.size() << ";\n";
+    os << "  /// Number of modes.\n  static constexpr int n_mode = " << sys_.modes.size() << ";\n";
+    os << "  /// Number of guards.\n  static constexpr int n_guard = " << sys_.guards.size() << ";\n";
+    auto names = [&](const std::vector<std::string>& v) {
+      std::string s;
+      for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + quoted(v[i]);
+      return s;
+    };
+    std::vector<std::string> pnames, mnames, gnames;
+    std::string pdefaults;
+    for (std::size_t j = 0; j < m_.params.size(); ++j) {
+      pnames.push_back(m_.params[j].name);
+      pdefaults += (j ? ", " : "") + fmt_double(m_.params[j].value_d);
+    }
+    for (const auto& md : sys_.modes) mnames.push_back(md.name);
+    for (const auto& g : sys_.guards) gnames.push_back(g.name);
+    os << "  /// State variable names, in order.\n  static constexpr std::array<const char*, " << n
+       << "> state_names{" << names(m_.state) << "};\n";
+    os << "  /// Parameter names.\n  static constexpr std::array<const char*, " << pnames.size()
+       << "> param_names{" << names(pnames) << "};\n";
+    os << "  /// Parameter defaults.\n  static constexpr std::array<double, " << pnames.size()
+       << "> param_defaults{" << pdefaults << "};\n";
+    os << "  /// Mode names.\n  static constexpr std::array<const char*, " << mnames.size()
+       << "> mode_names{" << names(mnames) << "};\n";
+    os << "  /// Guard names.\n  static constexpr std::array<const char*, " << gnames.size()
+       << "> guard_names{" << names(gnames) << "};\n";
+    os << "  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse.\n";
+    os << "  static constexpr std::array<hybgen::rt::GuardInfo, " << gnames.size() << "> guards{{";
+    for (std::size_t g = 0; g < sys_.guards.size(); ++g) {
+      const auto& gd = sys_.guards[g];
+      os << (g ? ", " : "") << "{" << gd.from << ", " << gd.to << ", "
+         << (gd.direction == Direction::Decreasing ? -1 : 1) << ", "
+         << (gd.has_inverse ? "true" : "false") << "}";
+    }
+    os << "}};\n\n";
+    os << kernels_;
+    os << "};\n\n";
+    os << "static_assert(hybgen::rt::HybridModel<" << sname << ">);\n\n";
+    os << "}  // namespace hybgen_model\n";
+    return os.str();
+  }
+
+ private:
+  const HybridSystem& sys_;
+  const Model& m_;
+  Printer& pr_;
+  std::map<std::string, std::string> bind_;
+  std::string kernels_;
+};
+
+std::string tuple_latex(Printer& pr, const std::vector<ex>& v) {
+  std::string s = "\\left(";
+  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + pr.latex(v[i]);
+  return s + "\\right)";
+}
+
+std::string tuple_text(Printer& pr, const std::vector<ex>& v) {
+  std::string s = "(";
+  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + pr.ginac(v[i]);
+  return s + ")";
+}
+
+/// J∘Δ⁻¹: the factor of the jump condition written at the post-reset point.
+ex jacobian_at_preimage(const HybridSystem& sys, const IrGuard& g) {
+  if (!g.has_inverse) return g.hybrid_jacobian_on_surface;
+  GiNaC::exmap at;
+  for (std::size_t i = 0; i < g.reset_inverse.size(); ++i)
+    at[sys.model->state_symbols[i]] = g.reset_inverse[i];
+  return simplify(g.hybrid_jacobian_on_surface.subs(at, GiNaC::subs_options::no_pattern));
+}
+
+std::string pde_latex(const HybridSystem& sys, Printer& pr, const IrMode& md, const std::string& u) {
+  const Model& m = *sys.model;
+  std::string s = "\\frac{\\partial " + u + "}{\\partial t}";
+  for (std::size_t i = 0; i < m.state.size(); ++i) {
+    if (md.flow[i].is_zero()) continue;
+    s += pr.signed_term(md.flow[i]) + "\\,\\frac{\\partial " + u + "}{\\partial " +
+         m.tex.at(m.state[i]) + "}";
+  }
+  if (md.divergence.is_zero()) return s + " = 0";
+  return s + " = -" +
+         (GiNaC::is_a<GiNaC::add>(md.divergence) ? "\\left(" + pr.latex(md.divergence) + "\\right)"
+                                                 : pr.latex(md.divergence)) +
+         "\\, " + u;
+}
+
+std::string state_args_latex(const Model& m) {
+  std::string s;
+  for (const auto& x : m.state) s += ", " + m.tex.at(x);
+  return s;
+}
+
+std::string report_markdown(const HybridSystem& sys, Printer& pr) {
+  const Model& m = *sys.model;
+  std::ostringstream os;
+  os << "<!-- Generated by hybgen " << generator_version() << " -- DO NOT EDIT. model sha256: "
+     << m.source_hash << " -->\n";
+  os << "# Derivation report: `" << m.name << "`\n\n";
+  os << "State $x = (";
+  for (std::size_t i = 0; i < m.state.size(); ++i) os << (i ? ", " : "") << "$" << m.tex.at(m.state[i]) << "$";
+  os << ")$ with reference measure $\\mu = ";
+  for (std::size_t i = 0; i < m.state.size(); ++i) os << (i ? " \\wedge " : "") << "d" << m.tex.at(m.state[i]);
+  os << "$.\n\nParameters (defaults): ";
+  for (std::size_t j = 0; j < m.params.size(); ++j)
+    os << (j ? ", " : "") << "$" << m.tex.at(m.params[j].name) << " = " << pr.latex(m.params[j].value) << "$";
+  os << ".\n\n";
+  os << derive_latex(sys) << "\n";
+  if (!sys.warnings.empty()) {
+    os << "## Warnings\n\n";
+    for (const auto& w : sys.warnings) os << "- " << w << "\n";
+  }
+  return os.str();
+}
+
+}  // namespace
+
+GeneratedFiles emit(const HybridSystem& sys) {
+  const Model& m = *sys.model;
+  Printer pr(m);
+  HeaderBuilder hb(sys, pr);
+  const std::size_t nm = sys.modes.size(), ng = sys.guards.size();
+  hb.vector_kernel("Vector field X of mode k.", "flow", nm,
+                   [&](std::size_t k) { return sys.modes[k].flow; });
+  hb.scalar_kernel("Divergence of X in mode k (Lebesgue measure in the state coordinates).",
+                   "divergence", nm, [&](std::size_t k) { return sys.modes[k].divergence; });
+  hb.scalar_kernel("Guard function s_k; the guard surface is s_k = 0.", "guard_surface", ng,
+                   [&](std::size_t k) { return sys.guards[k].surface; });
+  hb.vector_kernel("Gradient of s_k.", "guard_gradient", ng,
+                   [&](std::size_t k) { return sys.guards[k].gradient; });
+  hb.vector_kernel("Reset map of guard k.", "reset", ng,
+                   [&](std::size_t k) { return sys.guards[k].reset; });
+  hb.vector_kernel("Inverse reset of guard k (closed form where guards[k].has_inverse).",
+                   "reset_inverse", ng, [&](std::size_t k) {
+                     return sys.guards[k].has_inverse ? sys.guards[k].reset_inverse
+                                                      : m.state_symbols;
+                   });
+  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", ng,
+                   [&](std::size_t k) { return sys.guards[k].reset_jacobian; });
+  hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian", ng,
+                   [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
+  hb.density_kernels();
+  GeneratedFiles files;
+  files.header_name = m.name + ".hpp";
+  files.header = hb.assemble();
+  files.report_name = "report.md";
+  files.report = report_markdown(sys, pr);
+  return files;
+}
+
+void write_generated(const GeneratedFiles& files, const std::string& dir) {
+  std::filesystem::create_directories(dir);
+  write_file_atomic(dir + "/" + files.header_name, files.header);
+  write_file_atomic(dir + "/" + files.report_name, files.report);
+}
+
+std::string derive_text(const HybridSystem& sys) {
+  const Model& m = *sys.model;
+  Printer pr(m);
+  std::ostringstream os;
+  os << "model " << m.name << " (general hybrid system: " << m.state.size() << " states, "
+     << sys.modes.size() << " mode" << (sys.modes.size() == 1 ? "" : "s") << ", "
+     << sys.guards.size() << " guard" << (sys.guards.size() == 1 ? "" : "s") << ")\n";
+  os << "state       (";
+  for (std::size_t i = 0; i < m.state.size(); ++i) os << (i ? ", " : "") << m.state[i];
+  os << ")   measure: Lebesgue in these coordinates\n";
+  os << "parameters  ";
+  for (std::size_t j = 0; j < m.params.size(); ++j)
+    os << (j ? ", " : "") << m.params[j].name << " = " << pr.ginac(m.params[j].value);
+  os << "\n";
+  for (const auto& md : sys.modes) {
+    os << "\nmode " << md.name << "\n";
+    if (md.hamiltonian) os << "  H = " << pr.ginac(*md.hamiltonian) << "   (Hamilton's equations)\n";
+    for (std::size_t i = 0; i < m.state.size(); ++i)
+      os << "  " << m.state[i] << "' = " << pr.ginac(md.flow[i]) << "\n";
+    os << "  div X = " << pr.ginac(md.divergence) << "\n";
+  }
+  for (const auto& g : sys.guards) {
+    os << "\nguard " << g.name << ": " << sys.modes[static_cast<std::size_t>(g.from)].name << " -> "
+       << sys.modes[static_cast<std::size_t>(g.to)].name << " when s = " << pr.ginac(g.surface)
+       << " crosses 0, " << direction_word(g.direction) << "\n";
+    os << "  reset            Delta" << tuple_text(pr, m.state_symbols) << " = " << tuple_text(pr, g.reset) << "\n";
+    if (g.has_inverse)
+      os << "  inverse reset    Delta^-1" << tuple_text(pr, m.state_symbols) << " = "
+         << tuple_text(pr, g.reset_inverse) << "\n";
+    else
+      os << "  inverse reset    numeric (Newton at run time)\n";
+    os << "  hybrid Jacobian  J = " << pr.ginac(g.hybrid_jacobian_on_surface) << "   (on s = 0)\n";
+    if (!g.surface_note.empty() &&
+        !is_identically_zero(g.hybrid_jacobian - g.hybrid_jacobian_on_surface, {}))
+      os << "                   general form: J = " << pr.ginac(g.hybrid_jacobian) << "\n";
+  }
+  os << "\nhybrid Frobenius-Perron PDE (paper Thm 3.11)\n";
+  for (const auto& md : sys.modes) {
+    std::string u = sys.modes.size() > 1 ? "u_" + md.name : "u";
+    os << "  d" << u << "/dt";
+    for (std::size_t i = 0; i < m.state.size(); ++i)
+      if (!md.flow[i].is_zero()) os << " + (" << pr.ginac(md.flow[i]) << ") d" << u << "/d" << m.state[i];
+    os << " = " << (md.divergence.is_zero() ? "0" : "-(" + pr.ginac(md.divergence) + ") " + u) << "\n";
+  }
+  for (const auto& g : sys.guards) {
+    std::string uf = sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.from)].name : "u";
+    std::string ut = sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.to)].name : "u";
+    os << "  jump at " << g.name << ": " << ut << "(t+, y) = " << uf
+       << "(t-, Delta^-1(y)) / |J(Delta^-1(y))|";
+    if (g.has_inverse) {
+      std::string pre = tuple_text(pr, g.reset_inverse);
+      os << "\n      = " << uf << "(t-, " << pre.substr(1, pre.size() - 2) << ") / |"
+         << pr.ginac(jacobian_at_preimage(sys, g)) << "|";
+    }
+    os << "   for y in Delta(S)\n";
+  }
+  if (!sys.warnings.empty()) {
+    os << "\nwarnings\n";
+    for (const auto& w : sys.warnings) os << "  " << w << "\n";
+  }
+  return os.str();
+}
+
+std::string derive_latex(const HybridSystem& sys) {
+  const Model& m = *sys.model;
+  Printer pr(m);
+  std::ostringstream os;
+  const bool multi = sys.modes.size() > 1;
+  os << "% hybgen " << generator_version() << ": hybrid Frobenius--Perron PDE of '" << m.name << "'\n";
+  for (const auto& md : sys.modes) {
+    os << "% mode " << md.name << "\n\\[\n  \\dot x = " << tuple_latex(pr, md.flow)
+       << ", \\qquad \\operatorname{div}_\\mu X = " << pr.latex(md.divergence) << "\n\\]\n";
+  }
+  for (const auto& g : sys.guards) {
+    os << "% guard " << g.name << "\n\\[\n  \\mathcal S_{\\mathrm{" << g.name << "}} = \\{"
+       << pr.latex(g.surface) << " = 0\\},\\quad \\Delta" << tuple_latex(pr, m.state_symbols)
+       << " = " << tuple_latex(pr, g.reset);
+    if (g.has_inverse)
+      os << ",\\quad \\Delta^{-1}" << tuple_latex(pr, m.state_symbols) << " = "
+         << tuple_latex(pr, g.reset_inverse);
+    os << ",\\quad \\mathcal J^X_\\mu(\\Delta) = " << pr.latex(g.hybrid_jacobian_on_surface)
+       << "\n\\]\n";
+  }
+  os << "\\[\n\\begin{cases}\n";
+  for (const auto& md : sys.modes) {
+    std::string u = multi ? "u_{\\mathrm{" + md.name + "}}" : "u";
+    os << "  " << pde_latex(sys, pr, md, u) << ", & x \\notin \\Delta(\\mathcal S); \\\\[1ex]\n";
+  }
+  for (std::size_t k = 0; k < sys.guards.size(); ++k) {
+    const auto& g = sys.guards[k];
+    std::string uf = multi ? "u_{\\mathrm{" + sys.modes[static_cast<std::size_t>(g.from)].name + "}}" : "u";
+    std::string ut = multi ? "u_{\\mathrm{" + sys.modes[static_cast<std::size_t>(g.to)].name + "}}" : "u";
+    std::string args = state_args_latex(m);
+    os << "  " << ut << "(t^+" << args << ") = ";
+    if (g.has_inverse) {
+      std::string pre;
+      for (const auto& e : g.reset_inverse) pre += ", " + pr.latex(e);
+      os << "\\dfrac{" << uf << "(t^-" << pre << ")}{\\left|" << pr.latex(jacobian_at_preimage(sys, g))
+         << "\\right|}";
+    } else {
+      os << "\\dfrac{" << uf << "(t^-, \\Delta^{-1}(x))}{\\left|\\mathcal J(\\Delta^{-1}(x))\\right|}";
+    }
+    os << ", & x \\in \\Delta(\\mathcal S_{\\mathrm{" << g.name << "}})"
+       << (k + 1 < sys.guards.size() ? ";\\\\[1ex]" : ".") << "\n";
+  }
+  os << "\\end{cases}\n\\]\n";
+  return os.str();
+}
+
+nlohmann::ordered_json derive_json(const HybridSystem& sys) {
+  const Model& m = *sys.model;
+  Printer pr(m);
+  nlohmann::ordered_json j;
+  j["model"] = m.name;
+  j["kind"] = "hybrid";
+  j["state"] = m.state;
+  nlohmann::ordered_json params = nlohmann::ordered_json::object();
+  for (const auto& p : m.params) {
+    if (GiNaC::is_a<GiNaC::numeric>(p.value) && GiNaC::ex_to<GiNaC::numeric>(p.value).is_integer() &&
+        std::fabs(p.value_d) < 9.0e15)
+      params[p.name] = static_cast<long long>(p.value_d);
+    else
+      params[p.name] = p.value_d;
+  }
+  j["parameters"] = params;
+  nlohmann::ordered_json modes = nlohmann::ordered_json::array();
+  for (const auto& md : sys.modes) {
+    nlohmann::ordered_json mj;
+    mj["name"] = md.name;
+    std::vector<std::string> flow;
+    for (const auto& f : md.flow) flow.push_back(pr.ginac(f));
+    mj["flow"] = flow;
+    mj["divergence"] = pr.ginac(md.divergence);
+    if (md.hamiltonian) mj["hamiltonian"] = pr.ginac(*md.hamiltonian);
+    modes.push_back(mj);
+  }
+  j["modes"] = modes;
+  nlohmann::ordered_json guards = nlohmann::ordered_json::array();
+  for (const auto& g : sys.guards) {
+    nlohmann::ordered_json gj;
+    gj["name"] = g.name;
+    gj["from"] = sys.modes[static_cast<std::size_t>(g.from)].name;
+    gj["to"] = sys.modes[static_cast<std::size_t>(g.to)].name;
+    gj["surface"] = pr.ginac(g.surface);
+    gj["direction"] = direction_word(g.direction);
+    std::vector<std::string> reset, inverse;
+    for (const auto& e : g.reset) reset.push_back(pr.ginac(e));
+    gj["reset"] = reset;
+    if (g.has_inverse) {
+      for (const auto& e : g.reset_inverse) inverse.push_back(pr.ginac(e));
+      gj["reset_inverse"] = inverse;
+    } else {
+      gj["reset_inverse"] = nullptr;
+    }
+    gj["reset_inverse_kind"] = g.has_inverse ? "symbolic" : "numeric";
+    gj["hybrid_jacobian"] = pr.ginac(g.hybrid_jacobian_on_surface);
+    gj["hybrid_jacobian_general"] = pr.ginac(g.hybrid_jacobian);
+    guards.push_back(gj);
+  }
+  j["guards"] = guards;
+  j["reduction"] = nullptr;
+  j["warnings"] = sys.warnings;
+  return j;
+}
+
+}  // namespace hybgen::gen
