@@ -227,6 +227,21 @@ class HeaderBuilder {
   std::string kernels_;
 };
 
+/// A name inside \\mathrm{}: underscores escaped.
+std::string tex_name(const std::string& name) {
+  std::string out;
+  for (char c : name) {
+    if (c == '_') out += "\\_"; else out += c;
+  }
+  return "\\mathrm{" + out + "}";
+}
+
+/// |J| in LaTeX: a number is printed as its absolute value.
+std::string abs_latex(Printer& pr, const ex& e) {
+  if (GiNaC::is_a<GiNaC::numeric>(e)) return pr.latex(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)));
+  return "\\left|" + pr.latex(e) + "\\right|";
+}
+
 std::string tuple_latex(Printer& pr, const std::vector<ex>& v) {
   std::string s = "\\left(";
   for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + pr.latex(v[i]);
@@ -257,10 +272,11 @@ std::string pde_latex(const HybridSystem& sys, Printer& pr, const IrMode& md, co
          m.tex.at(m.state[i]) + "}";
   }
   if (md.divergence.is_zero()) return s + " = 0";
-  return s + " = -" +
-         (GiNaC::is_a<GiNaC::add>(md.divergence) ? "\\left(" + pr.latex(md.divergence) + "\\right)"
-                                                 : pr.latex(md.divergence)) +
-         "\\, " + u;
+  // −div·u, with the sign folded into a single term when div is not a sum.
+  const std::string rhs = GiNaC::is_a<GiNaC::add>(md.divergence)
+                              ? "-\\left(" + pr.latex(md.divergence) + "\\right)"
+                              : pr.latex(-md.divergence);
+  return s + " = " + rhs + "\\, " + u;
 }
 
 std::string state_args_latex(const Model& m) {
@@ -406,7 +422,7 @@ std::string derive_latex(const HybridSystem& sys) {
        << ", \\qquad \\operatorname{div}_\\mu X = " << pr.latex(md.divergence) << "\n\\]\n";
   }
   for (const auto& g : sys.guards) {
-    os << "% guard " << g.name << "\n\\[\n  \\mathcal S_{\\mathrm{" << g.name << "}} = \\{"
+    os << "% guard " << g.name << "\n\\[\n  \\mathcal S_{" << tex_name(g.name) << "} = \\{"
        << pr.latex(g.surface) << " = 0\\},\\quad \\Delta" << tuple_latex(pr, m.state_symbols)
        << " = " << tuple_latex(pr, g.reset);
     if (g.has_inverse)
@@ -422,19 +438,22 @@ std::string derive_latex(const HybridSystem& sys) {
   }
   for (std::size_t k = 0; k < sys.guards.size(); ++k) {
     const auto& g = sys.guards[k];
-    std::string uf = multi ? "u_{\\mathrm{" + sys.modes[static_cast<std::size_t>(g.from)].name + "}}" : "u";
-    std::string ut = multi ? "u_{\\mathrm{" + sys.modes[static_cast<std::size_t>(g.to)].name + "}}" : "u";
+    std::string uf = multi ? "u_{" + tex_name(sys.modes[static_cast<std::size_t>(g.from)].name) + "}" : "u";
+    std::string ut = multi ? "u_{" + tex_name(sys.modes[static_cast<std::size_t>(g.to)].name) + "}" : "u";
     std::string args = state_args_latex(m);
     os << "  " << ut << "(t^+" << args << ") = ";
     if (g.has_inverse) {
       std::string pre;
       for (const auto& e : g.reset_inverse) pre += ", " + pr.latex(e);
-      os << "\\dfrac{" << uf << "(t^-" << pre << ")}{\\left|" << pr.latex(jacobian_at_preimage(sys, g))
-         << "\\right|}";
+      const ex Jpre = jacobian_at_preimage(sys, g);
+      if (GiNaC::is_a<GiNaC::numeric>(Jpre) && GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(Jpre)) == 1)
+        os << uf << "(t^-" << pre << ")";
+      else
+        os << "\\dfrac{" << uf << "(t^-" << pre << ")}{" << abs_latex(pr, Jpre) << "}";
     } else {
       os << "\\dfrac{" << uf << "(t^-, \\Delta^{-1}(x))}{\\left|\\mathcal J(\\Delta^{-1}(x))\\right|}";
     }
-    os << ", & x \\in \\Delta(\\mathcal S_{\\mathrm{" << g.name << "}})"
+    os << ", & x \\in \\Delta(\\mathcal S_{" << tex_name(g.name) << "})"
        << (k + 1 < sys.guards.size() ? ";\\\\[1ex]" : ".") << "\n";
   }
   os << "\\end{cases}\n\\]\n";

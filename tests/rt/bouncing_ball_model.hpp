@@ -1,0 +1,75 @@
+#pragma once
+/// \file bouncing_ball_model.hpp
+/// A hand-written `hybgen::rt::HybridModel` of the bouncing ball (what the emitter should
+/// produce for models/bouncing_ball.model), used by the runtime tests.
+///
+/// State (x, p), parameters (m, g, e). One mode `flight`: X = (p/m, −m g), div X = 0.
+/// Guard `ground`: s = x, decreasing; Δ(x, p) = (x, −e p); Δ⁻¹(y) = (x, −p/e);
+/// J = e² (DESIGN.md formula with tangent t = (0, 1): det[DΔ t | X(Δx)] / det[t | X(x)]
+/// = (−e²p/m) / (−p/m)). u0 = exp(−(x−1)² − p²) on the support x ≥ 0.
+
+#include <array>
+#include <cmath>
+
+#include "hybgen/rt/model.hpp"
+
+namespace hybgen::rt::testing {
+
+/// The bouncing ball of the paper's §4.1.
+struct BouncingBall {
+  static constexpr int n_state = 2;                                        ///< (x, p)
+  static constexpr int n_param = 3;                                        ///< (m, g, e)
+  static constexpr int n_mode = 1;                                         ///< flight
+  static constexpr int n_guard = 1;                                        ///< ground
+  static constexpr const char* name = "bouncing_ball";                     ///< Model name.
+  static constexpr std::array<const char*, 2> state_names{"x", "p"};       ///< State names.
+  static constexpr std::array<const char*, 3> param_names{"m", "g", "e"};  ///< Parameter names.
+  static constexpr std::array<double, 3> param_defaults{1.0, 1.0, 1.0};    ///< Defaults.
+  static constexpr std::array<const char*, 1> mode_names{"flight"};        ///< Mode names.
+  static constexpr std::array<const char*, 1> guard_names{"ground"};       ///< Guard names.
+  static constexpr std::array<GuardInfo, 1> guards{GuardInfo{0, 0, -1, true}};  ///< Guards.
+
+  /// X = (p/m, −m g).
+  static void flow(int, const double* x, const double* par, double* out) {
+    out[0] = x[1] / par[0];
+    out[1] = -par[0] * par[1];
+  }
+  /// div X = 0.
+  static double divergence(int, const double*, const double*) { return 0.0; }
+  /// s = x.
+  static double guard_surface(int, const double* x, const double*) { return x[0]; }
+  /// ∇s = (1, 0).
+  static void guard_gradient(int, const double*, const double*, double* out) {
+    out[0] = 1.0;
+    out[1] = 0.0;
+  }
+  /// Δ(x, p) = (x, −e p).
+  static void reset(int, const double* x, const double* par, double* out) {
+    out[0] = x[0];
+    out[1] = -par[2] * x[1];
+  }
+  /// Δ⁻¹(x, p) = (x, −p/e).
+  static void reset_inverse(int, const double* x, const double* par, double* out) {
+    out[0] = x[0];
+    out[1] = -x[1] / par[2];
+  }
+  /// DΔ = diag(1, −e).
+  static void reset_jacobian(int, const double*, const double* par, double* out) {
+    out[0] = 1.0;
+    out[1] = 0.0;
+    out[2] = 0.0;
+    out[3] = -par[2];
+  }
+  /// J = e².
+  static double hybrid_jacobian(int, const double*, const double* par) { return par[2] * par[2]; }
+  /// u0 = exp(−(x−1)² − p²) for x ≥ 0, else 0.
+  static double initial_density(int, const double* x, const double*) {
+    return x[0] >= 0.0 ? std::exp(-(x[0] - 1.0) * (x[0] - 1.0) - x[1] * x[1]) : 0.0;
+  }
+  /// Support x ≥ 0.
+  static bool in_support(const double* x, const double*) { return x[0] >= 0.0; }
+};
+
+static_assert(HybridModel<BouncingBall>);
+
+}  // namespace hybgen::rt::testing
