@@ -37,10 +37,10 @@ struct Frontend {
   Frontend(const std::string& path, const std::vector<std::string>& sets)
       : src(SourceText::load(path)) {
     const auto t0 = Clock::now();
-    ModelAst ast = parse(src);          // stage 1: text -> AST
-    model = check(ast, src);            // stage 2: AST -> Model
-    apply_overrides(model, sets);       //          --set KEY=VALUE
-    sys = derive(model, src);           // stage 3: Model -> IR
+    ModelAst ast = parse(src);     // stage 1: text -> AST
+    model = check(ast, src);       // stage 2: AST -> Model
+    apply_overrides(model, sets);  //          --set KEY=VALUE
+    sys = derive(model, src);      // stage 3: Model -> IR
     sys.model = &model;
     seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   }
@@ -139,7 +139,8 @@ int cmd_run(const std::string& path, const std::vector<std::string>& sets, std::
   fe.print_warnings();
   const Model& m = fe.model;
   if (!m.sim.present)
-    throw ModelError(m.path, {1, 1}, "the model has no simulation block, so there is nothing to run");
+    throw ModelError(m.path, {1, 1},
+                     "the model has no simulation block, so there is nothing to run");
   BuildResult b = do_build(fe, cache, false, quiet);
   if (out.empty()) out = "out/" + m.name;
   std::error_code ec;
@@ -154,7 +155,8 @@ int cmd_run(const std::string& path, const std::vector<std::string>& sets, std::
   cfg["params"] = params;
   nlohmann::json axes = nlohmann::json::array();
   for (std::size_t i = 0; i < m.state.size(); ++i)
-    axes.push_back({{"name", m.state[i]}, {"min", m.sim.lo[i]}, {"max", m.sim.hi[i]}, {"n", m.sim.grid[i]}});
+    axes.push_back(
+        {{"name", m.state[i]}, {"min", m.sim.lo[i]}, {"max", m.sim.hi[i]}, {"n", m.sim.grid[i]}});
   cfg["axes"] = axes;
   cfg["t_end"] = m.sim.t_end;
   cfg["dt"] = m.sim.dt;
@@ -174,10 +176,11 @@ int cmd_run(const std::string& path, const std::vector<std::string>& sets, std::
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"hybgen: symbolic-to-numeric code generator for hybrid dynamical systems.\n"
-               "Derives the hybrid Frobenius-Perron PDE of a .model file, emits specialised C++\n"
-               "kernels, builds them against the runtime and evolves densities.",
-               "hybgen"};
+  CLI::App app{
+      "hybgen: symbolic-to-numeric code generator for hybrid dynamical systems.\n"
+      "Derives the hybrid Frobenius-Perron PDE of a .model file, emits specialised C++\n"
+      "kernels, builds them against the runtime and evolves densities.",
+      "hybgen"};
   app.set_version_flag("--version", std::string("hybgen ") + generator_version());
   app.require_subcommand(1);
   std::string model, format = "text", out, cache;
@@ -199,7 +202,8 @@ int main(int argc, char** argv) {
   generate->add_option("-o,--output", out, "output directory (default: generated/<model>)");
   auto* build = app.add_subcommand("build", "generate and compile the runner (cached)");
   add_model(build);
-  build->add_option("--cache", cache, "build cache directory (default: $HYBGEN_CACHE or ~/.cache/hybgen)");
+  build->add_option("--cache", cache,
+                    "build cache directory (default: $HYBGEN_CACHE or ~/.cache/hybgen)");
   build->add_flag("-v,--verbose", verbose, "print the compiler command");
   auto* run = app.add_subcommand("run", "derive, build and run: evolve the initial density");
   add_model(run);

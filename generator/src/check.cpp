@@ -21,15 +21,14 @@ namespace {
 using GiNaC::ex;
 
 const std::set<std::string>& function_names() {
-  static const std::set<std::string> f = {"sin",  "cos",  "tan", "asin", "acos",
-                                          "atan", "sinh", "cosh", "tanh", "exp",
-                                          "log",  "sqrt", "abs"};
+  static const std::set<std::string> f = {"sin",  "cos",  "tan", "asin", "acos", "atan", "sinh",
+                                          "cosh", "tanh", "exp", "log",  "sqrt", "abs"};
   return f;
 }
 
 const std::set<std::string>& reserved_names() {
-  static const std::set<std::string> r = {"model", "parameter", "state", "mode", "guard",
-                                          "simulation", "pi"};
+  static const std::set<std::string> r = {"model", "parameter",  "state", "mode",
+                                          "guard", "simulation", "pi"};
   return r;
 }
 
@@ -40,7 +39,8 @@ std::size_t edit_distance(const std::string& a, const std::string& b) {
   for (std::size_t i = 1; i <= a.size(); ++i) {
     cur[0] = i;
     for (std::size_t j = 1; j <= b.size(); ++j)
-      cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] != b[j - 1] ? 1u : 0u)});
+      cur[j] =
+          std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] != b[j - 1] ? 1u : 0u)});
     std::swap(prev, cur);
   }
   return prev[b.size()];
@@ -89,8 +89,8 @@ class Converter {
         if (it != scope_.end()) return it->second;
         std::vector<std::string> names;
         for (const auto& [k, v] : scope_) names.push_back(k);
-        throw src_.error(e.loc, "unknown name '" + e.text + "' in " + what_ +
-                                    suggestion(e.text, names));
+        throw src_.error(e.loc,
+                         "unknown name '" + e.text + "' in " + what_ + suggestion(e.text, names));
       }
       case Expr::Kind::Unary: {
         ex a = convert_node(*e.args.at(0), depth + 1);
@@ -214,7 +214,8 @@ GiNaC::numeric exact_number(const std::string& literal) {
   }
   std::size_t nz = digits.find_first_not_of('0');
   digits = nz == std::string::npos ? "0" : digits.substr(nz);
-  if (digits.size() > 400) throw std::invalid_argument("number '" + literal + "' has too many digits");
+  if (digits.size() > 400)
+    throw std::invalid_argument("number '" + literal + "' has too many digits");
   GiNaC::numeric value(digits.c_str());
   long shift = e10 - frac;
   GiNaC::numeric ten(10);
@@ -251,11 +252,11 @@ Model check(const ModelAst& ast, const SourceText& src) {
   std::map<std::string, SourceLoc> declared;  // states and parameters share a namespace
   auto declare = [&](const std::string& name, SourceLoc loc, const char* what) {
     if (function_names().count(name))
-      throw src.error(loc, std::string("a ") + what + " cannot be named '" + name +
-                               "': it is a function name");
+      throw src.error(
+          loc, std::string("a ") + what + " cannot be named '" + name + "': it is a function name");
     if (reserved_names().count(name))
-      throw src.error(loc, std::string("a ") + what + " cannot be named '" + name +
-                               "': it is a reserved word");
+      throw src.error(
+          loc, std::string("a ") + what + " cannot be named '" + name + "': it is a reserved word");
     auto it = declared.find(name);
     if (it != declared.end())
       throw src.error(loc, "'" + name + "' is already declared at " +
@@ -277,7 +278,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
   }
 
   // States.
-  if (ast.states.empty()) throw src.error({1, 1}, "the model declares no state variables (write e.g. 'state x, p')");
+  if (ast.states.empty())
+    throw src.error({1, 1}, "the model declares no state variables (write e.g. 'state x, p')");
   std::map<std::string, ex> state_scope;
   for (const auto& s : ast.states) {
     ex sym = GiNaC::realsymbol(s.name);
@@ -293,8 +295,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
     ex value = conv.convert(p.value);
     auto d = to_finite_double(value);
     if (!d)
-      throw src.error(p.value->loc, "the default of parameter '" + p.name +
-                                        "' is not a finite real number");
+      throw src.error(p.value->loc,
+                      "the default of parameter '" + p.name + "' is not a finite real number");
     ex sym = GiNaC::realsymbol(p.name);
     m.params.push_back({p.name, sym, value, *d, p.loc});
     param_scope[p.name] = sym;
@@ -306,7 +308,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
   std::vector<ex> state_syms = m.state_symbols;
 
   // Modes.
-  if (ast.modes.empty()) throw src.error({1, 1}, "the model declares no mode (write 'mode NAME { x' = ... }')");
+  if (ast.modes.empty())
+    throw src.error({1, 1}, "the model declares no mode (write 'mode NAME { x' = ... }')");
   std::map<std::string, int> mode_index;
   for (const auto& md : ast.modes) {
     if (mode_index.count(md.name.name))
@@ -329,7 +332,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
         for (const auto& nm : names) {
           auto it = std::find(m.state.begin(), m.state.end(), nm.name);
           if (it == m.state.end())
-            throw src.error(nm.loc, std::string(what) + " '" + nm.name + "' is not a state variable");
+            throw src.error(nm.loc,
+                            std::string(what) + " '" + nm.name + "' is not a state variable");
           out.push_back(static_cast<int>(it - m.state.begin()));
         }
       };
@@ -338,8 +342,10 @@ Model check(const ModelAst& ast, const SourceText& src) {
       if (spec.coordinates.empty() && spec.momenta.empty()) {
         if (n % 2 != 0)
           throw src.error(md.hamiltonian_loc,
-                          where + ": a Hamiltonian needs as many momenta as coordinates, but the "
-                                  "state has " + std::to_string(n) +
+                          where +
+                              ": a Hamiltonian needs as many momenta as coordinates, but the "
+                              "state has " +
+                              std::to_string(n) +
                               " variables (name them with 'coordinates' and 'momenta')");
         for (std::size_t i = 0; i < n / 2; ++i) spec.coordinates.push_back(static_cast<int>(i));
         for (std::size_t i = n / 2; i < n; ++i) spec.momenta.push_back(static_cast<int>(i));
@@ -349,12 +355,14 @@ Model check(const ModelAst& ast, const SourceText& src) {
       if (spec.coordinates.size() != spec.momenta.size() || all.size() != n ||
           spec.coordinates.size() + spec.momenta.size() != n)
         throw src.error(md.hamiltonian_loc,
-                        where + ": 'coordinates' and 'momenta' must split the state into two "
-                                "lists of equal length covering every state variable once");
+                        where +
+                            ": 'coordinates' and 'momenta' must split the state into two "
+                            "lists of equal length covering every state variable once");
     } else {
       if (md.flows.empty())
-        throw src.error(md.name.loc, where + " has no flow equations (write x' = ... for every "
-                                             "state variable, or a hamiltonian)");
+        throw src.error(md.name.loc, where +
+                                         " has no flow equations (write x' = ... for every "
+                                         "state variable, or a hamiltonian)");
       std::vector<std::optional<ex>> flow(m.state.size());
       Converter conv(src, full_scope, "the flow of " + where);
       for (const auto& f : md.flows) {
@@ -364,8 +372,7 @@ Model check(const ModelAst& ast, const SourceText& src) {
                                          " is not a state variable" +
                                          suggestion(f.var.name, m.state));
         auto i = static_cast<std::size_t>(it - m.state.begin());
-        if (flow[i])
-          throw src.error(f.var.loc, where + " gives " + f.var.name + "' twice");
+        if (flow[i]) throw src.error(f.var.loc, where + " gives " + f.var.name + "' twice");
         flow[i] = conv.convert(f.rhs);
       }
       for (std::size_t i = 0; i < flow.size(); ++i) {
@@ -394,7 +401,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
       if (it == mode_index.end()) {
         std::vector<std::string> names;
         for (const auto& [k, v] : mode_index) names.push_back(k);
-        throw src.error(n.loc, "unknown mode '" + n.name + "' in " + where + suggestion(n.name, names));
+        throw src.error(n.loc,
+                        "unknown mode '" + n.name + "' in " + where + suggestion(n.name, names));
       }
       return it->second;
     };
@@ -416,8 +424,9 @@ Model check(const ModelAst& ast, const SourceText& src) {
       throw src.error(g.when.loc, "the surface of " + where + " does not depend on the state");
     spec.direction = g.direction;
     if (!g.has_reset)
-      throw src.error(g.name.loc, where + " has no reset (write 'reset identity', 'reset "
-                                          "elastic', 'reset restitution e' or 'reset (...)')");
+      throw src.error(g.name.loc, where +
+                                      " has no reset (write 'reset identity', 'reset "
+                                      "elastic', 'reset restitution e' or 'reset (...)')");
     spec.reset_kind = g.reset.kind;
     spec.reset_loc = g.reset.loc;
     switch (g.reset.kind) {
@@ -435,12 +444,11 @@ Model check(const ModelAst& ast, const SourceText& src) {
         if (g.reset.components.size() != m.state.size()) {
           std::string names;
           for (std::size_t i = 0; i < m.state.size(); ++i) names += (i ? ", " : "") + m.state[i];
-          throw src.error(g.reset.components_loc,
-                          "the reset of " + where + " has " +
-                              std::to_string(g.reset.components.size()) + " component" +
-                              (g.reset.components.size() == 1 ? "" : "s") + ", expected " +
-                              std::to_string(m.state.size()) + " (one per state variable: " +
-                              names + ")");
+          throw src.error(
+              g.reset.components_loc,
+              "the reset of " + where + " has " + std::to_string(g.reset.components.size()) +
+                  " component" + (g.reset.components.size() == 1 ? "" : "s") + ", expected " +
+                  std::to_string(m.state.size()) + " (one per state variable: " + names + ")");
         }
         Converter rconv(src, full_scope, "the reset of " + where);
         for (const auto& c : g.reset.components) spec.reset.push_back(rconv.convert(c));
@@ -451,9 +459,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
          spec.reset_kind == ResetDecl::Kind::Restitution)) {
       const auto& src_mode = m.modes[static_cast<std::size_t>(spec.from)];
       if (!src_mode.hamiltonian)
-        throw src.error(g.reset.loc,
-                        "an elastic/restitution reset needs a Hamiltonian in mode '" +
-                            src_mode.name + "' (or write the reset explicitly)");
+        throw src.error(g.reset.loc, "an elastic/restitution reset needs a Hamiltonian in mode '" +
+                                         src_mode.name + "' (or write the reset explicitly)");
     }
     m.guards.push_back(std::move(spec));
   }
@@ -485,7 +492,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
       sim.lo[i] = number(d.lo, "the lower end of the domain of " + d.var.name);
       sim.hi[i] = number(d.hi, "the upper end of the domain of " + d.var.name);
       if (!(sim.lo[i] < sim.hi[i]))
-        throw src.error(d.lo->loc, "the domain of '" + d.var.name + "' is empty (lower end >= upper end)");
+        throw src.error(d.lo->loc,
+                        "the domain of '" + d.var.name + "' is empty (lower end >= upper end)");
     }
     for (std::size_t i = 0; i < n; ++i)
       if (std::isnan(sim.lo[i]))
@@ -563,8 +571,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
       } else if (k == "method") {
         if (st.word.empty()) throw src.error(st.value_loc, "method needs a name (characteristics)");
         if (st.word != "characteristics")
-          throw src.error(st.value_loc, "unknown method '" + st.word +
-                                            "' (available: characteristics)");
+          throw src.error(st.value_loc,
+                          "unknown method '" + st.word + "' (available: characteristics)");
         sim.method = st.word;
       } else {
         std::vector<std::string> keys = setting_names();
@@ -576,10 +584,10 @@ Model check(const ModelAst& ast, const SourceText& src) {
 
   // TeX names for Greek-letter symbols.
   static const std::set<std::string> greek = {
-      "alpha", "beta",  "gamma", "delta", "epsilon", "zeta",  "eta",   "theta",
-      "iota",  "kappa", "lambda", "mu",   "nu",      "xi",    "rho",   "sigma",
-      "tau",   "phi",   "chi",   "psi",   "omega",   "Gamma", "Delta", "Theta",
-      "Lambda", "Xi",   "Pi",    "Sigma", "Phi",     "Psi",   "Omega"};
+      "alpha",  "beta",  "gamma",  "delta", "epsilon", "zeta",  "eta",   "theta",
+      "iota",   "kappa", "lambda", "mu",    "nu",      "xi",    "rho",   "sigma",
+      "tau",    "phi",   "chi",    "psi",   "omega",   "Gamma", "Delta", "Theta",
+      "Lambda", "Xi",    "Pi",     "Sigma", "Phi",     "Psi",   "Omega"};
   auto texname = [&](const std::string& nm) {
     // theta0 -> \theta_{0}; zeta1 -> \zeta_{1}
     std::size_t k = nm.size();
@@ -596,8 +604,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
 }
 
 const std::vector<std::string>& setting_names() {
-  static const std::vector<std::string> names = {"grid", "t_end", "dt",    "method",
-                                                 "tol",  "max_events", "domain.<state>"};
+  static const std::vector<std::string> names = {
+      "grid", "t_end", "dt", "method", "tol", "max_events", "domain.<state>"};
   return names;
 }
 
@@ -607,9 +615,11 @@ std::vector<long> parse_grid(const std::string& text) {
   while (i <= text.size()) {
     std::size_t j = i;
     while (j < text.size() && std::isdigit(static_cast<unsigned char>(text[j]))) ++j;
-    if (j == i || j - i > 9) throw UsageError("malformed grid '" + text + "' (expected e.g. 75x75)");
+    if (j == i || j - i > 9)
+      throw UsageError("malformed grid '" + text + "' (expected e.g. 75x75)");
     out.push_back(std::stol(text.substr(i, j - i)));
-    if (out.back() < 2) throw UsageError("every grid axis needs at least 2 nodes (got '" + text + "')");
+    if (out.back() < 2)
+      throw UsageError("every grid axis needs at least 2 nodes (got '" + text + "')");
     if (j == text.size()) break;
     if (text[j] != 'x' && text[j] != 'X')
       throw UsageError("malformed grid '" + text + "' (expected e.g. 75x75)");
@@ -691,13 +701,15 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets) {
     } else if (key.rfind("domain.", 0) == 0) {
       std::string var = key.substr(7);
       auto it = std::find(model.state.begin(), model.state.end(), var);
-      if (it == model.state.end()) throw UsageError("--set " + key + ": '" + var + "' is not a state variable");
+      if (it == model.state.end())
+        throw UsageError("--set " + key + ": '" + var + "' is not a state variable");
       // VALUE: a,b or [a,b]
       std::string v = value;
       if (!v.empty() && v.front() == '[') v = v.substr(1);
       if (!v.empty() && v.back() == ']') v.pop_back();
       auto comma = v.find(',');
-      if (comma == std::string::npos) throw UsageError("--set " + key + "=[a,b] expects two numbers");
+      if (comma == std::string::npos)
+        throw UsageError("--set " + key + "=[a,b] expects two numbers");
       double lo = parse_override_number(key, v.substr(0, comma));
       double hi = parse_override_number(key, v.substr(comma + 1));
       if (!(lo < hi)) throw UsageError("--set " + key + ": empty interval");

@@ -66,8 +66,8 @@ bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
         GiNaC::Digits = 17;
         if (!GiNaC::is_a<GiNaC::numeric>(v)) return false;
         if (GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(v)) > GiNaC::numeric(1, 1000000000) *
-                                                               GiNaC::numeric(1, 1000000000) *
-                                                               GiNaC::numeric(1, 100000))
+                                                              GiNaC::numeric(1, 1000000000) *
+                                                              GiNaC::numeric(1, 100000))
           return false;
       } else if (!GiNaC::ex_to<GiNaC::numeric>(v).is_zero()) {
         return false;
@@ -179,7 +179,8 @@ HybridSystem derive(const Model& m, const SourceText& src) {
     g.to = gs.to;
     g.direction = gs.direction;
     g.surface = simplify(gs.surface);
-    for (const auto& xi : X) g.gradient.push_back(simplify(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(xi))));
+    for (const auto& xi : X)
+      g.gradient.push_back(simplify(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(xi))));
     const IrMode& before = sys.modes[static_cast<std::size_t>(gs.from)];
     const IrMode& after = sys.modes[static_cast<std::size_t>(gs.to)];
     const std::string where = "guard '" + gs.name + "'";
@@ -222,8 +223,8 @@ HybridSystem derive(const Model& m, const SourceText& src) {
         if (!natural)
           throw src.error(gs.reset_loc,
                           "an elastic/restitution reset needs a natural Hamiltonian "
-                          "½ pᵀM(q)⁻¹p + V(q) in mode '" + ms.name +
-                              "' (quadratic in the momenta with no linear terms)");
+                          "½ pᵀM(q)⁻¹p + V(q) in mode '" +
+                              ms.name + "' (quadratic in the momenta with no linear terms)");
         for (const auto& pk : p)
           if (!is_identically_zero(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
             throw src.error(gs.surface_loc,
@@ -257,8 +258,8 @@ HybridSystem derive(const Model& m, const SourceText& src) {
     for (std::size_t i : changed)
       for (std::size_t a : changed)
         for (std::size_t b : changed)
-          if (!is_identically_zero(g.reset_jacobian[i * n + a].diff(GiNaC::ex_to<GiNaC::symbol>(X[b])),
-                                   all_symbols))
+          if (!is_identically_zero(
+                  g.reset_jacobian[i * n + a].diff(GiNaC::ex_to<GiNaC::symbol>(X[b])), all_symbols))
             affine = false;
     if (changed.empty()) {
       g.has_inverse = true;
@@ -291,8 +292,9 @@ HybridSystem derive(const Model& m, const SourceText& src) {
           throw InternalError("inverse reset of " + where + " failed verification");
     } else {
       g.has_inverse = false;
-      sys.warnings.push_back(where + ": the reset is not affine in the variables it changes; its "
-                                     "inverse is computed numerically (Newton) at run time");
+      sys.warnings.push_back(where +
+                             ": the reset is not affine in the variables it changes; its "
+                             "inverse is computed numerically (Newton) at run time");
     }
 
     // Hybrid Jacobian J = ∇sᵀ adj(DΔ) X⁺(Δx) / ∇sᵀ X⁻(x).
@@ -388,7 +390,10 @@ HybridSystem derive(const Model& m, const SourceText& src) {
               double mid = 0.5 * (lo + hi);
               x[axis] = mid;
               double fm = eval(g.surface, x);
-              if ((fm < 0) == (flo < 0)) lo = mid, flo = fm; else hi = mid;
+              if ((fm < 0) == (flo < 0))
+                lo = mid, flo = fm;
+              else
+                hi = mid;
             }
             x[axis] = 0.5 * (lo + hi);
             found = true;
@@ -430,12 +435,16 @@ HybridSystem derive(const Model& m, const SourceText& src) {
         }
       }
       if (on_surface == 0) {
-        sys.warnings.push_back(where + ": the surface does not meet the simulation domain (with the "
-                                       "parameters at their defaults)");
+        sys.warnings.push_back(where +
+                               ": the surface does not meet the simulation domain (with the "
+                               "parameters at their defaults)");
       } else if (crossing == 0) {
-        sys.warnings.push_back(where + ": at every sampled point of the surface inside the domain "
-                                       "the flow of mode '" + before.name + "' crosses it in the "
-                                       "other direction, so the guard never fires there");
+        sys.warnings.push_back(where +
+                               ": at every sampled point of the surface inside the domain "
+                               "the flow of mode '" +
+                               before.name +
+                               "' crosses it in the "
+                               "other direction, so the guard never fires there");
       } else {
         if (jzero == crossing)
           throw src.error(gs.reset_loc, "the hybrid Jacobian of " + where +

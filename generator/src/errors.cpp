@@ -67,13 +67,12 @@ void SourceText::validate() const {
       if (c == 0xF0) lo = 0x90;
       if (c == 0xF4) hi = 0x8F;
     } else {
-      throw error(loc_of(i), "the model file is not valid UTF-8 (byte 0x" +
-                                 [&] {
-                                   char b[3];
-                                   std::snprintf(b, sizeof b, "%02X", c);
-                                   return std::string(b);
-                                 }() +
-                                 ")");
+      throw error(
+          loc_of(i), "the model file is not valid UTF-8 (byte 0x" + [&] {
+            char b[3];
+            std::snprintf(b, sizeof b, "%02X", c);
+            return std::string(b);
+          }() + ")");
     }
     if (i + len >= n) {
       throw error(loc_of(i), "the model file is not valid UTF-8 (truncated sequence)");
@@ -106,7 +105,10 @@ SourceLoc SourceText::loc_of(std::size_t offset) const {
   std::size_t lo = 0, hi = line_starts_.size();
   while (hi - lo > 1) {
     std::size_t mid = (lo + hi) / 2;
-    if (line_starts_[mid] <= offset) lo = mid; else hi = mid;
+    if (line_starts_[mid] <= offset)
+      lo = mid;
+    else
+      hi = mid;
   }
   return {static_cast<int>(lo + 1), static_cast<int>(offset - line_starts_[lo] + 1)};
 }

@@ -34,7 +34,8 @@ struct Result {
 /// Run hybgen with `args` from the source directory; capture all output.
 Result hybgen(const std::string& args) {
   fs::create_directories(kWork);
-  std::string cmd = "cd '" + kSrc + "' && HYBGEN_CACHE='" + kCache + "' '" + kExe + "' " + args + " 2>&1";
+  std::string cmd =
+      "cd '" + kSrc + "' && HYBGEN_CACHE='" + kCache + "' '" + kExe + "' " + args + " 2>&1";
   Result r;
   FILE* p = ::popen(cmd.c_str(), "r");
   if (!p) return r;
@@ -53,7 +54,9 @@ std::string write_model(const std::string& name, const std::string& text) {
   return path;
 }
 
-json read_json(const std::string& path) { return json::parse(hybgen::gen::read_file(path)); }
+json read_json(const std::string& path) {
+  return json::parse(hybgen::gen::read_file(path));
+}
 
 const std::vector<std::string> kModels = {"bouncing_ball", "sir", "sir_3d", "filippov",
                                           "chaplygin_energy"};
@@ -120,8 +123,8 @@ TEST(Cli, BrokenModelsExitOneWithLocation) {
       {"state x\nmode a { x' = y }\n", ":2:15: error: unknown name 'y'", ""},
       {"", ":1:1: error: the model file is empty", ""},
       {"state x\nmode a { x' = 1 }\n# caf\xe9\n", ":3:", "not valid UTF-8"},
-      {"state x\nmode a { x' = -1 }\nguard g { when x = 0 decreasing; reset (x, x) }\n", ":3:40:",
-       "2 components"},
+      {"state x\nmode a { x' = -1 }\nguard g { when x = 0 decreasing; reset (x, x) }\n",
+       ":3:40:", "2 components"},
       {"state x\nmode a { x' = -1 }\nguard g { from b; when x = 0 decreasing; reset identity }\n",
        ":3:16:", "unknown mode 'b'"},
       {"parameter k = 1e999\nstate x\nmode a { x' = k }\n", ":1:15:", "out of range"},
@@ -148,7 +151,9 @@ TEST(Cli, BadCommandLinesExitTwo) {
   EXPECT_EQ(hybgen("--help").code, 0);
 }
 
-fs::path run_dir(const std::string& name) { return kWork / "runs" / name; }
+fs::path run_dir(const std::string& name) {
+  return kWork / "runs" / name;
+}
 
 /// Run a model into a fresh directory; return its summary.
 json run(const std::string& model, const std::string& tag, const std::string& sets) {
@@ -160,7 +165,8 @@ json run(const std::string& model, const std::string& tag, const std::string& se
 }
 
 void check_run_outputs(const json& s, const fs::path& out, std::size_t dims) {
-  for (const char* key : {"model", "method", "grid", "times", "files", "mass", "outflow", "seconds"})
+  for (const char* key :
+       {"model", "method", "grid", "times", "files", "mass", "outflow", "seconds"})
     EXPECT_TRUE(s.contains(key)) << key;
   ASSERT_EQ(s["grid"]["axes"].size(), dims);
   std::vector<std::size_t> shape;
@@ -229,8 +235,9 @@ TEST(Cli, BouncingBallPaperConfigurationMatchesClosedForm) {
       }
     worst = std::max(worst, err / norm);
   }
-  std::printf("bouncing ball 75x75, 50 outputs to t=9.8: worst relative L1 error %.3e, solve %.4f s\n",
-              worst, s["seconds"]["solve"].get<double>());
+  std::printf(
+      "bouncing ball 75x75, 50 outputs to t=9.8: worst relative L1 error %.3e, solve %.4f s\n",
+      worst, s["seconds"]["solve"].get<double>());
   EXPECT_LE(worst, 1e-4);
 }
 
@@ -273,8 +280,9 @@ TEST(Cli, RestitutionMassBudget) {
     double z = zeno_mass(times[k].get<double>(), 0.8);
     worst = std::max(worst, std::fabs(atom[k].get<double>() - z) / m0);
   }
-  std::printf("restitution e=0.8: final atom %.6f, closed-form Zeno mass %.6f, worst |diff|/m0 %.2e\n",
-              atom.back().get<double>(), zeno_mass(times.back().get<double>(), 0.8), worst);
+  std::printf(
+      "restitution e=0.8: final atom %.6f, closed-form Zeno mass %.6f, worst |diff|/m0 %.2e\n",
+      atom.back().get<double>(), zeno_mass(times.back().get<double>(), 0.8), worst);
   EXPECT_GT(zeno_mass(10, 0.8), 0.1 * m0);  // the check is not vacuous
   EXPECT_LE(worst, 2e-3);
 }
@@ -284,8 +292,10 @@ TEST(Cli, NumericalFailureExitsThree) {
   // |v| ≤ 2 asks for θ' = √(negative): the vector field is not finite there,
   // which is reported with the state, the mode and the time, not hidden.
   fs::path out = run_dir("failure");
-  Result r = hybgen("run models/chaplygin_energy.model --quiet --set domain.v=[-2,2] "
-                    "--set grid=11x11 --out '" + out.string() + "'");
+  Result r = hybgen(
+      "run models/chaplygin_energy.model --quiet --set domain.v=[-2,2] "
+      "--set grid=11x11 --out '" +
+      out.string() + "'");
   EXPECT_EQ(r.code, 3) << r.out;
   EXPECT_NE(r.out.find("numerical failure"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("non-finite vector field"), std::string::npos) << r.out;
@@ -302,7 +312,8 @@ TEST(Cli, DegenerateParameterIsAModelError) {
 }
 
 TEST(Cli, OneDimensionalModelGivesLinePlots) {
-  std::string path = write_model("decay.model", R"(# x' = -x on [0, 2]; at x = 1/2 the state jumps up by 1.
+  std::string path =
+      write_model("decay.model", R"(# x' = -x on [0, 2]; at x = 1/2 the state jumps up by 1.
 state x
 mode m { x' = -x }
 guard kick { when x = 0.5 decreasing; reset (x + 1) }

@@ -22,7 +22,8 @@ void expect_error(const std::string& text, int line, int col, const std::string&
     ADD_FAILURE() << "no error for:\n" << text;
   } catch (const ModelError& e) {
     std::string what = e.what();
-    std::string prefix = "t.model:" + std::to_string(line) + ":" + std::to_string(col) + ": error: ";
+    std::string prefix =
+        "t.model:" + std::to_string(line) + ":" + std::to_string(col) + ": error: ";
     EXPECT_EQ(what.rfind(prefix, 0), 0u) << what;
     EXPECT_NE(what.find(fragment), std::string::npos) << what;
     EXPECT_EQ(e.exit_code(), ExitCode::ModelError);
@@ -91,8 +92,8 @@ TEST(Check, Overrides) {
   EXPECT_DOUBLE_EQ(m.sim.dt, 0.2);
   EXPECT_DOUBLE_EQ(m.sim.hi[0], 3.0);
   EXPECT_THROW(apply_overrides(m, {"nosuch=1"}), UsageError);
-  EXPECT_THROW(apply_overrides(m, {"grid=21"}), UsageError);      // wrong number of axes
-  EXPECT_THROW(apply_overrides(m, {"grid=21xx3"}), UsageError);   // malformed
+  EXPECT_THROW(apply_overrides(m, {"grid=21"}), UsageError);     // wrong number of axes
+  EXPECT_THROW(apply_overrides(m, {"grid=21xx3"}), UsageError);  // malformed
   EXPECT_THROW(apply_overrides(m, {"e=abc"}), UsageError);
   EXPECT_THROW(apply_overrides(m, {"e"}), UsageError);
   EXPECT_THROW(apply_overrides(m, {"t_end=-1"}), UsageError);
@@ -102,7 +103,8 @@ TEST(Check, Overrides) {
 
 TEST(Check, Errors) {
   expect_error("state x\nmode a { x' = y }\n", 2, 15, "unknown name 'y'");
-  expect_error("state x\nmode a { x' = sinn(x) }\n", 2, 15, "unknown function 'sinn' (did you mean 'sin'?)");
+  expect_error("state x\nmode a { x' = sinn(x) }\n", 2, 15,
+               "unknown function 'sinn' (did you mean 'sin'?)");
   expect_error("state x\nmode a { x' = sin(x, x) }\n", 2, 15, "takes 1 argument");
   expect_error("state x, x\nmode a { x' = 1 }\n", 1, 10, "'x' is already declared at 1:7");
   expect_error("parameter x = 1\nstate x\nmode a { x' = 1 }\n", 2, 7, "already declared");
@@ -120,30 +122,42 @@ TEST(Check, Errors) {
   // Guards.
   expect_error("state x\nmode a { x' = -1 }\nguard g { when x = 0 decreasing; reset (x, 1) }\n", 3,
                40, "has 2 components, expected 1 (one per state variable: x)");
-  expect_error("state x\nmode a { x' = -1 }\nmode b { x' = 1 }\nguard g { when x = 0 decreasing; reset identity }\n",
-               4, 7, "needs 'from MODE'");
-  expect_error("state x\nmode a { x' = -1 }\nguard g { from c; when x = 0 decreasing; reset identity }\n",
-               3, 16, "unknown mode 'c'");
-  expect_error("state x\nmode a { x' = -1 }\nguard g { when x = 0 decreasing }\n", 3, 7, "has no reset");
+  expect_error(
+      "state x\nmode a { x' = -1 }\nmode b { x' = 1 }\nguard g { when x = 0 decreasing; reset "
+      "identity }\n",
+      4, 7, "needs 'from MODE'");
+  expect_error(
+      "state x\nmode a { x' = -1 }\nguard g { from c; when x = 0 decreasing; reset identity }\n", 3,
+      16, "unknown mode 'c'");
+  expect_error("state x\nmode a { x' = -1 }\nguard g { when x = 0 decreasing }\n", 3, 7,
+               "has no reset");
   expect_error("state x\nmode a { x' = -1 }\nguard g { reset identity }\n", 3, 7, "has no surface");
-  expect_error("parameter c = 1\nstate x\nmode a { x' = -1 }\nguard g { when c = 0 decreasing; reset identity }\n",
-               4, 16, "does not depend on the state");
-  expect_error("state x, p\nmode a { x' = p; p' = -1 }\nguard g { when x = 0 decreasing; reset elastic }\n",
-               3, 34, "needs a Hamiltonian");
-  expect_error("state x, p, z\nmode a { hamiltonian p^2 }\n", 2, 10, "as many momenta as coordinates");
+  expect_error(
+      "parameter c = 1\nstate x\nmode a { x' = -1 }\nguard g { when c = 0 decreasing; reset "
+      "identity }\n",
+      4, 16, "does not depend on the state");
+  expect_error(
+      "state x, p\nmode a { x' = p; p' = -1 }\nguard g { when x = 0 decreasing; reset elastic }\n",
+      3, 34, "needs a Hamiltonian");
+  expect_error("state x, p, z\nmode a { hamiltonian p^2 }\n", 2, 10,
+               "as many momenta as coordinates");
   // Simulation block.
   expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; t_end 1 }\n", 3, 1,
                "no initial density");
-  expect_error("state x, y\nmode a { x' = 1; y' = 1 }\nsimulation { domain x in [0, 1]; initial 1 }\n",
-               3, 1, "no domain for 'y'");
+  expect_error(
+      "state x, y\nmode a { x' = 1; y' = 1 }\nsimulation { domain x in [0, 1]; initial 1 }\n", 3, 1,
+      "no domain for 'y'");
   expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [1, 0]; initial 1 }\n", 3, 27,
                "is empty");
-  expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; grid 3x3; initial 1 }\n",
-               3, 39, "the grid has 2 axes, the state has 1");
-  expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial 1; t_end -2 }\n",
-               3, 51, "t_end must be positive");
-  expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial 1; method magic }\n",
-               3, 52, "unknown method 'magic'");
+  expect_error(
+      "state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; grid 3x3; initial 1 }\n", 3, 39,
+      "the grid has 2 axes, the state has 1");
+  expect_error(
+      "state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial 1; t_end -2 }\n", 3, 51,
+      "t_end must be positive");
+  expect_error(
+      "state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial 1; method magic }\n", 3,
+      52, "unknown method 'magic'");
   expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial 1; tend 2 }\n",
                3, 45, "unknown simulation setting 'tend' (did you mean 't_end'?)");
   expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial b: 1 }\n", 3,

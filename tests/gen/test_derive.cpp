@@ -31,8 +31,7 @@ struct Derived {
   SourceText src;
   Model model;
   HybridSystem sys;
-  explicit Derived(const std::string& text, const std::string& path = "t.model")
-      : src(path, text) {
+  explicit Derived(const std::string& text, const std::string& path = "t.model") : src(path, text) {
     model = check(parse(src), src);
     sys = derive(model, src);
     sys.model = &model;
@@ -309,7 +308,8 @@ void expect_derive_error(const std::string& text, int line, int col, const std::
     ADD_FAILURE() << "no error for:\n" << text;
   } catch (const ModelError& e) {
     std::string what = e.what();
-    std::string prefix = "t.model:" + std::to_string(line) + ":" + std::to_string(col) + ": error: ";
+    std::string prefix =
+        "t.model:" + std::to_string(line) + ":" + std::to_string(col) + ": error: ";
     EXPECT_EQ(what.rfind(prefix, 0), 0u) << what;
     EXPECT_NE(what.find(fragment), std::string::npos) << what;
   }
@@ -317,29 +317,38 @@ void expect_derive_error(const std::string& text, int line, int col, const std::
 
 TEST(Derive, FailedChecks) {
   // The flow is tangent to the surface everywhere.
-  expect_derive_error("state x, y\nmode a { x' = 1; y' = 0 }\nguard g { when y = 0 decreasing; reset identity }\n",
-                      3, 16, "never crosses");
+  expect_derive_error(
+      "state x, y\nmode a { x' = 1; y' = 0 }\nguard g { when y = 0 decreasing; reset identity }\n",
+      3, 16, "never crosses");
   // The target mode's flow is tangent to Δ(S): J ≡ 0.
   expect_derive_error(R"(state x, y
 mode a { x' = -1; y' = 1 }
 mode b { x' = 0; y' = 1 }
 guard g { from a to b; when x = 0 decreasing; reset identity }
-)", 4, 47, "identically zero");
+)",
+                      4, 47, "identically zero");
   // A reset that cannot be inverted.
-  expect_derive_error("state x, p\nmode a { x' = p; p' = -1 }\nguard g { when x = 0 decreasing; reset (x, 0*p + 1) }\n",
-                      3, 34, "not invertible");
+  expect_derive_error(
+      "state x, p\nmode a { x' = p; p' = -1 }\nguard g { when x = 0 decreasing; reset (x, 0*p + 1) "
+      "}\n",
+      3, 34, "not invertible");
   // H.5: the identity reset of the ball lands on the guard with p < 0: beating.
   expect_derive_error(R"(state x, p
 mode a { x' = p; p' = -1 }
 guard g { when x = 0 decreasing; reset identity }
 simulation { domain x in [0, 2]; domain p in [-2, 2]; initial 1 }
-)", 3, 34, "H.5");
+)",
+                      3, 34, "H.5");
   // A Hamiltonian that is not natural (a term linear in p).
-  expect_derive_error("state x, p\nmode a { hamiltonian p^2/2 + x*p + x }\nguard g { when x = 0 decreasing; reset elastic }\n",
-                      3, 34, "natural Hamiltonian");
+  expect_derive_error(
+      "state x, p\nmode a { hamiltonian p^2/2 + x*p + x }\nguard g { when x = 0 decreasing; reset "
+      "elastic }\n",
+      3, 34, "natural Hamiltonian");
   // A surface that depends on the momentum, with a corner-condition reset.
-  expect_derive_error("state x, p\nmode a { hamiltonian p^2/2 + x }\nguard g { when x + p = 0 decreasing; reset elastic }\n",
-                      3, 16, "depends on the momenta");
+  expect_derive_error(
+      "state x, p\nmode a { hamiltonian p^2/2 + x }\nguard g { when x + p = 0 decreasing; reset "
+      "elastic }\n",
+      3, 16, "depends on the momenta");
 }
 
 TEST(Derive, WarnsWhenGuardNeverFires) {

@@ -54,9 +54,9 @@ TEST(Emit, GoldenFilesAreUpToDate) {
     ASSERT_NO_THROW(header = read_file(dir + "/" + files.header_name))
         << "missing golden file; run: hybgen generate models/" << name << ".model";
     ASSERT_NO_THROW(report = read_file(dir + "/" + files.report_name));
-    EXPECT_EQ(header, files.header) << "generated/" << name
-                                    << " is stale; regenerate with: hybgen generate models/"
-                                    << name << ".model";
+    EXPECT_EQ(header, files.header)
+        << "generated/" << name << " is stale; regenerate with: hybgen generate models/" << name
+        << ".model";
     EXPECT_EQ(report, files.report) << "generated/" << name << "/report.md is stale";
   }
 }
@@ -93,8 +93,10 @@ TEST(Emit, KernelsCompileWithWerrorAndMatchGiNaC) {
           << "int main() {\n  using M = hybgen_model::" << sname << ";\n"
           << "  double x[M::n_state], par[M::n_param + 1], out[M::n_state * M::n_state];\n"
           << "  while (true) {\n"
-          << "    for (int i = 0; i < M::n_state; ++i) if (std::scanf(\"%lf\", &x[i]) != 1) return 0;\n"
-          << "    for (int j = 0; j < M::n_param; ++j) if (std::scanf(\"%lf\", &par[j]) != 1) return 0;\n"
+          << "    for (int i = 0; i < M::n_state; ++i) if (std::scanf(\"%lf\", &x[i]) != 1) return "
+             "0;\n"
+          << "    for (int j = 0; j < M::n_param; ++j) if (std::scanf(\"%lf\", &par[j]) != 1) "
+             "return 0;\n"
           << "    for (int k = 0; k < M::n_mode; ++k) {\n"
           << "      M::flow(k, x, par, out);\n"
           << "      for (int i = 0; i < M::n_state; ++i) std::printf(\"%.17g\\n\", out[i]);\n"
@@ -106,7 +108,8 @@ TEST(Emit, KernelsCompileWithWerrorAndMatchGiNaC) {
           << "      M::reset_inverse(g, x, par, out);\n"
           << "      for (int i = 0; i < M::n_state; ++i) std::printf(\"%.17g\\n\", out[i]);\n"
           << "      M::reset_jacobian(g, x, par, out);\n"
-          << "      for (int i = 0; i < M::n_state * M::n_state; ++i) std::printf(\"%.17g\\n\", out[i]);\n"
+          << "      for (int i = 0; i < M::n_state * M::n_state; ++i) std::printf(\"%.17g\\n\", "
+             "out[i]);\n"
           << "      std::printf(\"%.17g\\n\", M::hybrid_jacobian(g, x, par));\n    }\n"
           << "  }\n}\n";
     const fs::path src = dir / (name + "_probe.cpp"), exe = dir / (name + "_probe");

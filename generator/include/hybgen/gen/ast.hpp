@@ -32,10 +32,10 @@ struct Expr {
     Binary,  ///< `text` is one of "+", "-", "*", "/", "^"; two arguments.
     Call,    ///< `text` is the function name; arguments in order.
   };
-  Kind kind = Kind::Number;     ///< Node kind.
-  SourceLoc loc;                ///< Position of the node's first character/operator.
-  std::string text;             ///< Literal, name, operator or function name.
-  std::vector<ExprPtr> args;    ///< Operands / call arguments.
+  Kind kind = Kind::Number;   ///< Node kind.
+  SourceLoc loc;              ///< Position of the node's first character/operator.
+  std::string text;           ///< Literal, name, operator or function name.
+  std::vector<ExprPtr> args;  ///< Operands / call arguments.
 };
 
 /// A relation `lhs OP rhs` with OP one of "<", "<=", ">", ">=", "=".
@@ -68,13 +68,13 @@ struct FlowEq {
 /// `mode NAME { ... }`: either explicit flow equations, or a Hamiltonian from
 /// which Hamilton's equations are derived (never both).
 struct ModeDecl {
-  Name name;                        ///< Mode name.
-  std::vector<FlowEq> flows;        ///< `x' = ...` lines, in source order.
-  ExprPtr hamiltonian;              ///< `hamiltonian EXPR`, or null.
-  SourceLoc hamiltonian_loc;        ///< Position of the `hamiltonian` keyword.
-  std::vector<Name> coordinates;    ///< `coordinates q1, q2` (optional).
-  std::vector<Name> momenta;        ///< `momenta p1, p2` (optional).
-  std::vector<Relation> where;      ///< `where REL` conditions: the mode's region.
+  Name name;                      ///< Mode name.
+  std::vector<FlowEq> flows;      ///< `x' = ...` lines, in source order.
+  ExprPtr hamiltonian;            ///< `hamiltonian EXPR`, or null.
+  SourceLoc hamiltonian_loc;      ///< Position of the `hamiltonian` keyword.
+  std::vector<Name> coordinates;  ///< `coordinates q1, q2` (optional).
+  std::vector<Name> momenta;      ///< `momenta p1, p2` (optional).
+  std::vector<Relation> where;    ///< `where REL` conditions: the mode's region.
 };
 
 /// Crossing direction of a guard surface s(x) = 0.
@@ -92,24 +92,24 @@ struct ResetDecl {
     Restitution,  ///< `reset restitution EXPR`
     Explicit,     ///< `reset (e1, e2, ..., eN)` — one component per state.
   };
-  Kind kind = Kind::Identity;      ///< Form.
-  SourceLoc loc;                   ///< Position of the `reset` keyword.
-  ExprPtr coefficient;             ///< Restitution coefficient (Kind::Restitution).
-  std::vector<ExprPtr> components; ///< New state (Kind::Explicit).
-  SourceLoc components_loc;        ///< Position of the opening parenthesis.
+  Kind kind = Kind::Identity;       ///< Form.
+  SourceLoc loc;                    ///< Position of the `reset` keyword.
+  ExprPtr coefficient;              ///< Restitution coefficient (Kind::Restitution).
+  std::vector<ExprPtr> components;  ///< New state (Kind::Explicit).
+  SourceLoc components_loc;         ///< Position of the opening parenthesis.
 };
 
 /// `guard NAME { from A to B  when LHS = RHS DIRECTION  reset ... }`.
 struct GuardDecl {
-  Name name;                 ///< Guard name.
-  std::optional<Name> from;  ///< Source mode (optional when there is one mode).
-  std::optional<Name> to;    ///< Target mode (optional: defaults to `from`).
-  Relation when;             ///< The surface, always with op "=".
+  Name name;                                    ///< Guard name.
+  std::optional<Name> from;                     ///< Source mode (optional when there is one mode).
+  std::optional<Name> to;                       ///< Target mode (optional: defaults to `from`).
+  Relation when;                                ///< The surface, always with op "=".
   Direction direction = Direction::Decreasing;  ///< Crossing direction of lhs - rhs.
-  SourceLoc direction_loc;   ///< Position of the direction word.
-  ResetDecl reset;           ///< The reset.
-  bool has_when = false;     ///< Whether `when` was given.
-  bool has_reset = false;    ///< Whether `reset` was given.
+  SourceLoc direction_loc;                      ///< Position of the direction word.
+  ResetDecl reset;                              ///< The reset.
+  bool has_when = false;                        ///< Whether `when` was given.
+  bool has_reset = false;                       ///< Whether `reset` was given.
 };
 
 /// `domain X in [LO, HI]` inside `simulation`.
@@ -142,22 +142,22 @@ struct GridDecl {
 
 /// `simulation { ... }`.
 struct SimulationDecl {
-  SourceLoc loc;                       ///< Position of the `simulation` keyword.
-  std::vector<DomainDecl> domains;     ///< One per state variable.
-  std::optional<GridDecl> grid;        ///< Grid node counts.
-  std::vector<InitialDecl> initial;    ///< Initial densities.
-  std::vector<Relation> support;       ///< `support REL`: state space restriction.
-  std::vector<Setting> settings;       ///< t_end, dt, method, tol, ...
+  SourceLoc loc;                     ///< Position of the `simulation` keyword.
+  std::vector<DomainDecl> domains;   ///< One per state variable.
+  std::optional<GridDecl> grid;      ///< Grid node counts.
+  std::vector<InitialDecl> initial;  ///< Initial densities.
+  std::vector<Relation> support;     ///< `support REL`: state space restriction.
+  std::vector<Setting> settings;     ///< t_end, dt, method, tol, ...
 };
 
 /// A whole `.model` file.
 struct ModelAst {
-  std::string path;                    ///< File path as given (for diagnostics).
-  std::optional<Name> name;            ///< `model NAME` (else the file stem).
-  std::vector<ParamDecl> params;       ///< Parameters in order.
-  std::vector<Name> states;            ///< State variables in order.
-  std::vector<ModeDecl> modes;         ///< Modes in order.
-  std::vector<GuardDecl> guards;       ///< Guards in order.
+  std::string path;                          ///< File path as given (for diagnostics).
+  std::optional<Name> name;                  ///< `model NAME` (else the file stem).
+  std::vector<ParamDecl> params;             ///< Parameters in order.
+  std::vector<Name> states;                  ///< State variables in order.
+  std::vector<ModeDecl> modes;               ///< Modes in order.
+  std::vector<GuardDecl> guards;             ///< Guards in order.
   std::optional<SimulationDecl> simulation;  ///< The simulation block, if any.
 };
 

@@ -23,9 +23,9 @@ struct BuildResult {
 
 /// Options of a build.
 struct BuildOptions {
-  std::string cache_dir;      ///< Cache root ("" = default_cache_dir()).
-  bool werror = false;        ///< Compile with -Werror (tests).
-  bool verbose = false;       ///< Print the compiler command.
+  std::string cache_dir;  ///< Cache root ("" = default_cache_dir()).
+  bool werror = false;    ///< Compile with -Werror (tests).
+  bool verbose = false;   ///< Print the compiler command.
 };
 
 /// The default cache root: $HYBGEN_CACHE, else $XDG_CACHE_HOME/hybgen, else

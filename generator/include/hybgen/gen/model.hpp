@@ -21,59 +21,59 @@ namespace hybgen::gen {
 
 /// A relation `expr OP 0` with OP one of <, <=, >, >= (lhs − rhs moved left).
 struct Condition {
-  GiNaC::ex expr;   ///< lhs − rhs.
-  std::string op;   ///< "<", "<=", ">", ">=".
-  SourceLoc loc;    ///< Where it was written.
+  GiNaC::ex expr;  ///< lhs − rhs.
+  std::string op;  ///< "<", "<=", ">", ">=".
+  SourceLoc loc;   ///< Where it was written.
 };
 
 /// A parameter with its exact default value.
 struct Parameter {
-  std::string name;   ///< Name.
-  GiNaC::ex symbol;   ///< Its realsymbol.
-  GiNaC::ex value;    ///< Exact default (rational, or an exact constant expression).
-  double value_d = 0; ///< The default as a double (finite).
-  SourceLoc loc;      ///< Where it was declared.
+  std::string name;    ///< Name.
+  GiNaC::ex symbol;    ///< Its realsymbol.
+  GiNaC::ex value;     ///< Exact default (rational, or an exact constant expression).
+  double value_d = 0;  ///< The default as a double (finite).
+  SourceLoc loc;       ///< Where it was declared.
 };
 
 /// A checked mode: explicit flow or a Hamiltonian (exactly one is set).
 struct ModeSpec {
-  std::string name;                  ///< Mode name.
-  SourceLoc loc;                     ///< Where it was declared.
-  std::vector<GiNaC::ex> flow;       ///< X^i (state order) when given explicitly.
+  std::string name;                      ///< Mode name.
+  SourceLoc loc;                         ///< Where it was declared.
+  std::vector<GiNaC::ex> flow;           ///< X^i (state order) when given explicitly.
   std::optional<GiNaC::ex> hamiltonian;  ///< H(q, p) when given.
-  std::vector<int> coordinates;      ///< State indices of q (Hamiltonian modes).
-  std::vector<int> momenta;          ///< State indices of p (Hamiltonian modes).
-  std::vector<Condition> where;      ///< Region of the mode.
+  std::vector<int> coordinates;          ///< State indices of q (Hamiltonian modes).
+  std::vector<int> momenta;              ///< State indices of p (Hamiltonian modes).
+  std::vector<Condition> where;          ///< Region of the mode.
 };
 
 /// A checked guard.
 struct GuardSpec {
-  std::string name;              ///< Guard name.
-  SourceLoc loc;                 ///< Where it was declared.
-  int from = 0;                  ///< Source mode.
-  int to = 0;                    ///< Target mode.
-  GiNaC::ex surface;             ///< s(x); the guard is s = 0.
-  SourceLoc surface_loc;         ///< Where `when` was written.
-  Direction direction = Direction::Decreasing;  ///< Crossing direction.
+  std::string name;                                        ///< Guard name.
+  SourceLoc loc;                                           ///< Where it was declared.
+  int from = 0;                                            ///< Source mode.
+  int to = 0;                                              ///< Target mode.
+  GiNaC::ex surface;                                       ///< s(x); the guard is s = 0.
+  SourceLoc surface_loc;                                   ///< Where `when` was written.
+  Direction direction = Direction::Decreasing;             ///< Crossing direction.
   ResetDecl::Kind reset_kind = ResetDecl::Kind::Identity;  ///< Form of the reset.
-  GiNaC::ex restitution;         ///< e for Elastic (1) / Restitution.
+  GiNaC::ex restitution;                                   ///< e for Elastic (1) / Restitution.
   std::vector<GiNaC::ex> reset;  ///< Explicit components (Kind::Explicit).
   SourceLoc reset_loc;           ///< Where `reset` was written.
 };
 
 /// Simulation settings (defaults from the model, overridable by --set).
 struct Simulation {
-  bool present = false;                ///< Whether the model had a block.
-  SourceLoc loc;                       ///< Where it was written.
-  std::vector<double> lo, hi;          ///< Domain per state variable.
-  std::vector<long> grid;              ///< Nodes per axis.
-  std::vector<GiNaC::ex> initial;      ///< Initial density per mode (0 if none).
-  std::vector<Condition> support;      ///< State-space restriction.
-  double t_end = 1.0;                  ///< Final time.
-  double dt = 0.1;                     ///< Output interval.
+  bool present = false;                    ///< Whether the model had a block.
+  SourceLoc loc;                           ///< Where it was written.
+  std::vector<double> lo, hi;              ///< Domain per state variable.
+  std::vector<long> grid;                  ///< Nodes per axis.
+  std::vector<GiNaC::ex> initial;          ///< Initial density per mode (0 if none).
+  std::vector<Condition> support;          ///< State-space restriction.
+  double t_end = 1.0;                      ///< Final time.
+  double dt = 0.1;                         ///< Output interval.
   std::string method = "characteristics";  ///< Solver.
-  double tol = 1e-10;                  ///< ODE relative tolerance.
-  long max_events = 10000;             ///< Cap on resets per characteristic.
+  double tol = 1e-10;                      ///< ODE relative tolerance.
+  long max_events = 10000;                 ///< Cap on resets per characteristic.
 };
 
 /// The checked model (output of `check`).
@@ -92,35 +92,35 @@ struct Model {
 
 /// A mode of the IR.
 struct IrMode {
-  std::string name;                  ///< Mode name.
-  std::vector<GiNaC::ex> flow;       ///< X^i in state order.
-  GiNaC::ex divergence;              ///< Σ ∂X^i/∂x^i.
+  std::string name;                      ///< Mode name.
+  std::vector<GiNaC::ex> flow;           ///< X^i in state order.
+  GiNaC::ex divergence;                  ///< Σ ∂X^i/∂x^i.
   std::optional<GiNaC::ex> hamiltonian;  ///< Source Hamiltonian, if any.
-  std::vector<Condition> where;      ///< Region.
+  std::vector<Condition> where;          ///< Region.
 };
 
 /// A guard of the IR.
 struct IrGuard {
-  std::string name;                 ///< Guard name.
-  int from = 0;                     ///< Source mode.
-  int to = 0;                       ///< Target mode.
-  GiNaC::ex surface;                ///< s(x).
-  std::vector<GiNaC::ex> gradient;  ///< ∇s.
+  std::string name;                             ///< Guard name.
+  int from = 0;                                 ///< Source mode.
+  int to = 0;                                   ///< Target mode.
+  GiNaC::ex surface;                            ///< s(x).
+  std::vector<GiNaC::ex> gradient;              ///< ∇s.
   Direction direction = Direction::Decreasing;  ///< Crossing direction.
-  std::vector<GiNaC::ex> reset;     ///< Δ(x).
-  std::vector<GiNaC::ex> reset_jacobian;  ///< DΔ(x), row-major N×N.
-  bool has_inverse = false;         ///< Whether `reset_inverse` is symbolic.
-  std::vector<GiNaC::ex> reset_inverse;   ///< Δ⁻¹(y) in the state symbols.
-  GiNaC::ex hybrid_jacobian;        ///< J(x) for x ∈ S (general formula).
-  GiNaC::ex hybrid_jacobian_on_surface;  ///< J with s = 0 substituted when possible.
-  std::string surface_note;         ///< How J was restricted to S (for reports).
+  std::vector<GiNaC::ex> reset;                 ///< Δ(x).
+  std::vector<GiNaC::ex> reset_jacobian;        ///< DΔ(x), row-major N×N.
+  bool has_inverse = false;                     ///< Whether `reset_inverse` is symbolic.
+  std::vector<GiNaC::ex> reset_inverse;         ///< Δ⁻¹(y) in the state symbols.
+  GiNaC::ex hybrid_jacobian;                    ///< J(x) for x ∈ S (general formula).
+  GiNaC::ex hybrid_jacobian_on_surface;         ///< J with s = 0 substituted when possible.
+  std::string surface_note;                     ///< How J was restricted to S (for reports).
 };
 
 /// The HybridSystem IR (output of `derive`).
 struct HybridSystem {
-  const Model* model = nullptr;     ///< The model it was derived from.
-  std::vector<IrMode> modes;        ///< Modes.
-  std::vector<IrGuard> guards;      ///< Guards.
+  const Model* model = nullptr;       ///< The model it was derived from.
+  std::vector<IrMode> modes;          ///< Modes.
+  std::vector<IrGuard> guards;        ///< Guards.
   std::vector<std::string> warnings;  ///< Non-fatal findings of the checks.
 };
 

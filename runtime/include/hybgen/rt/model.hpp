@@ -19,10 +19,10 @@ namespace hybgen::rt {
 
 /// Static description of one guard.
 struct GuardInfo {
-  int from;                  ///< Source mode index.
-  int to;                    ///< Target mode index.
-  int direction;             ///< -1: s decreases through 0; +1: s increases through 0.
-  bool has_inverse;          ///< Whether `reset_inverse` is a closed form (else Newton).
+  int from;          ///< Source mode index.
+  int to;            ///< Target mode index.
+  int direction;     ///< -1: s decreases through 0; +1: s increases through 0.
+  bool has_inverse;  ///< Whether `reset_inverse` is a closed form (else Newton).
 };
 
 /// What the runtime needs of a generated model. All functions are pure; `x`

@@ -31,18 +31,18 @@ namespace hybgen::rt {
 
 /// A run's settings, read from the config file `hybgen run` writes.
 struct RunConfig {
-  std::string model;                 ///< Model name.
-  std::string method;                ///< Solver ("characteristics").
-  std::string out_dir;               ///< Output directory (exists).
-  std::vector<double> params;        ///< Parameter values, model order.
+  std::string model;                    ///< Model name.
+  std::string method;                   ///< Solver ("characteristics").
+  std::string out_dir;                  ///< Output directory (exists).
+  std::vector<double> params;           ///< Parameter values, model order.
   std::vector<std::string> axis_names;  ///< State names.
-  std::vector<GridAxis> axes;        ///< Grid axes.
-  double t_end = 1.0;                ///< Final time.
-  double dt = 0.1;                   ///< Output interval.
-  double tol = 1e-10;                ///< ODE relative tolerance.
-  long max_events = 10000;           ///< Cap on resets per characteristic.
-  bool quiet = false;                ///< No progress output.
-  nlohmann::json seconds;            ///< Timings of the earlier stages.
+  std::vector<GridAxis> axes;           ///< Grid axes.
+  double t_end = 1.0;                   ///< Final time.
+  double dt = 0.1;                      ///< Output interval.
+  double tol = 1e-10;                   ///< ODE relative tolerance.
+  long max_events = 10000;              ///< Cap on resets per characteristic.
+  bool quiet = false;                   ///< No progress output.
+  nlohmann::json seconds;               ///< Timings of the earlier stages.
 };
 
 /// A configuration error (exit 2).
@@ -81,7 +81,8 @@ RunConfig read_config(const std::string& path) {
     c.params = j.at("params").get<std::vector<double>>();
     for (const auto& a : j.at("axes")) {
       c.axis_names.push_back(a.at("name").get<std::string>());
-      c.axes.push_back({a.at("min").get<double>(), a.at("max").get<double>(), a.at("n").get<int>()});
+      c.axes.push_back(
+          {a.at("min").get<double>(), a.at("max").get<double>(), a.at("n").get<int>()});
     }
     c.t_end = j.at("t_end").get<double>();
     c.dt = j.at("dt").get<double>();
@@ -229,8 +230,8 @@ int run_characteristics(const RunConfig& c) {
         for (std::size_t r = 0; r < rest; ++r) marginal[i] += wrest[r] * total[i * rest + r];
       std::string others;
       for (std::size_t a = 2; a < N; ++a) others += (a > 2 ? ", " : "") + c.axis_names[a];
-      write_heatmap_png(png, marginal.data(), n0, n1, c.axis_names[0], c.axes[0].min,
-                        c.axes[0].max, c.axis_names[1], c.axes[1].min, c.axes[1].max,
+      write_heatmap_png(png, marginal.data(), n0, n1, c.axis_names[0], c.axes[0].min, c.axes[0].max,
+                        c.axis_names[1], c.axes[1].min, c.axes[1].max,
                         title + "   marginal over " + others);
     }
     if constexpr (N <= 3)
@@ -246,7 +247,9 @@ int run_characteristics(const RunConfig& c) {
   s["method"] = c.method;
   nlohmann::json axes = nlohmann::json::array();
   for (std::size_t a = 0; a < N; ++a)
-    axes.push_back({{"name", c.axis_names[a]}, {"min", c.axes[a].min}, {"max", c.axes[a].max},
+    axes.push_back({{"name", c.axis_names[a]},
+                    {"min", c.axes[a].min},
+                    {"max", c.axes[a].max},
                     {"n", c.axes[a].n}});
   s["grid"] = {{"axes", axes}};
   s["times"] = times;
@@ -254,7 +257,8 @@ int run_characteristics(const RunConfig& c) {
   if (M::n_mode > 1) s["mode_files"] = mode_files;
   s["modes"] = std::vector<std::string>(M::mode_names.begin(), M::mode_names.end());
   nlohmann::json params = nlohmann::json::object();
-  for (std::size_t j = 0; j < static_cast<std::size_t>(M::n_param); ++j) params[M::param_names[j]] = c.params[j];
+  for (std::size_t j = 0; j < static_cast<std::size_t>(M::n_param); ++j)
+    params[M::param_names[j]] = c.params[j];
   s["parameters"] = params;
   s["initial_mass"] = mb.mass0;
   s["mass"] = mb.mass;
@@ -268,9 +272,10 @@ int run_characteristics(const RunConfig& c) {
   write_file_atomic((out / "summary.json").string(), s.dump(2) + "\n");
 
   if (!c.quiet) {
-    std::printf("%s: characteristics on %zu nodes, %zu output times: solve %.3f s, budget %.3f s, "
-                "output %.3f s\n",
-                c.model.c_str(), n_node, times.size(), solve_s, budget_s, output_s);
+    std::printf(
+        "%s: characteristics on %zu nodes, %zu output times: solve %.3f s, budget %.3f s, "
+        "output %.3f s\n",
+        c.model.c_str(), n_node, times.size(), solve_s, budget_s, output_s);
     std::printf("mass budget (initial mass on the grid %.6g):\n", mb.mass0);
     std::printf("  %10s %14s %14s %14s\n", "t", "grid", "outflow", "atom");
     const std::size_t K = times.size(), stride = std::max<std::size_t>(1, (K + 9) / 10);
@@ -288,7 +293,8 @@ int run_characteristics(const RunConfig& c) {
 template <HybridModel M>
 int runner_main(int argc, char** argv) {
   if (argc != 2) {
-    std::fprintf(stderr, "usage: %s CONFIG.json (written by `hybgen run`)\n", argc ? argv[0] : "runner");
+    std::fprintf(stderr, "usage: %s CONFIG.json (written by `hybgen run`)\n",
+                 argc ? argv[0] : "runner");
     return 2;
   }
   try {
