@@ -48,6 +48,7 @@ struct bouncing_ball {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -96,6 +97,7 @@ struct bouncing_ball {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -112,6 +114,7 @@ struct bouncing_ball {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -128,6 +131,7 @@ struct bouncing_ball {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -146,6 +150,7 @@ struct bouncing_ball {
         break;
       }
       default:
+        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
         break;
     }
   }

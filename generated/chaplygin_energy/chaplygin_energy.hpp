@@ -57,6 +57,7 @@ struct chaplygin_energy {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -118,6 +119,7 @@ struct chaplygin_energy {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -139,6 +141,7 @@ struct chaplygin_energy {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -160,6 +163,7 @@ struct chaplygin_energy {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -185,6 +189,7 @@ struct chaplygin_energy {
         break;
       }
       default:
+        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
         break;
     }
   }

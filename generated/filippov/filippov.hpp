@@ -53,6 +53,7 @@ struct filippov {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -114,6 +115,7 @@ struct filippov {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -135,6 +137,7 @@ struct filippov {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -156,6 +159,7 @@ struct filippov {
         break;
       }
       default:
+        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -181,6 +185,7 @@ struct filippov {
         break;
       }
       default:
+        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
         break;
     }
   }

@@ -51,6 +51,7 @@ struct sir_3d {
         break;
       }
       default:
+        for (int i = 0; i < 3; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -101,6 +102,7 @@ struct sir_3d {
         break;
       }
       default:
+        for (int i = 0; i < 3; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -118,6 +120,7 @@ struct sir_3d {
         break;
       }
       default:
+        for (int i = 0; i < 3; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -136,6 +139,7 @@ struct sir_3d {
         break;
       }
       default:
+        for (int i = 0; i < 3; ++i) out[i] = std::nan("");
         break;
     }
   }
@@ -159,6 +163,7 @@ struct sir_3d {
         break;
       }
       default:
+        for (int i = 0; i < 9; ++i) out[i] = std::nan("");
         break;
     }
   }

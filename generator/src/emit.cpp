@@ -91,6 +91,7 @@ class HeaderBuilder {
   /// A kernel `static void NAME(int k, const double* x, const double* par, double* out)`
   /// switching on k; `outputs(k)` gives the expressions for case k.
   void vector_kernel(const std::string& doc, const std::string& name, std::size_t cases,
+                     std::size_t n_out,
                      const std::function<std::vector<ex>(std::size_t)>& outputs) {
     std::ostringstream os;
     os << "  /// " << doc << "\n";
@@ -106,7 +107,9 @@ class HeaderBuilder {
       os << "      case " << c << ": {\n"
          << emit_c_block(pr_.dag(), as, bind_, "        ") << "        break;\n      }\n";
     }
-    os << "      default:\n        break;\n    }\n  }\n\n";
+    // An invalid index yields NaN in every output, never stale memory.
+    os << "      default:\n        for (int i = 0; i < " << n_out
+       << "; ++i) out[i] = std::nan(\"\");\n        break;\n    }\n  }\n\n";
     kernels_ += os.str();
   }
 
@@ -332,22 +335,23 @@ GeneratedFiles emit(const HybridSystem& sys) {
   Printer pr(m);
   HeaderBuilder hb(sys, pr);
   const std::size_t nm = sys.modes.size(), ng = sys.guards.size();
-  hb.vector_kernel("Vector field X of mode k.", "flow", nm,
+  const std::size_t n = m.state.size();
+  hb.vector_kernel("Vector field X of mode k.", "flow", nm, n,
                    [&](std::size_t k) { return sys.modes[k].flow; });
   hb.scalar_kernel("Divergence of X in mode k (Lebesgue measure in the state coordinates).",
                    "divergence", nm, [&](std::size_t k) { return sys.modes[k].divergence; });
   hb.scalar_kernel("Guard function s_k; the guard surface is s_k = 0.", "guard_surface", ng,
                    [&](std::size_t k) { return sys.guards[k].surface; });
-  hb.vector_kernel("Gradient of s_k.", "guard_gradient", ng,
+  hb.vector_kernel("Gradient of s_k.", "guard_gradient", ng, n,
                    [&](std::size_t k) { return sys.guards[k].gradient; });
-  hb.vector_kernel("Reset map of guard k.", "reset", ng,
+  hb.vector_kernel("Reset map of guard k.", "reset", ng, n,
                    [&](std::size_t k) { return sys.guards[k].reset; });
   hb.vector_kernel("Inverse reset of guard k (closed form where guards[k].has_inverse).",
-                   "reset_inverse", ng, [&](std::size_t k) {
+                   "reset_inverse", ng, n, [&](std::size_t k) {
                      return sys.guards[k].has_inverse ? sys.guards[k].reset_inverse
                                                       : m.state_symbols;
                    });
-  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", ng,
+  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", ng, n * n,
                    [&](std::size_t k) { return sys.guards[k].reset_jacobian; });
   hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian", ng,
                    [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
