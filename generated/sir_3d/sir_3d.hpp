@@ -115,7 +115,7 @@ struct sir_3d {
     switch (k) {
       case 0: {
         out[0] = x[0];
-        out[1] = -x[1]*(par[4] - 1.0);
+        out[1] = x[1]*(1.0 - par[4]);
         out[2] = x[2] + x[1]*par[4];
         break;
       }
@@ -132,10 +132,9 @@ struct sir_3d {
     (void)out;
     switch (k) {
       case 0: {
-        const double t0 = par[4] - 1.0;
         out[0] = x[0];
-        out[1] = -x[1]/t0;
-        out[2] = -(x[2] - x[1]*par[4] - x[2]*par[4])/t0;
+        out[1] = x[1]/(1.0 - par[4]);
+        out[2] = (x[1]*par[4] + x[2]*par[4] - x[2])/(par[4] - 1.0);
         break;
       }
       default:

@@ -37,6 +37,15 @@
 // coefficient is stored as Product(-1, negated sum). Printers print such a
 // product as the sum with flipped signs, positive terms first ("b-a"), so that
 // GiNaC's `a-b` vs `-(b-a)` and `(b-a)/(c-d)` vs `(a-b)/(d-c)` print the same.
+//
+// Readable signs (printers only; nodes are unchanged). A product printed on its
+// own (not as a term of a sum, where its sign is the sum's + or -) whose
+// coefficient is negative gives its sign to one sum factor with an odd integer
+// exponent, printed negated and positive terms first, when that prints fewer
+// minus signs: -i*(f-1) prints as i*(1-f), -1/(f-1) as 1/(1-f); -(f-1)^2 and
+// -i*(a+b) stay. Of several such factors the one saving the most minus signs
+// wins, the first in canonical order on ties (`mul_view`). All three printers
+// share this decision, so their outputs keep the same shape.
 
 namespace hybgen::gen {
 namespace detail {
@@ -631,37 +640,75 @@ struct DagStore {
   }
 };
 
-/// A factor base^exp of a denominator (exp > 0, rational).
-struct DenFactor {
-  NodeId base;  ///< Base.
-  RatText exp;  ///< Positive exponent.
+/// A factor base^exp of a product as printed (exp > 0 and rational; exp is 1 for a factor that
+/// is not a power with a rational exponent).
+struct Factor {
+  NodeId base;        ///< Base (or the whole factor if exp is 1).
+  RatText exp;        ///< Positive exponent.
+  bool flip = false;  ///< Print the base, a Sum, negated: it took the product's sign.
 };
 
 /// A product split for printing: sign, |coefficient|, numerator and denominator factors.
 struct MulView {
-  bool neg = false;            ///< Negative overall sign.
-  bool coeff_float = false;    ///< Coefficient is a float.
-  RatText coeff_rat;           ///< |coefficient| if rational.
-  double coeff_f = 0.0;        ///< |coefficient| if float.
-  std::vector<NodeId> num;     ///< Numerator factors (printed as they are).
-  std::vector<DenFactor> den;  ///< Denominator factors.
+  bool neg = false;          ///< Negative overall sign.
+  bool coeff_float = false;  ///< Coefficient is a float.
+  RatText coeff_rat;         ///< |coefficient| if rational.
+  double coeff_f = 0.0;      ///< |coefficient| if float.
+  std::vector<Factor> num;   ///< Numerator factors.
+  std::vector<Factor> den;   ///< Denominator factors (exponents negated).
 };
 
 namespace {
 
+/// Whether a term of a sum has a negative numeric coefficient (prints with a minus sign).
+bool term_negative(const DagStore& s, NodeId t) {
+  const Node& x = s.at(t);
+  if (x.kind == NodeKind::Product && s.is_number(x.ops[0]))
+    return num_is_negative(s.at(x.ops[0]).num);
+  if (s.is_number(t)) return num_is_negative(x.num);
+  return false;
+}
+
+/// How many fewer minus signs a product with a negative sign prints if the sign is absorbed
+/// into factor `f` (printed negated): <= 0 if that does not help or f cannot take it.
+/// Negating a sum of n terms, k of them negative, turns 1 + k minus signs into n - k; only a
+/// sum to an odd integer power can take the sign.
+int absorb_gain(const DagStore& s, const Factor& f) {
+  const Node& b = s.at(f.base);
+  if (b.kind != NodeKind::Sum || !f.exp.is_int() || (f.exp.p.back() - '0') % 2 == 0) return 0;
+  int k = 0;
+  for (NodeId t : b.ops) k += term_negative(s, t) ? 1 : 0;
+  return 1 + 2 * k - static_cast<int>(b.ops.size());
+}
+
 /// Decompose a Product, or a Power with a negative rational exponent, or any node (a single
-/// numerator factor).
-MulView mul_view(const DagStore& s, NodeId n) {
+/// numerator factor). With `absorb`, a negative sign goes into the sum factor (to an odd
+/// power) whose negation saves the most minus signs, the first in canonical order on ties:
+/// -i*(f-1) prints as i*(1-f). Terms of sums are viewed without `absorb` (their sign is the
+/// sum's + or -).
+MulView mul_view(const DagStore& s, NodeId n, bool absorb) {
   MulView v;
   v.coeff_rat.p = "1";
-  const Node& x = s.at(n);
+  const RatText one = s.at(s.one).rat;
+  int best_gain = 0;
+  Factor* best = nullptr;
+  std::vector<std::pair<bool, std::size_t>> order;  // (in den, index), canonical order
   auto add_factor = [&](NodeId f) {
     const Node& fx = s.at(f);
-    if (fx.kind == NodeKind::Power && s.is_rational(fx.ops[1]) && s.at(fx.ops[1]).rat.neg)
-      v.den.push_back({fx.ops[0], s.at(fx.ops[1]).rat.flipped()});
-    else
-      v.num.push_back(f);
+    if (fx.kind == NodeKind::Power && s.is_rational(fx.ops[1])) {
+      const RatText& e = s.at(fx.ops[1]).rat;
+      if (e.neg) {
+        v.den.push_back({fx.ops[0], e.flipped()});
+        order.emplace_back(true, v.den.size() - 1);
+        return;
+      }
+      v.num.push_back({fx.ops[0], e});
+    } else {
+      v.num.push_back({f, one});
+    }
+    order.emplace_back(false, v.num.size() - 1);
   };
+  const Node& x = s.at(n);
   if (x.kind == NodeKind::Product) {
     std::size_t i = 0;
     if (s.is_number(x.ops[0])) {
@@ -681,7 +728,42 @@ MulView mul_view(const DagStore& s, NodeId n) {
   } else {
     add_factor(n);
   }
+  if (!absorb || !v.neg) return v;
+  for (const auto& [in_den, idx] : order) {
+    Factor& f = in_den ? v.den[idx] : v.num[idx];
+    if (const int g = absorb_gain(s, f); g > best_gain) {
+      best_gain = g;
+      best = &f;
+    }
+  }
+  if (best) {
+    best->flip = true;
+    v.neg = false;
+  }
   return v;
+}
+
+/// The terms of sum `n` (negated if `flip`) in print order, each as (negative?, node): canonical
+/// order, except that if the first term would be negative the positive terms come first (each
+/// group in canonical order): -f+1 prints as 1-f.
+std::vector<std::pair<bool, NodeId>> sum_terms(const DagStore& s, NodeId n, bool flip) {
+  std::vector<std::pair<bool, NodeId>> terms;
+  for (NodeId t : s.at(n).ops) terms.emplace_back(term_negative(s, t) != flip, t);
+  if (!terms.empty() && terms.front().first)
+    std::stable_partition(terms.begin(), terms.end(), [](const auto& t) { return !t.first; });
+  return terms;
+}
+
+/// The part of every printer's walk that places signs: a Sum, a Product, or a Power with a
+/// rational exponent, printed by `p`'s sum(sum, flip), power(base, exp, flip) or view(MulView).
+template <class Printer>
+auto print_algebraic(Printer& p, const DagStore& s, NodeId n) {
+  const Node& x = s.at(n);
+  if (x.kind == NodeKind::Sum) return p.sum(n, false);
+  if (s.is_negated_sum(n)) return p.sum(x.ops[1], true);
+  if (x.kind == NodeKind::Power && !s.at(x.ops[1]).rat.neg)
+    return p.power(x.ops[0], s.at(x.ops[1]).rat, false);
+  return p.view(mul_view(s, n, true));
 }
 
 enum Prec : int { kSum = 1, kMul = 2, kPow = 3, kAtom = 4 };
@@ -695,6 +777,87 @@ std::string paren(const Txt& t, int min_prec) {
   return t.prec < min_prec ? "(" + t.s + ")" : t.s;
 }
 
+/// What the text printers share: the walk over the dag, signs of sums and products, the parts
+/// of a product. `Derived` formats: rat_abs, float_abs, leaf (symbols, constants), function,
+/// symbolic_power, power_text (base^e from the base's text), product_text and sum_text.
+template <class Derived>
+class TextPrinter {
+ public:
+  explicit TextPrinter(const DagStore& s) : s_(s) {}
+
+  Txt print(NodeId n) const {
+    const Node& x = s_.at(n);
+    switch (x.kind) {
+      case NodeKind::Rational:
+        return with_sign(x.rat.neg, Derived::rat_abs(x.rat));
+      case NodeKind::Float:
+        return with_sign(x.num.f < 0.0, Derived::float_abs(std::fabs(x.num.f)));
+      case NodeKind::Constant:
+      case NodeKind::Symbol:
+        return self().leaf(x);
+      case NodeKind::Function:
+        return self().function(x);
+      case NodeKind::Power:
+        if (!s_.is_rational(x.ops[1])) return self().symbolic_power(x.ops[0], x.ops[1]);
+        [[fallthrough]];
+      case NodeKind::Product:
+      case NodeKind::Sum:
+        return print_algebraic(*this, s_, n);
+    }
+    throw InternalError("ExprDag: bad node kind");
+  }
+
+ protected:
+  template <class Printer>
+  friend auto print_algebraic(Printer& p, const DagStore& s, NodeId n);
+
+  [[nodiscard]] const Derived& self() const { return static_cast<const Derived&>(*this); }
+
+  static Txt with_sign(bool neg, Txt t) {
+    if (neg) return {"-" + t.s, kSum};
+    return t;
+  }
+
+  /// base^e (e > 0), the base (a Sum) printed negated if `flip`.
+  Txt power(NodeId base, const RatText& e, bool flip) const {
+    return self().power_text(base, flip ? sum(base, true) : print(base), e);
+  }
+
+  Txt view(const MulView& v) const {
+    std::vector<Txt> num, den;
+    if (v.coeff_float) {
+      num.push_back(Derived::float_abs(v.coeff_f));
+    } else {
+      if (v.coeff_rat.p != "1") num.push_back({v.coeff_rat.p, kAtom});
+      if (v.coeff_rat.q != "1") den.push_back({v.coeff_rat.q, kAtom});
+    }
+    for (const Factor& f : v.num) num.push_back(power(f.base, f.exp, f.flip));
+    for (const Factor& d : v.den) den.push_back(power(d.base, d.exp, d.flip));
+    return Derived::product_text(num, den, v.neg);
+  }
+
+  /// |term| of a sum (its sign comes from sum_terms).
+  Txt magnitude(NodeId t) const {
+    const Node& x = s_.at(t);
+    if (x.kind == NodeKind::Rational) return Derived::rat_abs(x.rat);
+    if (x.kind == NodeKind::Float) return Derived::float_abs(std::fabs(x.num.f));
+    if (x.kind == NodeKind::Product && s_.is_number(x.ops[0])) {
+      MulView v = mul_view(s_, t, false);
+      v.neg = false;
+      return view(v);
+    }
+    return print(t);
+  }
+
+  Txt sum(NodeId n, bool flip) const {
+    std::vector<std::pair<bool, Txt>> terms;
+    for (const auto& [neg, t] : sum_terms(s_, n, flip)) terms.emplace_back(neg, magnitude(t));
+    return Derived::sum_text(terms);
+  }
+
+  const DagStore& s_;
+};
+
 // ---------------------------------------------------------------------------
 // GiNaC input syntax
 
@@ -704,45 +867,10 @@ std::string ginac_float(double v) {
   return s;
 }
 
-class GinacPrinter {
+class GinacPrinter : public TextPrinter<GinacPrinter> {
  public:
-  explicit GinacPrinter(const DagStore& s) : s_(s) {}
+  explicit GinacPrinter(const DagStore& s) : TextPrinter(s) {}
 
-  Txt print(NodeId n) const {
-    const Node& x = s_.at(n);
-    switch (x.kind) {
-      case NodeKind::Rational: {
-        Txt t = rat_abs(x.rat);
-        if (x.rat.neg) return {"-" + t.s, kSum};
-        return t;
-      }
-      case NodeKind::Float: {
-        Txt t = float_abs(std::fabs(x.num.f));
-        if (x.num.f < 0.0) return {"-" + t.s, kSum};
-        return t;
-      }
-      case NodeKind::Constant:
-      case NodeKind::Symbol:
-        return {x.payload, kAtom};
-      case NodeKind::Function:
-        return {x.payload + "(" + print(x.ops[0]).s + ")", kAtom};
-      case NodeKind::Power:
-        if (s_.is_rational(x.ops[1])) {
-          const RatText& e = s_.at(x.ops[1]).rat;
-          if (e.neg) return view(mul_view(s_, n));
-          return power(x.ops[0], e);
-        }
-        return {paren(print(x.ops[0]), kAtom) + "^" + paren(print(x.ops[1]), kAtom), kPow};
-      case NodeKind::Product:
-        if (s_.is_negated_sum(n)) return sum(x.ops[1], true);
-        return view(mul_view(s_, n));
-      case NodeKind::Sum:
-        return sum(n, false);
-    }
-    throw InternalError("ExprDag: bad node kind");
-  }
-
- private:
   static Txt rat_abs(const RatText& r) {
     if (r.is_int()) return {r.p, kAtom};
     return {r.p + "/" + r.q, kMul};
@@ -753,66 +881,31 @@ class GinacPrinter {
     return {s, s.find('e') == std::string::npos ? kAtom : kMul};
   }
 
-  Txt power(NodeId base, const RatText& e) const {
-    if (e.is("1", "1")) return print(base);
-    if (e.is("1", "2")) return {"sqrt(" + print(base).s + ")", kAtom};
-    const std::string et = e.is_int() ? e.p : "(" + e.p + "/" + e.q + ")";
-    return {paren(print(base), kAtom) + "^" + et, kPow};
+  [[nodiscard]] static Txt leaf(const Node& x) { return {x.payload, kAtom}; }
+
+  [[nodiscard]] Txt function(const Node& x) const {
+    return {x.payload + "(" + print(x.ops[0]).s + ")", kAtom};
   }
 
-  Txt view(const MulView& v) const {
-    std::vector<Txt> num, den;
-    if (v.coeff_float) {
-      num.push_back(float_abs(v.coeff_f));
-    } else {
-      if (v.coeff_rat.p != "1") num.push_back({v.coeff_rat.p, kAtom});
-      if (v.coeff_rat.q != "1") den.push_back({v.coeff_rat.q, kAtom});
-    }
-    for (NodeId f : v.num) num.push_back(print(f));
-    for (const DenFactor& d : v.den) den.push_back(power(d.base, d.exp));
+  [[nodiscard]] Txt symbolic_power(NodeId b, NodeId e) const {
+    return {paren(print(b), kAtom) + "^" + paren(print(e), kAtom), kPow};
+  }
+
+  static Txt power_text(NodeId /*base*/, const Txt& b, const RatText& e) {
+    if (e.is("1", "1")) return b;
+    if (e.is("1", "2")) return {"sqrt(" + b.s + ")", kAtom};
+    const std::string et = e.is_int() ? e.p : "(" + e.p + "/" + e.q + ")";
+    return {paren(b, kAtom) + "^" + et, kPow};
+  }
+
+  static Txt product_text(const std::vector<Txt>& num, const std::vector<Txt>& den, bool neg) {
     Txt out = join(num);
-    if (!den.empty()) {
-      const Txt d = join(den);
-      out = {paren(out, kMul) + "/" + paren(d, kPow), kMul};
-    }
-    if (v.neg) out = {"-" + paren(out, kMul), kSum};
+    if (!den.empty()) out = {paren(out, kMul) + "/" + paren(join(den), kPow), kMul};
+    if (neg) out = {"-" + paren(out, kMul), kSum};
     return out;
   }
 
-  static Txt join(const std::vector<Txt>& parts) {
-    if (parts.empty()) return {"1", kAtom};
-    if (parts.size() == 1) return parts[0];
-    std::string s;
-    for (std::size_t i = 0; i < parts.size(); ++i) {
-      if (i) s += "*";
-      s += paren(parts[i], kPow);
-    }
-    return {s, kMul};
-  }
-
-  /// |term| and its sign.
-  std::pair<bool, Txt> term(NodeId t) const {
-    const Node& x = s_.at(t);
-    if (x.kind == NodeKind::Rational) return {x.rat.neg, rat_abs(x.rat)};
-    if (x.kind == NodeKind::Float) return {x.num.f < 0.0, float_abs(std::fabs(x.num.f))};
-    if (x.kind == NodeKind::Product && !s_.is_negated_sum(t)) {
-      MulView v = mul_view(s_, t);
-      const bool neg = v.neg;
-      v.neg = false;
-      return {neg, view(v)};
-    }
-    return {false, print(t)};
-  }
-
-  Txt sum(NodeId n, bool flip) const {
-    std::vector<std::pair<bool, Txt>> terms;
-    for (NodeId t : s_.at(n).ops) {
-      auto tt = term(t);
-      if (flip) tt.first = !tt.first;
-      terms.push_back(std::move(tt));
-    }
-    if (flip)
-      std::stable_partition(terms.begin(), terms.end(), [](const auto& t) { return !t.first; });
+  static Txt sum_text(const std::vector<std::pair<bool, Txt>>& terms) {
     std::string s;
     for (std::size_t i = 0; i < terms.size(); ++i) {
       if (terms[i].first)
@@ -824,7 +917,17 @@ class GinacPrinter {
     return {s, kSum};
   }
 
-  const DagStore& s_;
+ private:
+  static Txt join(const std::vector<Txt>& parts) {
+    if (parts.empty()) return {"1", kAtom};
+    if (parts.size() == 1) return parts[0];
+    std::string s;
+    for (std::size_t i = 0; i < parts.size(); ++i) {
+      if (i) s += "*";
+      s += paren(parts[i], kPow);
+    }
+    return {s, kMul};
+  }
 };
 
 // ---------------------------------------------------------------------------
@@ -865,49 +968,16 @@ std::string lparen(const std::string& s) {
   return "\\left(" + s + "\\right)";
 }
 
-class LatexPrinter {
+/// A factor or term: parenthesised if it is a sum.
+std::string lparen_sum(const Txt& t) {
+  return t.prec <= kSum ? lparen(t.s) : t.s;
+}
+
+class LatexPrinter : public TextPrinter<LatexPrinter> {
  public:
   LatexPrinter(const DagStore& s, const std::map<std::string, std::string>& tex)
-      : s_(s), tex_(tex) {}
+      : TextPrinter(s), tex_(tex) {}
 
-  Txt print(NodeId n) const {
-    const Node& x = s_.at(n);
-    switch (x.kind) {
-      case NodeKind::Rational: {
-        Txt t = rat_abs(x.rat);
-        if (x.rat.neg) return {"-" + t.s, kSum};
-        return t;
-      }
-      case NodeKind::Float: {
-        Txt t = float_abs(std::fabs(x.num.f));
-        if (x.num.f < 0.0) return {"-" + t.s, kSum};
-        return t;
-      }
-      case NodeKind::Constant:
-        return {"\\pi", kAtom};
-      case NodeKind::Symbol:
-        return {tex_symbol(x.payload, tex_), kAtom};
-      case NodeKind::Function:
-        if (x.payload == "abs") return {"\\left|" + print(x.ops[0]).s + "\\right|", kAtom};
-        // kPow: a function is parenthesised as the base of a power.
-        return {tex_function(x.payload) + lparen(print(x.ops[0]).s), kPow};
-      case NodeKind::Power:
-        if (s_.is_rational(x.ops[1])) {
-          const RatText& e = s_.at(x.ops[1]).rat;
-          if (e.neg) return view(mul_view(s_, n));
-          return power(x.ops[0], e);
-        }
-        return {base(x.ops[0]) + "^{" + print(x.ops[1]).s + "}", kPow};
-      case NodeKind::Product:
-        if (s_.is_negated_sum(n)) return sum(x.ops[1], true);
-        return view(mul_view(s_, n));
-      case NodeKind::Sum:
-        return sum(n, false);
-    }
-    throw InternalError("ExprDag: bad node kind");
-  }
-
- private:
   static Txt rat_abs(const RatText& r) {
     if (r.is_int()) return {r.p, kAtom};
     return {"\\frac{" + r.p + "}{" + r.q + "}", kMul};
@@ -918,29 +988,64 @@ class LatexPrinter {
     return {s, s.find('\\') == std::string::npos ? kAtom : kMul};
   }
 
-  std::string base(NodeId b) const {
-    const Txt t = print(b);
-    return t.prec < kAtom ? lparen(t.s) : t.s;
+  [[nodiscard]] Txt leaf(const Node& x) const {
+    if (x.kind == NodeKind::Constant) return {"\\pi", kAtom};
+    return {tex_symbol(x.payload, tex_), kAtom};
   }
 
-  Txt power(NodeId b, const RatText& e) const {
-    if (e.is("1", "1")) return print(b);
-    if (e.p == "1" && e.q == "2") return {"\\sqrt{" + print(b).s + "}", kAtom};
+  [[nodiscard]] Txt function(const Node& x) const {
+    if (x.payload == "abs") return {"\\left|" + print(x.ops[0]).s + "\\right|", kAtom};
+    // kPow: a function is parenthesised as the base of a power.
+    return {tex_function(x.payload) + lparen(print(x.ops[0]).s), kPow};
+  }
+
+  [[nodiscard]] Txt symbolic_power(NodeId b, NodeId e) const {
+    return {base(print(b)) + "^{" + print(e).s + "}", kPow};
+  }
+
+  [[nodiscard]] Txt power_text(NodeId b, const Txt& bt, const RatText& e) const {
+    if (e.is("1", "1")) return bt;
+    if (e.p == "1" && e.q == "2") return {"\\sqrt{" + bt.s + "}", kAtom};
     if (e.p == "1" && !e.is_int() && e.q.size() == 1)
-      return {"\\sqrt[" + e.q + "]{" + print(b).s + "}", kAtom};
+      return {"\\sqrt[" + e.q + "]{" + bt.s + "}", kAtom};
     const std::string et = e.is_int() ? e.p : "\\frac{" + e.p + "}{" + e.q + "}";
     const Node& bx = s_.at(b);
     if (bx.kind == NodeKind::Function && bx.payload != "abs" && e.is_int())
       return {tex_function(bx.payload) + "^{" + et + "}" + lparen(print(bx.ops[0]).s), kPow};
-    return {base(b) + "^{" + et + "}", kPow};
+    return {base(bt) + "^{" + et + "}", kPow};
   }
+
+  static Txt product_text(const std::vector<Txt>& num, const std::vector<Txt>& den, bool neg) {
+    Txt out;
+    if (den.empty())
+      out = num.size() == 1 ? num[0] : Txt{join(num), kMul};
+    else
+      out = {"\\frac{" + join(num) + "}{" + join(den) + "}", kMul};
+    if (neg) out = {"-" + lparen_sum(out), kSum};
+    return out;
+  }
+
+  static Txt sum_text(const std::vector<std::pair<bool, Txt>>& terms) {
+    std::string s;
+    for (std::size_t i = 0; i < terms.size(); ++i) {
+      if (i)
+        s += terms[i].first ? " - " : " + ";
+      else if (terms[i].first)
+        s += "-";
+      s += lparen_sum(terms[i].second);
+    }
+    return {s, kSum};
+  }
+
+ private:
+  static std::string base(const Txt& t) { return t.prec < kAtom ? lparen(t.s) : t.s; }
 
   static std::string join(const std::vector<Txt>& parts) {
     if (parts.empty()) return "1";
     if (parts.size() == 1) return parts[0].s;
     std::string s;
     for (std::size_t i = 0; i < parts.size(); ++i) {
-      const std::string p = parts[i].prec <= kSum ? lparen(parts[i].s) : parts[i].s;
+      const std::string p = lparen_sum(parts[i]);
       if (i) {
         const bool digit = !p.empty() && (std::isdigit(static_cast<unsigned char>(p[0])) != 0);
         s += digit ? " \\cdot " : " ";
@@ -950,61 +1055,6 @@ class LatexPrinter {
     return s;
   }
 
-  Txt view(const MulView& v) const {
-    std::vector<Txt> num, den;
-    if (v.coeff_float) {
-      num.push_back(float_abs(v.coeff_f));
-    } else {
-      if (v.coeff_rat.p != "1") num.push_back({v.coeff_rat.p, kAtom});
-      if (v.coeff_rat.q != "1") den.push_back({v.coeff_rat.q, kAtom});
-    }
-    for (NodeId f : v.num) num.push_back(print(f));
-    for (const DenFactor& d : v.den) den.push_back(power(d.base, d.exp));
-    Txt out;
-    if (den.empty()) {
-      out = num.size() == 1 ? num[0] : Txt{join(num), kMul};
-    } else {
-      out = {"\\frac{" + join(num) + "}{" + join(den) + "}", kMul};
-    }
-    if (v.neg) out = {"-" + (out.prec <= kSum ? lparen(out.s) : out.s), kSum};
-    return out;
-  }
-
-  std::pair<bool, Txt> term(NodeId t) const {
-    const Node& x = s_.at(t);
-    if (x.kind == NodeKind::Rational) return {x.rat.neg, rat_abs(x.rat)};
-    if (x.kind == NodeKind::Float) return {x.num.f < 0.0, float_abs(std::fabs(x.num.f))};
-    if (x.kind == NodeKind::Product && !s_.is_negated_sum(t)) {
-      MulView v = mul_view(s_, t);
-      const bool neg = v.neg;
-      v.neg = false;
-      return {neg, view(v)};
-    }
-    return {false, print(t)};
-  }
-
-  Txt sum(NodeId n, bool flip) const {
-    std::vector<std::pair<bool, Txt>> terms;
-    for (NodeId t : s_.at(n).ops) {
-      auto tt = term(t);
-      if (flip) tt.first = !tt.first;
-      terms.push_back(std::move(tt));
-    }
-    if (flip)
-      std::stable_partition(terms.begin(), terms.end(), [](const auto& t) { return !t.first; });
-    std::string s;
-    for (std::size_t i = 0; i < terms.size(); ++i) {
-      if (i)
-        s += terms[i].first ? " - " : " + ";
-      else if (terms[i].first)
-        s += "-";
-      const Txt& tt = terms[i].second;
-      s += tt.prec <= kSum ? lparen(tt.s) : tt.s;
-    }
-    return {s, kSum};
-  }
-
-  const DagStore& s_;
   const std::map<std::string, std::string>& tex_;
 };
 
@@ -1142,6 +1192,9 @@ class CLowering {
   }
 
  private:
+  template <class Printer>
+  friend auto print_algebraic(Printer& p, const DagStore& s, NodeId n);
+
   [[nodiscard]] bool is_neg(LId id, const std::vector<std::string>* temps) const {
     if (temps && !(*temps)[id].empty()) return false;
     return nodes_[id].kind == LKind::Neg;
@@ -1200,19 +1253,12 @@ class CLowering {
         const std::string f = x.payload == "abs" ? "std::fabs" : "std::" + x.payload;
         return call(f, {lower(x.ops[0])});
       }
-      case NodeKind::Power: {
-        if (s_.is_rational(x.ops[1])) {
-          const RatText& e = s_.at(x.ops[1]).rat;
-          if (e.neg) return view(mul_view(s_, n));
-          return power(x.ops[0], e);
-        }
-        return call("std::pow", {lower(x.ops[0]), lower(x.ops[1])});
-      }
+      case NodeKind::Power:
+        if (!s_.is_rational(x.ops[1])) return call("std::pow", {lower(x.ops[0]), lower(x.ops[1])});
+        [[fallthrough]];
       case NodeKind::Product:
-        if (s_.is_negated_sum(n)) return sum(x.ops[1], true);
-        return view(mul_view(s_, n));
       case NodeKind::Sum:
-        return sum(n, false);
+        return print_algebraic(*this, s_, n);
     }
     throw InternalError("ExprDag: bad node kind");
   }
@@ -1227,9 +1273,9 @@ class CLowering {
     return prod({intpow(b, k - 1), b});
   }
 
-  /// base^e for a positive rational e.
-  LId power(NodeId base, const RatText& e) {
-    const LId b = lower(base);
+  /// base^e for a positive rational e, the base (a Sum) negated if `flip`.
+  LId power(NodeId base, const RatText& e, bool flip) {
+    const LId b = flip ? sum(base, true) : lower(base);
     if (e.is("1", "1")) return b;
     const bool expand = cse_ || nodes_[b].kind == LKind::Leaf;
     RatText a = e;
@@ -1254,32 +1300,36 @@ class CLowering {
       num.push_back(leaf(c_double(v.coeff_f)));
     else if (!v.coeff_rat.is("1", "1"))
       num.push_back(leaf(c_rational(v.coeff_rat)));
-    for (NodeId f : v.num) num.push_back(lower(f));
-    for (const DenFactor& d : v.den) den.push_back(power(d.base, d.exp));
+    for (const Factor& f : v.num) num.push_back(power(f.base, f.exp, f.flip));
+    for (const Factor& d : v.den) den.push_back(power(d.base, d.exp, d.flip));
     LId out = num.empty() ? one() : prod(num);
     if (!den.empty()) out = quot(out, prod(den));
     return v.neg ? neg(out) : out;
   }
 
-  LId sum(NodeId n, bool flip) {
-    std::vector<std::pair<bool, LId>> terms;
-    for (NodeId t : s_.at(n).ops) {
-      LId l = lower(t);
-      bool minus = false;
-      if (nodes_[l].kind == LKind::Neg) {
-        minus = true;
-        l = nodes_[l].ops[0];
-      }
-      terms.emplace_back(minus != flip, l);
+  /// |term| of a sum (its sign comes from sum_terms).
+  LId magnitude(NodeId t) {
+    const Node& x = s_.at(t);
+    if (x.kind == NodeKind::Product && s_.is_number(x.ops[0])) {
+      MulView v = mul_view(s_, t, false);
+      v.neg = false;
+      return view(v);
     }
-    if (flip)
-      std::stable_partition(terms.begin(), terms.end(), [](const auto& t) { return !t.first; });
+    const LId l = lower(t);
+    return nodes_[l].kind == LKind::Neg ? nodes_[l].ops[0] : l;
+  }
+
+  LId sum(NodeId n, bool flip) {
+    auto& memo = flip ? flipped_memo_ : memo_;
+    if (auto it = memo.find(n); it != memo.end()) return it->second;
     LNode node{LKind::Sum, {}, {}, {}};
-    for (const auto& [minus, l] : terms) {
-      node.ops.push_back(l);
+    for (const auto& [minus, t] : sum_terms(s_, n, flip)) {
+      node.ops.push_back(magnitude(t));
       node.minus.push_back(minus);
     }
-    return make(std::move(node));
+    const LId id = make(std::move(node));
+    memo.emplace(n, id);
+    return id;
   }
 
   const DagStore& s_;
@@ -1287,7 +1337,8 @@ class CLowering {
   bool cse_;
   std::vector<LNode> nodes_;
   std::map<std::string, LId> table_;
-  std::unordered_map<NodeId, LId> memo_;
+  std::unordered_map<NodeId, LId> memo_;          ///< Lowered nodes.
+  std::unordered_map<NodeId, LId> flipped_memo_;  ///< Lowered negated sums.
 };
 
 }  // namespace

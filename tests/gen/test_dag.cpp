@@ -199,8 +199,9 @@ TEST(DagDeterminism, SignNormalisationExamples) {
   EXPECT_EQ(dag.to_ginac(dag.import(a - b)), "a-b");
   EXPECT_EQ(dag.to_ginac(dag.import(b - a)), "b-a");
   EXPECT_EQ(dag.to_ginac(dag.import(-(b - a))), "a-b");
-  EXPECT_EQ(dag.to_ginac(dag.import((b - a) / (c - d))), "-(a-b)/(c-d)");
-  EXPECT_EQ(dag.to_ginac(dag.import((a - b) / (d - c))), "-(a-b)/(c-d)");
+  // The sign of the quotient goes into its first sum (see ReadableSigns).
+  EXPECT_EQ(dag.to_ginac(dag.import((b - a) / (c - d))), "(b-a)/(c-d)");
+  EXPECT_EQ(dag.to_ginac(dag.import((a - b) / (d - c))), "(b-a)/(c-d)");
   EXPECT_EQ(dag.to_ginac(dag.import(sqrt(b - a))), "sqrt(b-a)");
   EXPECT_EQ(dag.to_ginac(dag.import(sin(b - a))), "-sin(a-b)");
   EXPECT_EQ(dag.to_ginac(dag.import(cos(b - a))), "cos(a-b)");
@@ -211,6 +212,73 @@ TEST(DagDeterminism, SignNormalisationExamples) {
   ASSERT_EQ(dag.kind(n), NodeKind::Product);
   EXPECT_EQ(dag.payload(dag.operands(n)[0]), "-1");
   EXPECT_EQ(dag.to_ginac(dag.operands(n)[1]), "a-b");
+}
+
+/// Printed forms of one expression: to_ginac, to_latex, to_c.
+struct Printed {
+  std::string ginac, latex, c;
+};
+
+Printed print_all(const ex& e, const std::map<std::string, std::string>& bind) {
+  ExprDag dag;
+  const NodeId n = dag.import(e);
+  return {dag.to_ginac(n), dag.to_latex(n), dag.to_c(n, bind)};
+}
+
+void expect_printed(const ex& e, const std::map<std::string, std::string>& bind,
+                    const Printed& want) {
+  SCOPED_TRACE(want.ginac);
+  const Printed got = print_all(e, bind);
+  EXPECT_EQ(got.ginac, want.ginac);
+  EXPECT_EQ(got.latex, want.latex);
+  EXPECT_EQ(got.c, want.c);
+}
+
+TEST(DagDeterminism, ReadableSigns) {
+  // A negative product gives its sign to a sum factor with an odd exponent when that prints
+  // fewer minus signs; terms of sums keep theirs; even powers never take it.
+  const realsymbol f("f"), g("g"), i("i"), x("x"), e("e"), p("p"), q("q"), r("r");
+  const realsymbol beta("beta"), s("s"), delta("delta"), gamma("gamma"), mu("mu");
+  const std::map<std::string, std::string> bind = {
+      {"f", "par[4]"}, {"g", "g"},     {"i", "x[1]"}, {"x", "x[0]"}, {"e", "e"},
+      {"p", "p"},      {"q", "q"},     {"r", "r"},    {"beta", "b"}, {"s", "s"},
+      {"delta", "d"},  {"gamma", "c"}, {"mu", "m"}};
+  expect_printed((1 - f) * i, bind, {"i*(1-f)", "i \\left(1 - f\\right)", "x[1]*(1.0 - par[4])"});
+  expect_printed(i / (1 - f), bind, {"i/(1-f)", "\\frac{i}{1 - f}", "x[1]/(1.0 - par[4])"});
+  expect_printed(1 / (1 - f), bind, {"1/(1-f)", "\\frac{1}{1 - f}", "1.0/(1.0 - par[4])"});
+  expect_printed(-pow(f - 1, 2), bind,
+                 {"-(f-1)^2", "-\\left(f - 1\\right)^{2}", "-std::pow(par[4] - 1.0, 2.0)"});
+  expect_printed(-pow(f - 1, 3), bind,
+                 {"(1-f)^3", "\\left(1 - f\\right)^{3}", "std::pow(1.0 - par[4], 3.0)"});
+  // A positive product keeps its factors as they are.
+  expect_printed((1 - f) * (1 - g) * x, bind,
+                 {"x*(f-1)*(g-1)", "x \\left(f - 1\\right) \\left(g - 1\\right)",
+                  "x[0]*(par[4] - 1.0)*(g - 1.0)"});
+  // Only one factor takes the sign: the first in canonical order on a tie.
+  expect_printed(-(1 - f) * (1 - g) * x, bind,
+                 {"x*(1-f)*(g-1)", "x \\left(1 - f\\right) \\left(g - 1\\right)",
+                  "x[0]*(1.0 - par[4])*(g - 1.0)"});
+  // No sum, or no sum that helps: unchanged.
+  expect_printed(-e * p, bind, {"-e*p", "-e p", "-e*p"});
+  expect_printed(-(1 + e) * q, bind, {"-q*(e+1)", "-q \\left(e + 1\\right)", "-q*(e + 1.0)"});
+  expect_printed(p - (1 + e) * q * r, bind,
+                 {"p-q*r*(e+1)", "p - q r \\left(e + 1\\right)", "p - q*r*(e + 1.0)"});
+  // In a sum the term's sign stays the sum's minus.
+  expect_printed(p - (f - 1) * q, bind,
+                 {"p-q*(f-1)", "p - q \\left(f - 1\\right)", "p - q*(par[4] - 1.0)"});
+  expect_printed(beta * s * i + delta * pow(i, 2) - (gamma + mu + delta) * i, bind,
+                 {"beta*i*s+delta*i^2-i*(delta+gamma+mu)",
+                  "\\mathrm{beta} i s + \\mathrm{delta} i^{2} - i \\left(\\mathrm{delta} + "
+                  "\\mathrm{gamma} + \\mathrm{mu}\\right)",
+                  "b*x[1]*s + d*(x[1]*x[1]) - x[1]*(d + c + m)"});
+  // Positive terms first when a sum would start with a minus.
+  expect_printed(-q * r + p, bind, {"p-q*r", "p - q r", "p - q*r"});
+  expect_printed(-(f - 1 - g - p) * x, bind,
+                 {"x*(g+p+1-f)", "x \\left(g + p + 1 - f\\right)", "x[0]*(g + p + 1.0 - par[4])"});
+  // The factor that saves the most minus signs takes it: here the numerator.
+  expect_printed(-(f - g - p - q) / (f + g - 1), bind,
+                 {"(g+p+q-f)/(f+g-1)", "\\frac{g + p + q - f}{f + g - 1}",
+                  "(g + p + q - par[4])/(par[4] + g - 1.0)"});
 }
 
 /// A rich set of expressions for the re-exec comparison and round trips.
@@ -230,6 +298,12 @@ std::vector<ex> sample_expressions(const Syms& s) {
   v.push_back(asin(x - y) + acos(y / 3) + atan(z - x) + sinh(x) + cosh(y - z) + tanh(-k));
   v.push_back(pow(x - y, -3) + pow(y - x, 7) + pow(z - m, 8));
   v.push_back(2.5 * x - 1e-20 * y + 1e20 * z);
+  // Products whose sign is printed inside a sum factor.
+  v.push_back((1 - a) * x);
+  v.push_back(x / (1 - a) - 2 * y / ((1 - b) * (1 - c)));
+  v.push_back(-pow(a - 1, 2) * x + pow(1 - b, 3) * y - 0.5 * z * (k - 1));
+  v.push_back(sin((1 - a) * x) + sqrt(-(x - y - z) * m));
+  v.push_back(-(a - b - c - d) / (a + b - 1));
   // A Jacobian entry of a 2-link arm.
   const ex q1 = x, q2 = y;
   const ex px = cos(q1) + cos(q1 + q2), py = sin(q1) + sin(q1 + q2);
@@ -415,6 +489,8 @@ TEST(DagEmitC, CompiledKernelMatchesGinacEvalf) {
       pow(a * x - b * y, 4) / pow(m - z, 2),
       -x / (3 * y * z),
       exp(x - y) * log(k - y) + exp(y - x),
+      (1 - a) * x + y / (1 - b) - pow(1 - a, 3) * z,
+      -(a - b - x - y) / (a + b - 1) * sin((1 - a) * z),
   };
   std::vector<CAssignment> out;
   ExprDag dag;
@@ -614,7 +690,7 @@ TEST(DagLatex, Forms) {
   EXPECT_EQ(l(pow(x, numeric(1, 3))), "\\sqrt[3]{x}");
   EXPECT_EQ(l(pow(sin(x), 2) + exp(-y)), "\\exp\\left(-y\\right) + \\sin^{2}\\left(x\\right)");
   EXPECT_EQ(l(pow(x + y, 2)), "\\left(x + y\\right)^{2}");
-  EXPECT_EQ(l(-2 * x * (a - b)), "-2 x \\left(\\alpha - \\beta\\right)");
+  EXPECT_EQ(l(-2 * x * (a - b)), "2 x \\left(\\beta - \\alpha\\right)");
   EXPECT_EQ(l(abs(x) * GiNaC::Pi), "\\pi \\left|x\\right|");
   EXPECT_EQ(l(pow(x, y)), "x^{y}");
   EXPECT_EQ(l(numeric(3, 4) * pow(x, -2)), "\\frac{3}{4 x^{2}}");
