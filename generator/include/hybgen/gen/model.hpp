@@ -73,7 +73,7 @@ struct Simulation {
   double dt = 0.1;                         ///< Output interval.
   std::string method = "characteristics";  ///< Solver.
   double tol = 1e-10;                      ///< ODE relative tolerance.
-  long max_events = 10000;                 ///< Cap on resets per characteristic.
+  long max_events = 100000;                ///< Cap on resets per characteristic.
 };
 
 /// The checked model (output of `check`).

@@ -808,6 +808,8 @@ struct MassBudget {
   std::vector<double> mass;     ///< Mass in the box at each output time.
   std::vector<double> outflow;  ///< Net outflow through the box faces during [0, t_k].
   std::vector<double> atom;     ///< mass0 − mass − outflow.
+  /// Estimated |error| of mass[k] (`adaptive_mass_budget`, budget.hpp); empty for fixed rules.
+  std::vector<double> mass_error;
 };
 
 /// A mass budget and the first failed characteristic, if any.

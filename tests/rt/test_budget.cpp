@@ -1,0 +1,555 @@
+// Tests of hybgen/rt/budget.hpp: the adaptive mass budget against closed forms — the Zeno
+// mass of the bouncing ball (e < 1), a zero atom (e = 1), an exactly Gaussian spiral, a 1-D
+// two-mode switching system — plus failure propagation, the point cap and speed.
+
+#include <gtest/gtest.h>
+#include <omp.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <numbers>
+#include <string>
+#include <vector>
+
+#include "bouncing_ball_model.hpp"
+#include "hybgen/rt/budget.hpp"
+
+namespace {
+
+namespace rt = hybgen::rt;
+using Ball = rt::testing::BouncingBall;
+
+std::vector<double> output_times(int n, double dt) {
+  std::vector<double> t;
+  for (int k = 0; k < n; ++k) t.push_back(dt * k);
+  return t;
+}
+
+rt::CharacteristicsOptions options(double rtol, double atol) {
+  rt::CharacteristicsOptions o;
+  o.ode.rtol = rtol;
+  o.ode.atol = atol;
+  return o;
+}
+
+rt::TensorGrid<2> paper_grid() {
+  rt::TensorGrid<2> grid;
+  grid.axes = {rt::GridAxis{0.0, 2.0, 75}, rt::GridAxis{-2.0, 2.0, 75}};
+  return grid;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// ---------------------------------------------------------------------------------------
+// The Zeno mass of the ball (m = g = 1; the closed form of test_characteristics.cpp).
+//
+// From (x0, p0), x0 ≥ 0: first impact at t1 = p0 + v1 with speed v1 = sqrt(p0² + 2 x0); the
+// flights then last 2 e^k v1 (k ≥ 1), so the Zeno time is T_Z = t1 + 2 e v1/(1 − e) =
+// p0 + v1 (1 + e)/(1 − e), and T_Z ≤ t ⇔ x0 ≤ X(p0) = (V² − p0²)/2 with V = (t − p0)(1 − e)/
+// (1 + e), non-empty iff V > |p0|. Z(t) = ∫ u0 1[T_Z ≤ t] over the WHOLE half plane x0 ≥ 0:
+// ∫ over x0 ∈ [0, X] of exp(−(x0 − 1)²) = (√π/2)(erf(X − 1) + erf(1)), and the p0 integral
+// by 64-panel, 16-point Gauss–Legendre on the interval where V > |p0| (smooth there).
+//
+// Why atom = Z for the box B = [0, 2] × [−2, 2]: mass0 − mass(t) − outflow(t) is the mass that
+// neither stayed in B nor left it through its faces (net). The ball's density has no other
+// sink than the Zeno point (0, 0) — resets at the ground x = 0 map B into B (|e p| < |p|)
+// and `outflow` counts a reset across the face x = 0 only when it carries mass into or out
+// of B. Every trajectory reaching (0, 0) spends its last moments in B (a neighbourhood of
+// (0, 0) in x ≥ 0 lies in B), so its mass — whether it started in B or entered later — is
+// either in B, or gone through the faces, or in the atom; it is in the atom iff T_Z ≤ t.
+// Mass starting outside B and never reaching (0, 0) by t enters and leaves B only through
+// faces. Hence atom(t) = Z(t) exactly, for this (or any) box containing a neighbourhood of
+// (0, 0) in the half plane.
+double zeno_mass(double t, double e) {
+  const double c = (1.0 - e) / (1.0 + e);
+  const double p_hi = t * c / (1.0 + c), p_lo = -t * c / (1.0 - c);
+  const rt::AxisRule r = rt::gauss_legendre_rule(p_lo, p_hi, 64, 16);
+  double s = 0.0;
+  for (std::size_t i = 0; i < r.nodes.size(); ++i) {
+    const double p0 = r.nodes[i];
+    const double V = (t - p0) * c;
+    const double X = 0.5 * (V * V - p0 * p0);
+    s += r.weights[i] * std::exp(-p0 * p0) * 0.5 * std::sqrt(std::numbers::pi) *
+         (std::erf(X - 1.0) + std::erf(1.0));
+  }
+  return s;
+}
+
+/// ∫_{[0,2]×[−2,2]} exp(−(x − 1)² − p²) = π erf(1) erf(2).
+double ball_box_mass0() {
+  return std::numbers::pi * std::erf(1.0) * std::erf(2.0);
+}
+
+/// The estimated error of atom[k]: volume (mass0 and mass[k]) plus faces (space part).
+double atom_estimate(const rt::BudgetResult<2>& r, const rt::AdaptiveBudgetInfo& info,
+                     std::size_t k) {
+  return r.budget.mass_error[k] + info.volume.mass0_error + info.surface.error[k];
+}
+
+struct BallRun {
+  rt::BudgetResult<2> res;
+  rt::AdaptiveBudgetInfo info;
+  double seconds = 0.0;
+};
+
+BallRun ball_budget(double e, const std::vector<double>& times, const rt::AdaptiveOptions& ao) {
+  const std::array<double, 3> par{1.0, 1.0, e};
+  BallRun r;
+  const auto t0 = std::chrono::steady_clock::now();
+  r.res = rt::adaptive_mass_budget<Ball>(paper_grid(), times, par.data(), options(1e-10, 1e-12), ao,
+                                         3, &r.info);
+  r.seconds = seconds_since(t0);
+  return r;
+}
+
+void print_run(const char* name, const BallRun& r) {
+  const auto& i = r.info;
+  std::printf(
+      "[ %s ] %.3f s; volume: %zu points, %zu cells, %d batches, converged %d, est. %.2g; "
+      "faces: %zu points, converged %d, est. %.2g\n",
+      name, r.seconds, i.volume.points, i.volume.cells, i.volume.iterations,
+      i.volume.converged ? 1 : 0, i.volume.error_estimate, i.surface.points,
+      i.surface.converged ? 1 : 0, i.surface.error_estimate);
+}
+
+// ---------------------------------------------------------------------------------------
+
+TEST(AdaptiveBudget, ZenoAtomIsTheZenoMass) {
+  // e = 0.8 on the paper's box, t = 0, 0.5, …, 10. Tolerances: rel_tol = 1e-4 bounds the
+  // estimated volume error of each mass by 2.6e-4 and that of the outflow likewise; the
+  // estimates are ≈ 2σ estimates (budget.hpp), so we assert |atom − Z| ≤ 2·estimate plus
+  // 2e-5 for what they do not include (Gauss–Legendre of order 3 in time on the faces:
+  // ~1e-5 here; ODE and Z: < 1e-9), and the brief's target 2e-3·mass0 with margin (1e-3).
+  const auto times = output_times(21, 0.5);
+  const BallRun r = ball_budget(0.8, times, rt::AdaptiveOptions{});
+  ASSERT_TRUE(r.res.ok()) << rt::describe<Ball>(r.res.failure);
+  print_run("zeno e=0.8", r);
+  const auto& b = r.res.budget;
+  EXPECT_TRUE(r.info.volume.converged);
+  EXPECT_TRUE(r.info.surface.converged);
+  EXPECT_NEAR(b.mass0, ball_box_mass0(), 1e-6 * b.mass0);
+  EXPECT_EQ(b.atom[0], 0.0);  // mass0 and mass(0) are the same sum
+  ASSERT_EQ(b.mass_error.size(), times.size());
+  double worst = 0.0;
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    const double Z = zeno_mass(times[k], 0.8), err = b.atom[k] - Z;
+    const double est = atom_estimate(r.res, r.info, k);
+    worst = std::max(worst, std::fabs(err));
+    if (k % 4 == 0)
+      std::printf(
+          "   t %5.2f: mass %.6f outflow %+.6f atom %.6f, Zeno mass %.6f, error %+.2e "
+          "(estimate %.2e)\n",
+          times[k], b.mass[k], b.outflow[k], b.atom[k], Z, err, est);
+    EXPECT_LE(std::fabs(err), 2.0 * est + 2e-5) << "t = " << times[k];
+    EXPECT_LE(std::fabs(err), 1e-3 * b.mass0) << "t = " << times[k];
+  }
+  std::printf("   worst |atom − Z| = %.2e = %.2e mass0\n", worst, worst / b.mass0);
+  // For contrast, the trapezoid budget on the grid nodes (what the runner reported).
+  const std::array<double, 3> par{1.0, 1.0, 0.8};
+  const auto opt = options(1e-10, 1e-12);
+  const auto sol = rt::solve_grid<Ball>(paper_grid(), times, par.data(), opt);
+  ASSERT_TRUE(sol.ok());
+  const auto trap = rt::mass_budget<Ball>(paper_grid(), sol, times, par.data(), opt);
+  std::printf("   trapezoid on the 75x75 nodes: atom(10) = %.4f vs Zeno mass %.4f\n",
+              trap.budget.atom.back(), zeno_mass(10.0, 0.8));
+}
+
+TEST(AdaptiveBudget, ElasticBallHasNoAtom) {
+  // e = 1: no Zeno point, the budget must close: |atom| ≤ 1e-4·mass0.
+  const auto times = output_times(21, 0.5);
+  const BallRun r = ball_budget(1.0, times, rt::AdaptiveOptions{});
+  ASSERT_TRUE(r.res.ok()) << rt::describe<Ball>(r.res.failure);
+  print_run("elastic e=1", r);
+  const auto& b = r.res.budget;
+  EXPECT_TRUE(r.info.volume.converged);
+  double worst = 0.0;
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    worst = std::max(worst, std::fabs(b.atom[k]));
+    EXPECT_LE(std::fabs(b.atom[k]), 2.0 * atom_estimate(r.res, r.info, k) + 2e-5);
+    EXPECT_LE(std::fabs(b.atom[k]), 1e-4 * b.mass0) << "t = " << times[k];
+  }
+  std::printf("   max |atom| = %.2e = %.2e mass0 (mass(10) %.6f, outflow(10) %+.6f)\n", worst,
+              worst / b.mass0, b.mass.back(), b.outflow.back());
+}
+
+// ---------------------------------------------------------------------------------------
+// x' = a x − p, p' = x + a p (div = 2a): φ_t(y) = e^{at} R(t) y with R the rotation by t,
+// so u0 = exp(−4|y − c|²) gives u(t, y) = e^{−2at} exp(−4 e^{−2at}|y − φ_t(c)|²) and
+//   ∫_{[−1,1]²} u(t) = e^{−2at} Π_{i} (√π/(4s)) (erf(2s(1 − c_i(t))) + erf(2s(1 + c_i(t)))),
+// s = e^{−at}, c(t) = φ_t(c). No atoms: outflow = mass0 − mass exactly.
+
+struct Spiral2D {
+  static constexpr int n_state = 2, n_param = 1, n_mode = 1, n_guard = 0;
+  static constexpr const char* name = "spiral";
+  static constexpr std::array<const char*, 2> state_names{"x", "p"};
+  static constexpr std::array<const char*, 1> param_names{"a"};
+  static constexpr std::array<double, 1> param_defaults{0.15};
+  static constexpr std::array<const char*, 1> mode_names{"only"};
+  static constexpr std::array<const char*, 0> guard_names{};
+  static constexpr std::array<rt::GuardInfo, 0> guards{};
+  static void flow(int, const double* x, const double* par, double* out) {
+    out[0] = par[0] * x[0] - x[1];
+    out[1] = x[0] + par[0] * x[1];
+  }
+  static double divergence(int, const double*, const double* par) { return 2.0 * par[0]; }
+  static double guard_surface(int, const double*, const double*) { return 1.0; }
+  static void guard_gradient(int, const double*, const double*, double* out) {
+    out[0] = out[1] = 0.0;
+  }
+  static void reset(int, const double* x, const double*, double* out) {
+    out[0] = x[0];
+    out[1] = x[1];
+  }
+  static void reset_inverse(int, const double* x, const double*, double* out) {
+    out[0] = x[0];
+    out[1] = x[1];
+  }
+  static void reset_jacobian(int, const double*, const double*, double* out) {
+    out[0] = out[3] = 1.0;
+    out[1] = out[2] = 0.0;
+  }
+  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
+  static double initial_density(int, const double* x, const double*) {
+    return std::exp(-4.0 * ((x[0] - 0.5) * (x[0] - 0.5) + x[1] * x[1]));
+  }
+  static bool in_support(const double*, const double*) { return true; }
+};
+static_assert(rt::HybridModel<Spiral2D>);
+
+double spiral_mass(double t, double a) {
+  const double s = std::exp(-a * t);
+  const std::array<double, 2> c{0.5 * std::cos(t) / s, 0.5 * std::sin(t) / s};
+  double m = s * s;
+  for (const double ci : c)
+    m *= std::sqrt(std::numbers::pi) / (4.0 * s) *
+         (std::erf(2.0 * s * (1.0 - ci)) + std::erf(2.0 * s * (1.0 + ci)));
+  return m;
+}
+
+TEST(AdaptiveBudget, SmoothSpiralClosesTightly) {
+  rt::TensorGrid<2> box;
+  box.axes = {rt::GridAxis{-1.0, 1.0, 2}, rt::GridAxis{-1.0, 1.0, 2}};
+  const std::array<double, 1> par{0.15};
+  // Times not starting at 0: mass0 comes from an extra t = 0 slot.
+  std::vector<double> times;
+  for (int k = 1; k <= 12; ++k) times.push_back(0.25 * k);
+  rt::AdaptiveOptions ao;
+  ao.rel_tol = 1e-9;
+  rt::AdaptiveBudgetInfo info;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto res = rt::adaptive_mass_budget<Spiral2D>(box, times, par.data(), options(1e-12, 1e-14),
+                                                      ao, 6, &info);
+  const double secs = seconds_since(t0);
+  ASSERT_TRUE(res.ok());
+  const auto& b = res.budget;
+  double worst_mass = std::fabs(b.mass0 - spiral_mass(0.0, 0.15)), worst_atom = 0.0;
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    worst_mass = std::max(worst_mass, std::fabs(b.mass[k] - spiral_mass(times[k], 0.15)));
+    worst_atom = std::max(worst_atom, std::fabs(b.atom[k]));
+  }
+  std::printf(
+      "[ spiral ] %.3f s, volume %zu points (converged %d), faces %zu points: mass0 %.12f, "
+      "outflow(3) %.12f, max|mass − exact| %.2e, max|atom| %.2e\n",
+      secs, info.volume.points, info.volume.converged ? 1 : 0, info.surface.points, b.mass0,
+      b.outflow.back(), worst_mass, worst_atom);
+  EXPECT_TRUE(info.volume.converged);
+  EXPECT_TRUE(info.surface.converged);
+  EXPECT_GT(b.outflow.back(), 0.1);  // a sizeable part of the mass has left the box
+  EXPECT_LT(worst_mass, 1e-10 * b.mass0);
+  EXPECT_LT(worst_atom, 1e-9 * b.mass0);
+}
+
+// ---------------------------------------------------------------------------------------
+// Two modes on the line with identity resets (see test_characteristics.cpp):
+//   A: x' = +1, guard "up" A → B at x = 1 (increasing); B: x' = −2, guard "down" B → A at
+//   x = −1 (decreasing). u jumps where histories are cut; the faces are points (D = 0).
+
+struct TwoMode1D {
+  static constexpr int n_state = 1, n_param = 0, n_mode = 2, n_guard = 2;
+  static constexpr const char* name = "two_mode";
+  static constexpr std::array<const char*, 1> state_names{"x"};
+  static constexpr std::array<const char*, 0> param_names{};
+  static constexpr std::array<double, 0> param_defaults{};
+  static constexpr std::array<const char*, 2> mode_names{"A", "B"};
+  static constexpr std::array<const char*, 2> guard_names{"up", "down"};
+  static constexpr std::array<rt::GuardInfo, 2> guards{rt::GuardInfo{0, 1, 1, true},
+                                                       rt::GuardInfo{1, 0, -1, true}};
+  static void flow(int m, const double*, const double*, double* out) {
+    out[0] = m == 0 ? 1.0 : -2.0;
+  }
+  static double divergence(int, const double*, const double*) { return 0.0; }
+  static double guard_surface(int g, const double* x, const double*) {
+    return g == 0 ? x[0] - 1.0 : x[0] + 1.0;
+  }
+  static void guard_gradient(int, const double*, const double*, double* out) { out[0] = 1.0; }
+  static void reset(int, const double* x, const double*, double* out) { out[0] = x[0]; }
+  static void reset_inverse(int, const double* x, const double*, double* out) { out[0] = x[0]; }
+  static void reset_jacobian(int, const double*, const double*, double* out) { out[0] = 1.0; }
+  static double hybrid_jacobian(int g, const double*, const double*) {
+    return g == 0 ? -2.0 : -0.5;
+  }
+  static double initial_density(int m, const double* x, const double*) {
+    return m == 0 ? std::exp(-4.0 * (x[0] - 0.5) * (x[0] - 0.5))
+                  : 0.5 * std::exp(-4.0 * (x[0] + 0.2) * (x[0] + 0.2));
+  }
+  static bool in_support(const double*, const double*) { return true; }
+};
+static_assert(rt::HybridModel<TwoMode1D>);
+
+TEST(AdaptiveBudget, TwoModeLineCloses) {
+  rt::TensorGrid<1> box;
+  box.axes = {rt::GridAxis{-2.0, 2.0, 41}};
+  const auto times = output_times(9, 0.5);
+  rt::AdaptiveOptions ao;
+  ao.rel_tol = 1e-8;
+  rt::AdaptiveBudgetInfo info;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto res =
+      rt::adaptive_mass_budget<TwoMode1D>(box, times, nullptr, options(1e-11, 1e-13), ao, 6, &info);
+  const double secs = seconds_since(t0);
+  ASSERT_TRUE(res.ok());
+  const auto& b = res.budget;
+  double worst = 0.0;
+  for (const double a : b.atom) worst = std::max(worst, std::fabs(a));
+  std::printf(
+      "[ two-mode ] %.3f s, %zu points, %zu cells (converged %d): mass0 %.10f mass(4) %.10f "
+      "outflow(4) %.10f max|atom| %.2e\n",
+      secs, info.volume.points, info.volume.cells, info.volume.converged ? 1 : 0, b.mass0,
+      b.mass.back(), b.outflow.back(), worst);
+  EXPECT_TRUE(info.volume.converged);
+  EXPECT_GT(b.outflow.back(), 0.05);  // 0.0749 (test_characteristics)
+  EXPECT_LT(worst, 1e-7 * b.mass0);
+}
+
+// ---------------------------------------------------------------------------------------
+// Integrable singularities that no cell boundary is aligned with: X = 0 (u(t) = u0, no
+// flux), u0 = |x − c|^{−1/2} on [−1, 1] (∫ = 2(√(1 + c) + √(1 − c))) and, in 2-D,
+// u0 = 1/|y − c| on [0, 1]² with c = (0.3, 0.7) (∫ by summing the closed form over the four
+// rectangles with a corner at c: ∫_{[0,a]×[0,b]} 1/r = a asinh(b/a) + b asinh(a/b)).
+// The 1-D case is the estimate's weak spot: Gauss misses the peak with one sign at every
+// level and the errors of successive levels decay only by r = 2^{−1/2}, so the leaf's true
+// error is ≈ r/(1 − r) = 2.4 times its last discrepancy (measured: up to 3.1×).
+
+template <std::size_t N>
+struct Static {
+  static constexpr int n_state = static_cast<int>(N), n_param = 0, n_mode = 1, n_guard = 0;
+  static constexpr const char* name = "static";
+  static constexpr std::array<const char*, N> state_names{};
+  static constexpr std::array<const char*, 0> param_names{};
+  static constexpr std::array<double, 0> param_defaults{};
+  static constexpr std::array<const char*, 1> mode_names{"only"};
+  static constexpr std::array<const char*, 0> guard_names{};
+  static constexpr std::array<rt::GuardInfo, 0> guards{};
+  static inline std::array<double, 2> c{0.3, 0.7};  ///< Where u0 is singular.
+  static void flow(int, const double*, const double*, double* out) {
+    for (std::size_t i = 0; i < N; ++i) out[i] = 0.0;
+  }
+  static double divergence(int, const double*, const double*) { return 0.0; }
+  static double guard_surface(int, const double*, const double*) { return 1.0; }
+  static void guard_gradient(int, const double*, const double*, double* out) {
+    for (std::size_t i = 0; i < N; ++i) out[i] = 0.0;
+  }
+  static void reset(int, const double* x, const double*, double* out) {
+    for (std::size_t i = 0; i < N; ++i) out[i] = x[i];
+  }
+  static void reset_inverse(int, const double* x, const double*, double* out) {
+    for (std::size_t i = 0; i < N; ++i) out[i] = x[i];
+  }
+  static void reset_jacobian(int, const double*, const double*, double* out) {
+    for (std::size_t i = 0; i < N * N; ++i) out[i] = i % (N + 1) == 0 ? 1.0 : 0.0;
+  }
+  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
+  static double initial_density(int, const double* x, const double*) {
+    if constexpr (N == 1) {
+      return 1.0 / std::sqrt(std::fabs(x[0] - c[0]));
+    } else {
+      return 1.0 / std::hypot(x[0] - c[0], x[1] - c[1]);
+    }
+  }
+  static bool in_support(const double*, const double*) { return true; }
+};
+static_assert(rt::HybridModel<Static<1>> && rt::HybridModel<Static<2>>);
+
+double corner_integral(double a, double b) {
+  return a * std::asinh(b / a) + b * std::asinh(a / b);
+}
+
+TEST(AdaptiveBudget, IntegrableSingularitiesConverge) {
+  const auto times = output_times(3, 0.5);
+  rt::AdaptiveOptions ao;
+  ao.rel_tol = 1e-6;
+  rt::TensorGrid<1> line;
+  line.axes = {rt::GridAxis{-1.0, 1.0, 2}};
+  double worst_ratio = 0.0;
+  std::size_t most_points = 0;
+  for (const double c : {0.3, 0.1, 0.123456, 0.5, 0.77, -0.4, -0.99}) {
+    Static<1>::c[0] = c;
+    rt::TraceFailure<1> f;
+    const auto am =
+        rt::adaptive_mass<Static<1>>(line, times, nullptr, options(1e-10, 1e-12), ao, f);
+    ASSERT_TRUE(f.ok());
+    const double exact = 2.0 * (std::sqrt(1.0 + c) + std::sqrt(1.0 - c));
+    EXPECT_TRUE(am.converged) << "c = " << c;
+    EXPECT_LE(std::fabs(am.mass0 - exact), 4.0 * am.mass0_error) << "c = " << c;
+    EXPECT_LE(std::fabs(am.mass0 - exact), 2e-5 * exact) << "c = " << c;
+    EXPECT_EQ(am.mass.back(), am.mass0);  // u(t) = u0
+    worst_ratio = std::max(worst_ratio, std::fabs(am.mass0 - exact) / am.mass0_error);
+    most_points = std::max(most_points, am.points);
+  }
+  std::printf(
+      "[ singular 1-D ] |x - c|^(-1/2), 7 positions c, rel_tol 1e-6: <= %zu points, "
+      "worst |error|/estimate %.2f\n",
+      most_points, worst_ratio);
+  rt::TensorGrid<2> square;
+  square.axes = {rt::GridAxis{0.0, 1.0, 2}, rt::GridAxis{0.0, 1.0, 2}};
+  rt::TraceFailure<2> f;
+  ao.rel_tol = 1e-5;
+  const auto am =
+      rt::adaptive_mass<Static<2>>(square, times, nullptr, options(1e-10, 1e-12), ao, f);
+  ASSERT_TRUE(f.ok());
+  const double exact = corner_integral(0.3, 0.7) + corner_integral(0.7, 0.7) +
+                       corner_integral(0.3, 0.3) + corner_integral(0.7, 0.3);
+  std::printf(
+      "[ singular 2-D ] 1/|y - c|: %zu points, %zu cells: mass %.10f, exact %.10f, "
+      "error %.2e (estimate %.2e)\n",
+      am.points, am.cells, am.mass0, exact, am.mass0 - exact, am.mass0_error);
+  EXPECT_TRUE(am.converged);
+  EXPECT_LE(std::fabs(am.mass0 - exact), am.mass0_error);
+  EXPECT_LE(std::fabs(am.mass0 - exact), 2e-5 * exact);
+}
+
+// ---------------------------------------------------------------------------------------
+// Failures, the point cap, zero integrands.
+
+/// x' = a x (backward flow contracts towards 0) with X undefined (NaN) at |x| ≥ 3: interior
+/// characteristics never meet it; those from the faces of [−3, 3] start on it.
+struct EdgeNaN1D {
+  static constexpr int n_state = 1, n_param = 1, n_mode = 1, n_guard = 0;
+  static constexpr const char* name = "edge_nan";
+  static constexpr std::array<const char*, 1> state_names{"x"};
+  static constexpr std::array<const char*, 1> param_names{"a"};
+  static constexpr std::array<double, 1> param_defaults{0.3};
+  static constexpr std::array<const char*, 1> mode_names{"only"};
+  static constexpr std::array<const char*, 0> guard_names{};
+  static constexpr std::array<rt::GuardInfo, 0> guards{};
+  static void flow(int, const double* x, const double* par, double* out) {
+    out[0] = std::fabs(x[0]) >= 3.0 ? std::numeric_limits<double>::quiet_NaN() : par[0] * x[0];
+  }
+  static double divergence(int, const double*, const double* par) { return par[0]; }
+  static double guard_surface(int, const double*, const double*) { return 1.0; }
+  static void guard_gradient(int, const double*, const double*, double* out) { out[0] = 0.0; }
+  static void reset(int, const double* x, const double*, double* out) { out[0] = x[0]; }
+  static void reset_inverse(int, const double* x, const double*, double* out) { out[0] = x[0]; }
+  static void reset_jacobian(int, const double*, const double*, double* out) { out[0] = 1.0; }
+  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
+  static double initial_density(int, const double* x, const double*) {
+    return std::exp(-x[0] * x[0]);
+  }
+  static bool in_support(const double*, const double*) { return true; }
+};
+static_assert(rt::HybridModel<EdgeNaN1D>);
+
+TEST(AdaptiveBudget, FailuresPropagate) {
+  // (a) Volume: e = 0 has no finite Δ⁻¹; the first traced batch already fails.
+  const auto times = output_times(21, 0.5);
+  const std::array<double, 3> par0{1.0, 1.0, 0.0};
+  const auto res =
+      rt::adaptive_mass_budget<Ball>(paper_grid(), times, par0.data(), options(1e-10, 1e-12));
+  ASSERT_FALSE(res.ok());
+  EXPECT_EQ(res.failure.status.error, rt::TraceError::non_finite_reset);
+  EXPECT_EQ(res.failure.status.guard, 0);
+  const std::string msg = rt::describe<Ball>(res.failure);
+  std::printf("[ failure ] volume: %s\n", msg.c_str());
+  EXPECT_NE(msg.find("non-finite inverse reset"), std::string::npos);
+  EXPECT_EQ(res.budget.mass.size(), times.size());  // partial, but shaped
+  // (b) Faces only: the volume integral succeeds, the outflow fails.
+  rt::TensorGrid<1> box;
+  box.axes = {rt::GridAxis{-3.0, 3.0, 61}};
+  const std::array<double, 1> par{0.3};
+  rt::TraceFailure<1> vf;
+  const auto am = rt::adaptive_mass<EdgeNaN1D>(box, times, par.data(), options(1e-10, 1e-12),
+                                               rt::AdaptiveOptions{}, vf);
+  EXPECT_TRUE(vf.ok());
+  EXPECT_TRUE(am.converged);
+  const auto res1 =
+      rt::adaptive_mass_budget<EdgeNaN1D>(box, times, par.data(), options(1e-10, 1e-12));
+  ASSERT_FALSE(res1.ok());
+  EXPECT_EQ(res1.failure.status.error, rt::TraceError::non_finite_flow);
+  EXPECT_EQ(std::fabs(res1.failure.start[0]), 3.0);
+  std::printf("[ failure ] faces: %s\n", rt::describe<EdgeNaN1D>(res1.failure).c_str());
+}
+
+TEST(AdaptiveBudget, PointCapIsReportedHonestly) {
+  const auto times = output_times(21, 0.5);
+  rt::AdaptiveOptions ao;
+  ao.max_points = 3000;
+  const BallRun r = ball_budget(0.8, times, ao);
+  ASSERT_TRUE(r.res.ok());
+  print_run("capped", r);
+  EXPECT_FALSE(r.info.volume.converged);
+  EXPECT_LE(r.info.volume.points, ao.max_points);
+  EXPECT_GT(r.info.volume.error_estimate, ao.rel_tol * r.res.budget.mass0);
+  // At so coarse a level the estimate is rough (features may still be unseen): printed only.
+  double worst = 0.0, worst_ratio = 0.0;
+  for (std::size_t k = 1; k < times.size(); ++k) {
+    const double err = std::fabs(r.res.budget.atom[k] - zeno_mass(times[k], 0.8));
+    worst = std::max(worst, err);
+    worst_ratio = std::max(worst_ratio, err / atom_estimate(r.res, r.info, k));
+  }
+  std::printf("   worst |atom − Z| %.2e, worst |atom − Z|/estimate %.2f\n", worst, worst_ratio);
+}
+
+TEST(AdaptiveBudget, ZeroDensityIsNotRefined) {
+  // A box outside the support x ≥ 0: u ≡ 0; only the initial cells and their halves.
+  rt::TensorGrid<2> box;
+  box.axes = {rt::GridAxis{-3.0, -1.0, 2}, rt::GridAxis{-2.0, 2.0, 2}};
+  const std::array<double, 3> par{1.0, 1.0, 0.8};
+  rt::TraceFailure<2> f;
+  const auto am = rt::adaptive_mass<Ball>(box, output_times(21, 0.5), par.data(),
+                                          options(1e-10, 1e-12), rt::AdaptiveOptions{}, f);
+  ASSERT_TRUE(f.ok());
+  EXPECT_TRUE(am.converged);
+  EXPECT_EQ(am.mass0, 0.0);
+  EXPECT_EQ(am.error_estimate, 0.0);
+  EXPECT_EQ(am.iterations, 1);
+  EXPECT_EQ(am.points, 3u * 16u * 16u);  // 16 initial cells of 4 × 4 nodes, 32 halves
+}
+
+TEST(AdaptiveBudget, RunnerConfigurationSpeed) {
+  // The runner's set-up (models/bouncing_ball.model): 75×75 box, t = 0, 0.2, …, 10 (51
+  // times), here with e = 0.8; rel_tol 3e-4 (suggested for the runner) and the default 1e-4.
+  // Time is printed (best of 3), not asserted: the machine may be shared.
+  const auto times = output_times(51, 0.2);
+  for (const double tol : {3e-4, 1e-4}) {
+    rt::AdaptiveOptions ao;
+    ao.rel_tol = tol;
+    double best = 1e30;
+    BallRun r;
+    for (int rep = 0; rep < 3; ++rep) {
+      r = ball_budget(0.8, times, ao);
+      ASSERT_TRUE(r.res.ok());
+      best = std::min(best, r.seconds);
+    }
+    double worst = 0.0, est = 0.0;
+    for (std::size_t k = 0; k < times.size(); ++k) {
+      worst = std::max(worst, std::fabs(r.res.budget.atom[k] - zeno_mass(times[k], 0.8)));
+      est = std::max(est, atom_estimate(r.res, r.info, k));
+    }
+    const double m0 = r.res.budget.mass0;
+    std::printf(
+        "[ timing ] 75x75 ball e=0.8, 51 times to 10, rel_tol %.0e, %d threads: budget best of 3 "
+        "%.3f s (%zu + %zu points); worst |atom − Z| %.2e mass0, estimate %.2e mass0\n",
+        tol, omp_get_max_threads(), best, r.info.volume.points, r.info.surface.points, worst / m0,
+        est / m0);
+    EXPECT_LE(worst, 1e-3 * m0);
+    EXPECT_LE(worst, est);
+  }
+}
+
+}  // namespace
