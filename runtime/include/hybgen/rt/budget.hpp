@@ -629,25 +629,8 @@ struct FaceValues {
       const double* yi = y[i].data();
       if (!M::in_support(yi, par)) continue;
       for (std::size_t m = 0; m < sol.n_mode; ++m) {
-        std::array<double, N> X{};
-        M::flow(static_cast<int>(m), yi, par, X.data());
-        const double xn = sign * X[a];
-        bool fires = false, image_in_box = false;
-        for (std::size_t g = 0; g < static_cast<std::size_t>(M::n_guard) && !fires; ++g) {
-          const GuardInfo gi = guard_info<M>(g);
-          if (gi.from != static_cast<int>(m)) continue;
-          std::array<double, N> grad{}, img{};
-          M::guard_gradient(static_cast<int>(g), yi, par, grad.data());
-          const double gn = std::sqrt(dot<N>(grad.data(), grad.data()));
-          if (!(std::fabs(M::guard_surface(static_cast<int>(g), yi, par)) <= 1e-12 * gn * diam))
-            continue;
-          if (sign_of(dot<N>(grad.data(), X.data())) != gi.direction) continue;
-          M::reset(static_cast<int>(g), yi, par, img.data());
-          fires = true;
-          image_in_box = in_box<N>(img.data(), lo, hi);
-        }
-        const bool counts = !fires || (xn > 0.0 ? !image_in_box : image_in_box);
-        if (!counts || xn == 0.0) continue;
+        const double xn = face_flux<M>(static_cast<int>(m), yi, a, sign, lo, hi, diam, par);
+        if (xn == 0.0) continue;
         double acc = 0.0;
         std::size_t j = 0;
         for (std::size_t k = 0; k < K; ++k) {

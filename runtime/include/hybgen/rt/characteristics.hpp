@@ -853,6 +853,36 @@ std::array<double, N> tensor_node(const std::array<const AxisRule*, N>& rules, s
   return y;
 }
 
+/// The outward normal flux density X_m·n_out of mode m at a point y of the face of the box
+/// [lo, hi] normal to `axis` (n_out = `sign` e_axis), or 0 where the mass crossing there is
+/// not gained or lost by the box: at a point of a guard surface S_h where h fires, the mass is
+/// reset to Δ_h(y); it leaves the box iff it crosses outwards and Δ_h(y) is outside, and it
+/// enters iff it arrives from outside and Δ_h(y) is inside. `diam` scales the surface test.
+template <HybridModel M>
+double face_flux(int m, const double* y, std::size_t axis, double sign,
+                 const std::array<double, state_dim_v<M>>& lo,
+                 const std::array<double, state_dim_v<M>>& hi, double diam, const double* par) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> X{};
+  M::flow(m, y, par, X.data());
+  const double xn = sign * X[axis];
+  bool fires = false, image_in_box = false;
+  for (std::size_t g = 0; g < static_cast<std::size_t>(M::n_guard) && !fires; ++g) {
+    const GuardInfo gi = guard_info<M>(g);
+    if (gi.from != m) continue;
+    std::array<double, N> grad{}, img{};
+    M::guard_gradient(static_cast<int>(g), y, par, grad.data());
+    const double gn = std::sqrt(dot<N>(grad.data(), grad.data()));
+    if (!(std::fabs(M::guard_surface(static_cast<int>(g), y, par)) <= 1e-12 * gn * diam)) continue;
+    if (sign_of(dot<N>(grad.data(), X.data())) != gi.direction) continue;
+    M::reset(static_cast<int>(g), y, par, img.data());
+    fires = true;
+    image_in_box = in_box<N>(img.data(), lo, hi);
+  }
+  const bool counts = !fires || (xn > 0.0 ? !image_in_box : image_in_box);
+  return counts ? xn : 0.0;
+}
+
 /// Cumulative net outflow through the faces of `box` at the output times, with the tensor
 /// rules `face` (rule of axis b used along b on every face normal to another axis) and
 /// Gauss–Legendre of `time_order` nodes between consecutive output times (and from 0).
@@ -944,28 +974,8 @@ std::vector<double> outflow(const TensorGrid<state_dim_v<M>>& box,
     for (std::size_t i = 0; i < pts.size(); ++i) {
       const double* y = pts[i].data();
       if (!M::in_support(y, par)) continue;
-      std::array<double, N> X{};
-      M::flow(static_cast<int>(m), y, par, X.data());
-      const double xn = sign_of_face[i] * X[axis_of[i]];
-      // A face point on S_h where h fires: the mass crossing there is reset to Δ_h(y). It
-      // leaves the box iff it crosses outwards and Δ_h(y) is outside; it enters the box iff
-      // it arrives from outside and Δ_h(y) is inside.
-      bool fires = false, image_in_box = false;
-      for (std::size_t g = 0; g < static_cast<std::size_t>(M::n_guard) && !fires; ++g) {
-        const GuardInfo gi = guard_info<M>(g);
-        if (gi.from != static_cast<int>(m)) continue;
-        std::array<double, N> grad{}, img{};
-        M::guard_gradient(static_cast<int>(g), y, par, grad.data());
-        const double gn = std::sqrt(dot<N>(grad.data(), grad.data()));
-        if (!(std::fabs(M::guard_surface(static_cast<int>(g), y, par)) <= 1e-12 * gn * diam))
-          continue;
-        if (sign_of(dot<N>(grad.data(), X.data())) != gi.direction) continue;
-        M::reset(static_cast<int>(g), y, par, img.data());
-        fires = true;
-        image_in_box = in_box<N>(img.data(), lo, hi);
-      }
-      const bool counts = !fires || (xn > 0.0 ? !image_in_box : image_in_box);
-      fw[m * pts.size() + i] = counts ? wts[i] * xn : 0.0;
+      fw[m * pts.size() + i] = wts[i] * face_flux<M>(static_cast<int>(m), y, axis_of[i],
+                                                     sign_of_face[i], lo, hi, diam, par);
     }
   }
   // Flux at the quadrature times, accumulated per output interval.
