@@ -56,6 +56,10 @@ std::string suggestion(const std::string& name, const std::vector<std::string>& 
   return best.empty() ? std::string() : " (did you mean '" + best + "'?)";
 }
 
+/// Limits of exact arithmetic in the front end.
+constexpr int kMaxExponent = 4096;   ///< |numerator| and denominator of a numeric exponent.
+constexpr int kMaxBits = 1 << 16;    ///< Size of an exactly computed numeric power.
+
 /// Converts AST expressions to GiNaC with a scope of visible names.
 class Converter {
  public:
@@ -110,9 +114,28 @@ class Converter {
           if (a.is_zero() && GiNaC::is_a<GiNaC::numeric>(b) &&
               !GiNaC::ex_to<GiNaC::numeric>(b).is_positive())
             throw src_.error(e.loc, "0 raised to a non-positive power");
-          if (GiNaC::is_a<GiNaC::numeric>(b) && GiNaC::is_a<GiNaC::numeric>(a) &&
-              GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(b)) > 4096)
-            throw src_.error(e.loc, "exponent too large");
+          // Bound exact arithmetic: a huge exponent (even on a symbol) makes
+          // every later exact evaluation hang, and a numeric power is computed
+          // exactly here, so its size is bounded too.
+          if (GiNaC::is_a<GiNaC::numeric>(b)) {
+            const auto& nb = GiNaC::ex_to<GiNaC::numeric>(b);
+            if (!nb.is_rational() || GiNaC::abs(nb.numer()) > kMaxExponent ||
+                nb.denom() > kMaxExponent)
+              throw src_.error(e.args.at(1)->loc, "exponent too large (at most " +
+                                                      std::to_string(kMaxExponent) + ")");
+            if (GiNaC::is_a<GiNaC::numeric>(a)) {
+              const auto& na = GiNaC::ex_to<GiNaC::numeric>(a);
+              if (na.is_rational()) {
+                const double bits =
+                    static_cast<double>(na.numer().int_length() + na.denom().int_length()) *
+                    GiNaC::abs(nb).to_double();
+                if (bits > kMaxBits)
+                  throw src_.error(e.loc, "number too large: this power has about " +
+                                              std::to_string(static_cast<long long>(bits)) +
+                                              " bits (at most " + std::to_string(kMaxBits) + ")");
+              }
+            }
+          }
           return GiNaC::pow(a, b);
         }
         throw InternalError("unknown binary operator '" + e.text + "'");
