@@ -105,6 +105,11 @@ std::string runner_flags(bool werror) {
   std::string f = "-std=c++20 -O3 -march=native -DNDEBUG -Wall -Wextra ";
   f += HYBGEN_OPENMP_FLAGS;
   if (werror) f += " -Werror";
+#ifdef HYBGEN_RUNNER_EXTRA_FLAGS
+  // The sanitizer flags hybgen itself was built with (HYBGEN_SANITIZE), so
+  // that generated kernels run under ASan/UBSan too; empty otherwise.
+  if (const std::string extra = HYBGEN_RUNNER_EXTRA_FLAGS; !extra.empty()) f += " " + extra;
+#endif
   return f;
 }
 
