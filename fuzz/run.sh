@@ -33,13 +33,16 @@ build() {
 
 dict_of() { [[ $1 == fuzz_overrides ]] && echo "$ROOT/fuzz/overrides.dict" || echo "$ROOT/fuzz/model.dict"; }
 
-# Seed corpus (read-only) of a harness.
+# Seed corpus (read-only directories) of a harness: seeds and past findings.
 seeds_of() {
+  local d dirs
   if [[ $1 == fuzz_overrides ]]; then
-    echo "$ROOT/fuzz/seeds/overrides"
+    dirs=("$ROOT/fuzz/seeds/overrides" "$ROOT/fuzz/regressions/overrides")
   else
-    echo "$ROOT/models $ROOT/fuzz/seeds/frontend"
+    dirs=("$ROOT/models" "$ROOT/fuzz/seeds/frontend" "$ROOT/fuzz/regressions/frontend")
   fi
+  for d in "${dirs[@]}"; do [[ -d $d ]] && echo "$d"; done
+  return 0
 }
 
 # fuzz HARNESS SECONDS CORPUS_DIR [extra libFuzzer flags...]
