@@ -126,14 +126,6 @@ inline std::string frame_name(std::size_t k) {
   return b;
 }
 
-/// Trapezoid weights of a grid axis.
-inline std::vector<double> trapezoid_weights(const GridAxis& a) {
-  std::vector<double> w(static_cast<std::size_t>(a.n), (a.max - a.min) / (a.n - 1));
-  w.front() *= 0.5;
-  w.back() *= 0.5;
-  return w;
-}
-
 }  // namespace detail
 
 /// Solve, write the outputs and the summary; returns the exit code.
@@ -230,12 +222,13 @@ int run_characteristics(const RunConfig& c) {
     } else {
       // Marginal density on the first two axes: integrate the others (trapezoid).
       const std::size_t n0 = shape[0], n1 = shape[1], rest = n_node / (n0 * n1);
+      std::vector<std::vector<double>> w(N);
+      for (std::size_t a = 2; a < N; ++a) w[a] = trapezoid_rule(c.axes[a]).weights;
       std::vector<double> wrest(rest, 1.0);
       for (std::size_t r = 0; r < rest; ++r) {
         std::size_t rem = r;
         for (std::size_t a = N; a-- > 2;) {
-          const auto w = detail::trapezoid_weights(c.axes[a]);
-          wrest[r] *= w[rem % shape[a]];
+          wrest[r] *= w[a][rem % shape[a]];
           rem /= shape[a];
         }
       }
