@@ -61,6 +61,19 @@ inline std::string override_invariant_violation(const gen::Model& m) {
   if (!(s.tol > 0 && s.tol < 1)) return "bad tol accepted";
   if (s.max_events < 1) return "bad max_events accepted";
   if (s.grid.size() != m.state.size()) return "grid rank changed";
+  double nodes = 1;
+  for (long n : s.grid) nodes *= static_cast<double>(n);
+  if (nodes > static_cast<double>(gen::kMaxGridNodes)) return "grid above the node limit accepted";
+  if (s.particles < 1 || s.seed < 0 || s.step < 0 || !std::isfinite(s.step))
+    return "bad particles/seed/step accepted";
+  if (s.eigenvalues < 1 || s.eigenvalues > 64) return "bad eigenvalues accepted";
+  if (s.method != "characteristics" && s.method != "transfer" && s.method != "invariant" &&
+      s.method != "particles")
+    return "unknown method accepted";
+  if (s.scheme != "interpolate" && s.scheme != "conservative") return "unknown scheme accepted";
+  if (!(m.limits.derive_seconds > 0) || m.limits.max_expr_nodes < 1 ||
+      !(m.limits.max_expand_terms >= 1))
+    return "bad derivation limit accepted";
   for (long n : s.grid)
     if (n < 2) return "grid axis < 2 accepted";
   for (std::size_t i = 0; i < s.lo.size(); ++i)

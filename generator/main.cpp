@@ -40,7 +40,13 @@ struct Frontend {
     ModelAst ast = parse(src);     // stage 1: text -> AST
     model = check(ast, src);       // stage 2: AST -> Model
     apply_overrides(model, sets);  //          --set KEY=VALUE
-    sys = derive(model, src);      // stage 3: Model -> IR
+    {
+      // A single GiNaC operation cannot be interrupted: past the derivation's
+      // own budget (checked between operations) the watchdog ends the process
+      // with a located error naming the object being derived.
+      const Watchdog watchdog(src.path(), model.limits.derive_seconds * 1.5 + 5);
+      sys = derive(model, src);  // stage 3: Model -> IR
+    }
     sys.model = &model;
     seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   }
@@ -162,6 +168,11 @@ int cmd_run(const std::string& path, const std::vector<std::string>& sets, std::
   cfg["dt"] = m.sim.dt;
   cfg["tol"] = m.sim.tol;
   cfg["max_events"] = m.sim.max_events;
+  cfg["particles"] = m.sim.particles;
+  cfg["seed"] = m.sim.seed;
+  cfg["step"] = m.sim.step > 0 ? m.sim.step : m.sim.dt;
+  cfg["scheme"] = m.sim.scheme;
+  cfg["eigenvalues"] = m.sim.eigenvalues;
   cfg["quiet"] = quiet;
   cfg["seconds"] = {{"derive", fe.seconds}, {"build", b.seconds}};
   const std::string config = out + "/config.json";

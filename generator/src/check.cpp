@@ -57,8 +57,8 @@ std::string suggestion(const std::string& name, const std::vector<std::string>& 
 }
 
 /// Limits of exact arithmetic in the front end.
-constexpr int kMaxExponent = 4096;   ///< |numerator| and denominator of a numeric exponent.
-constexpr int kMaxBits = 1 << 16;    ///< Size of an exactly computed numeric power.
+constexpr int kMaxExponent = 4096;  ///< |numerator| and denominator of a numeric exponent.
+constexpr int kMaxBits = 1 << 16;   ///< Size of an exactly computed numeric power.
 
 /// Converts AST expressions to GiNaC with a scope of visible names.
 class Converter {
@@ -77,6 +77,26 @@ class Converter {
   }
 
  private:
+  /// r, the result of e, unless GiNaC's automatic evaluation folded exponents
+  /// past kMaxExponent: (x^a)^b becomes x^(a·b) and x^a·x^b becomes x^(a+b),
+  /// so each written exponent can be in bounds while the folded one is not
+  /// (fuzzer finding F1b: ((x^4096)^4096)^4096 is x^(2^36)). Only r's own
+  /// power and the factors of its product are new; deeper terms were checked.
+  ex bounded(const ex& r, const Expr& e) const {
+    auto check_power = [&](const ex& f) {
+      if (!GiNaC::is_a<GiNaC::power>(f) || !GiNaC::is_a<GiNaC::numeric>(f.op(1))) return;
+      const auto& n = GiNaC::ex_to<GiNaC::numeric>(f.op(1));
+      if (!n.is_rational() || GiNaC::abs(n.numer()) > kMaxExponent || n.denom() > kMaxExponent)
+        throw src_.error(e.loc, "exponent too large once powers are combined (at most " +
+                                    std::to_string(kMaxExponent) +
+                                    " in x^a, after (x^a)^b = x^(a*b))");
+    };
+    check_power(r);
+    if (GiNaC::is_a<GiNaC::mul>(r))
+      for (std::size_t i = 0; i < r.nops(); ++i) check_power(r.op(i));
+    return r;
+  }
+
   ex convert_node(const Expr& e, int depth) const {
     if (depth > 512) throw src_.error(e.loc, "expression is nested too deeply");
     switch (e.kind) {
@@ -105,10 +125,10 @@ class Converter {
         ex b = convert_node(*e.args.at(1), depth + 1);
         if (e.text == "+") return a + b;
         if (e.text == "-") return a - b;
-        if (e.text == "*") return a * b;
+        if (e.text == "*") return bounded(a * b, e);
         if (e.text == "/") {
           if (b.is_zero()) throw src_.error(e.args.at(1)->loc, "division by zero");
-          return a / b;
+          return bounded(a / b, e);
         }
         if (e.text == "^" || e.text == "**") {
           if (a.is_zero() && GiNaC::is_a<GiNaC::numeric>(b) &&
@@ -121,8 +141,8 @@ class Converter {
             const auto& nb = GiNaC::ex_to<GiNaC::numeric>(b);
             if (!nb.is_rational() || GiNaC::abs(nb.numer()) > kMaxExponent ||
                 nb.denom() > kMaxExponent)
-              throw src_.error(e.args.at(1)->loc, "exponent too large (at most " +
-                                                      std::to_string(kMaxExponent) + ")");
+              throw src_.error(e.args.at(1)->loc,
+                               "exponent too large (at most " + std::to_string(kMaxExponent) + ")");
             if (GiNaC::is_a<GiNaC::numeric>(a)) {
               const auto& na = GiNaC::ex_to<GiNaC::numeric>(a);
               if (na.is_rational()) {
@@ -136,7 +156,7 @@ class Converter {
               }
             }
           }
-          return GiNaC::pow(a, b);
+          return bounded(GiNaC::pow(a, b), e);
         }
         throw InternalError("unknown binary operator '" + e.text + "'");
       }
@@ -528,6 +548,8 @@ Model check(const ModelAst& ast, const SourceText& src) {
                                          " axes, the state has " + std::to_string(n));
       for (long c : s.grid->counts)
         if (c < 2) throw src.error(s.grid->loc, "every grid axis needs at least 2 nodes");
+      if (const std::string why = grid_size_problem(s.grid->counts); !why.empty())
+        throw src.error(s.grid->loc, why);
       sim.grid = s.grid->counts;
     } else {
       sim.grid.assign(n, 65);
@@ -572,31 +594,16 @@ Model check(const ModelAst& ast, const SourceText& src) {
     for (const auto& st : s.settings) {
       const std::string& k = st.key.name;
       if (!seen.insert(k).second) throw src.error(st.key.loc, "setting '" + k + "' is given twice");
-      auto need_number = [&]() {
-        if (!st.value) throw src.error(st.value_loc, "setting '" + k + "' needs a number");
-        return number(st.value, "setting '" + k + "'");
-      };
-      if (k == "t_end") {
-        sim.t_end = need_number();
-        if (!(sim.t_end > 0)) throw src.error(st.value_loc, "t_end must be positive");
-      } else if (k == "dt") {
-        sim.dt = need_number();
-        have_dt = true;
-        if (!(sim.dt > 0)) throw src.error(st.value_loc, "dt must be positive");
-      } else if (k == "tol") {
-        sim.tol = need_number();
-        if (!(sim.tol > 0 && sim.tol < 1)) throw src.error(st.value_loc, "tol must be in (0, 1)");
-      } else if (k == "max_events") {
-        double v = need_number();
-        if (!(v >= 1 && v <= 1e9 && v == std::floor(v)))
-          throw src.error(st.value_loc, "max_events must be a positive integer");
-        sim.max_events = static_cast<long>(v);
-      } else if (k == "method") {
-        if (st.word.empty()) throw src.error(st.value_loc, "method needs a name (characteristics)");
-        if (st.word != "characteristics")
-          throw src.error(st.value_loc,
-                          "unknown method '" + st.word + "' (available: characteristics)");
-        sim.method = st.word;
+      if (k == "t_end" || k == "dt" || k == "tol" || k == "max_events" || k == "method" ||
+          k == "particles" || k == "seed" || k == "step" || k == "scheme" || k == "eigenvalues" ||
+          k == "max_expr_nodes" || k == "max_expand_terms" || k == "derive_seconds") {
+        SettingValue v;
+        v.word = st.word;
+        if (st.value && st.word.empty())
+          v.number = number(st.value, "setting '" + k + "'"), v.has_number = true;
+        if (const std::string why = set_simulation_setting(m, k, v); !why.empty())
+          throw src.error(st.value_loc, "setting '" + k + "': " + why);
+        if (k == "dt") have_dt = true;
       } else {
         std::vector<std::string> keys = setting_names();
         throw src.error(st.key.loc, "unknown simulation setting '" + k + "'" + suggestion(k, keys));
@@ -627,9 +634,32 @@ Model check(const ModelAst& ast, const SourceText& src) {
 }
 
 const std::vector<std::string>& setting_names() {
-  static const std::vector<std::string> names = {
-      "grid", "t_end", "dt", "method", "tol", "max_events", "domain.<state>"};
+  static const std::vector<std::string> names = {"grid",
+                                                 "t_end",
+                                                 "dt",
+                                                 "method",
+                                                 "tol",
+                                                 "max_events",
+                                                 "particles",
+                                                 "seed",
+                                                 "step",
+                                                 "scheme",
+                                                 "eigenvalues",
+                                                 "max_expr_nodes",
+                                                 "max_expand_terms",
+                                                 "derive_seconds",
+                                                 "domain.<state>"};
   return names;
+}
+
+std::string grid_size_problem(const std::vector<long>& counts) {
+  double nodes = 1;
+  for (long c : counts) nodes *= static_cast<double>(c);
+  if (nodes <= static_cast<double>(kMaxGridNodes)) return "";
+  char b[160];
+  std::snprintf(b, sizeof b, "the grid has %.3g nodes, more than the limit of %ld (2^28)", nodes,
+                kMaxGridNodes);
+  return b;
 }
 
 std::vector<long> parse_grid(const std::string& text) {
@@ -682,6 +712,71 @@ double parse_override_number(const std::string& key, const std::string& value) {
 }
 }  // namespace
 
+bool is_simulation_setting(const std::string& key) {
+  static const std::set<std::string> keys = {
+      "t_end",         "dt",   "tol",    "max_events",  "method",         "particles",
+      "seed",          "step", "scheme", "eigenvalues", "max_expr_nodes", "max_expand_terms",
+      "derive_seconds"};
+  return keys.count(key) > 0;
+}
+
+std::string set_simulation_setting(Model& model, const std::string& key, const SettingValue& v) {
+  Simulation& sim = model.sim;
+  auto word = [&](const std::vector<std::string>& allowed, std::string& into) -> std::string {
+    if (std::find(allowed.begin(), allowed.end(), v.word) != allowed.end()) {
+      into = v.word;
+      return "";
+    }
+    std::string list;
+    for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+    return (v.word.empty() ? "needs one of: " : "unknown value '" + v.word + "' (available: ") +
+           list + (v.word.empty() ? "" : ")");
+  };
+  // A number in [lo, hi]; `integer` also requires a whole number.
+  auto num = [&](double lo, double hi, bool integer, const char* what,
+                 auto&& store) -> std::string {
+    if (!v.has_number) return std::string("needs a number (") + what + ")";
+    if (!(v.number >= lo && v.number <= hi) || (integer && v.number != std::floor(v.number)))
+      return std::string("must be ") + what;
+    store(v.number);
+    return "";
+  };
+  if (key == "method")
+    return word({"characteristics", "transfer", "invariant", "particles"}, sim.method);
+  if (key == "scheme") return word({"interpolate", "conservative"}, sim.scheme);
+  if (key == "t_end")
+    return num(std::nextafter(0.0, 1.0), 1e300, false, "positive",
+               [&](double x) { sim.t_end = x; });
+  if (key == "dt")
+    return num(std::nextafter(0.0, 1.0), 1e300, false, "positive", [&](double x) { sim.dt = x; });
+  if (key == "step")
+    return num(std::nextafter(0.0, 1.0), 1e300, false, "positive", [&](double x) { sim.step = x; });
+  if (key == "tol")
+    return num(std::nextafter(0.0, 1.0), std::nextafter(1.0, 0.0), false, "in (0, 1)",
+               [&](double x) { sim.tol = x; });
+  if (key == "max_events")
+    return num(1, 1e9, true, "an integer in [1, 1e9]",
+               [&](double x) { sim.max_events = static_cast<long>(x); });
+  if (key == "particles")
+    return num(1, 1e10, true, "an integer in [1, 1e10]",
+               [&](double x) { sim.particles = static_cast<long>(x); });
+  if (key == "seed")
+    return num(0, 9007199254740992.0, true, "an integer in [0, 2^53]",
+               [&](double x) { sim.seed = static_cast<long>(x); });
+  if (key == "eigenvalues")
+    return num(1, 64, true, "an integer in [1, 64]",
+               [&](double x) { sim.eigenvalues = static_cast<int>(x); });
+  if (key == "max_expr_nodes")
+    return num(100, 1e12, true, "an integer in [100, 1e12]",
+               [&](double x) { model.limits.max_expr_nodes = static_cast<std::size_t>(x); });
+  if (key == "max_expand_terms")
+    return num(1, 1e300, false, "at least 1", [&](double x) { model.limits.max_expand_terms = x; });
+  if (key == "derive_seconds")
+    return num(0.001, 1e9, false, "in [0.001, 1e9] seconds",
+               [&](double x) { model.limits.derive_seconds = x; });
+  return "unknown setting";
+}
+
 void apply_overrides(Model& model, const std::vector<std::string>& sets) {
   Simulation& sim = model.sim;
   for (const auto& kv : sets) {
@@ -702,25 +797,20 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets) {
       if (g.size() != model.state.size())
         throw UsageError("--set grid=" + value + ": the grid needs " +
                          std::to_string(model.state.size()) + " axes");
+      if (const std::string why = grid_size_problem(g); !why.empty())
+        throw UsageError("--set grid=" + value + ": " + why);
       sim.grid = g;
-    } else if (key == "t_end") {
-      sim.t_end = parse_override_number(key, value);
-      if (!(sim.t_end > 0)) throw UsageError("--set t_end: must be positive");
-    } else if (key == "dt") {
-      sim.dt = parse_override_number(key, value);
-      if (!(sim.dt > 0)) throw UsageError("--set dt: must be positive");
-    } else if (key == "tol") {
-      sim.tol = parse_override_number(key, value);
-      if (!(sim.tol > 0 && sim.tol < 1)) throw UsageError("--set tol: must be in (0, 1)");
-    } else if (key == "max_events") {
-      double v = parse_override_number(key, value);
-      if (!(v >= 1 && v <= 1e9 && v == std::floor(v)))
-        throw UsageError("--set max_events: must be a positive integer");
-      sim.max_events = static_cast<long>(v);
-    } else if (key == "method") {
-      if (value != "characteristics")
-        throw UsageError("--set method=" + value + ": unknown method (available: characteristics)");
-      sim.method = value;
+    } else if (is_simulation_setting(key)) {
+      SettingValue v;
+      if (value.empty()) throw UsageError("--set " + key + "= needs a value");
+      if (std::isalpha(static_cast<unsigned char>(value[0]))) {
+        v.word = value;
+      } else {
+        v.number = parse_override_number(key, value);
+        v.has_number = true;
+      }
+      if (const std::string why = set_simulation_setting(model, key, v); !why.empty())
+        throw UsageError("--set " + key + "=" + value + ": " + why);
     } else if (key.rfind("domain.", 0) == 0) {
       std::string var = key.substr(7);
       auto it = std::find(model.state.begin(), model.state.end(), var);

@@ -3,7 +3,10 @@
 #include "hybgen/gen/derive.hpp"
 
 #include <cmath>
+#include <new>
 #include <random>
+
+#include "hybgen/gen/limits.hpp"
 
 namespace hybgen::gen {
 
@@ -17,18 +20,30 @@ std::size_t expr_size(const ex& e) {
 }
 
 ex simplify(const ex& e) {
+  LimitScope::check_time();
   ex best = e;
   std::size_t best_size = expr_size(e);
   auto consider = [&](const ex& c) {
     std::size_t s = expr_size(c);
     if (s < best_size) best = c, best_size = s;
   };
-  try {
-    consider(e.expand());
-    if (best_size < 4000) consider(GiNaC::normal(e));
-  } catch (const std::exception&) {
-    // simplification is best effort; the unsimplified expression is exact
+  // Expanding (and normal(), which expands numerator and denominator) is
+  // skipped when the estimated expansion exceeds the limit: the unexpanded
+  // form is exact, only larger.
+  if (LimitScope::may_expand(e)) {
+    try {
+      consider(e.expand());
+      LimitScope::check_time();
+      if (best_size < 4000) consider(GiNaC::normal(e));
+    } catch (const std::bad_alloc&) {
+      throw LimitExceeded("simplifying an expression ran out of memory");
+    } catch (const LimitExceeded&) {
+      throw;
+    } catch (const std::exception&) {
+      // simplification is best effort; the unsimplified expression is exact
+    }
   }
+  LimitScope::check_size(best);
   return best;
 }
 
@@ -52,6 +67,7 @@ bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
   std::mt19937_64 rng(0x5eed);
   std::uniform_int_distribution<int> num(-97, 97), den(1, 89);
   for (int trial = 0; trial < 4; ++trial) {
+    LimitScope::check_time();
     GiNaC::exmap at;
     for (const auto& s : syms) {
       int n = num(rng);
@@ -138,7 +154,25 @@ bool holds_closure(const Condition& c, double v) {
 
 }  // namespace
 
+namespace {
+HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitScope& scope);
+}  // namespace
+
 HybridSystem derive(const Model& m, const SourceText& src) {
+  LimitScope scope(m.limits);
+  try {
+    return derive_within_limits(m, src, scope);
+  } catch (const LimitExceeded& e) {
+    throw src.error(scope.loc(), "deriving " + scope.what() + ": " + e.what());
+  } catch (const std::bad_alloc&) {
+    throw src.error(scope.loc(), "deriving " + scope.what() +
+                                     ": out of memory (the symbolic expressions grew too large)");
+  }
+}
+
+namespace {
+
+HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitScope& scope) {
   HybridSystem sys;
   sys.model = &m;
   const auto& X = m.state_symbols;
@@ -148,6 +182,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
 
   // Modes: vector field and divergence.
   for (const auto& ms : m.modes) {
+    scope.object("the vector field of mode '" + ms.name + "'", ms.loc);
     IrMode mode;
     mode.name = ms.name;
     mode.where = ms.where;
@@ -173,6 +208,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
 
   // Guards.
   for (const auto& gs : m.guards) {
+    scope.object("the surface of guard '" + gs.name + "'", gs.surface_loc);
     IrGuard g;
     g.name = gs.name;
     g.from = gs.from;
@@ -186,6 +222,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
     const std::string where = "guard '" + gs.name + "'";
 
     // The reset map Δ.
+    scope.object("the reset of guard '" + gs.name + "'", gs.reset_loc);
     switch (gs.reset_kind) {
       case ResetDecl::Kind::Identity:
         g.reset = X;
@@ -251,6 +288,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
     g.reset_jacobian = jacobian(g.reset, X);
 
     // Δ⁻¹: closed form when Δ is affine in the variables it changes.
+    scope.object("the inverse reset of guard '" + gs.name + "'", gs.reset_loc);
     std::vector<std::size_t> changed;
     for (std::size_t i = 0; i < n; ++i)
       if (!is_identically_zero(g.reset[i] - X[i], all_symbols)) changed.push_back(i);
@@ -298,6 +336,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
     }
 
     // Hybrid Jacobian J = ∇sᵀ adj(DΔ) X⁺(Δx) / ∇sᵀ X⁻(x).
+    scope.object("the hybrid Jacobian of guard '" + gs.name + "'", gs.loc);
     matrix DD(static_cast<unsigned>(n), static_cast<unsigned>(n));
     for (std::size_t i = 0; i < n * n; ++i)
       DD(static_cast<unsigned>(i / n), static_cast<unsigned>(i % n)) = g.reset_jacobian[i];
@@ -314,6 +353,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
           }
           ++rr;
         }
+        LimitScope::check_time();
         ex det = n == 1 ? ex(1) : minor.determinant(GiNaC::determinant_algo::laplace);
         adj(i, j) = ((i + j) % 2 ? -det : det);
       }
@@ -357,6 +397,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
   // Numerical checks on sampled points of each guard surface (parameters at
   // their defaults, inside the simulation domain).
   if (m.sim.present) {
+    scope.object("the sampled checks of the guards", m.sim.loc);
     Evaluator eval(m);
     std::mt19937_64 rng(12345);
     for (std::size_t gi = 0; gi < sys.guards.size(); ++gi) {
@@ -369,6 +410,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
       for (std::size_t i = 0; i < n; ++i) lie += g.gradient[i] * before.flow[i];
       int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0;
       for (int trial = 0; trial < 400 && crossing < 60; ++trial) {
+        LimitScope::check_time();
         std::vector<double> x(n);
         for (std::size_t i = 0; i < n; ++i)
           x[i] = std::uniform_real_distribution<double>(m.sim.lo[i], m.sim.hi[i])(rng);
@@ -465,5 +507,7 @@ HybridSystem derive(const Model& m, const SourceText& src) {
   }
   return sys;
 }
+
+}  // namespace
 
 }  // namespace hybgen::gen

@@ -154,10 +154,10 @@ TEST(Check, Errors) {
       "the grid has 2 axes, the state has 1");
   expect_error(
       "state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial 1; t_end -2 }\n", 3, 51,
-      "t_end must be positive");
+      "setting 't_end': must be positive");
   expect_error(
       "state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial 1; method magic }\n", 3,
-      52, "unknown method 'magic'");
+      52, "setting 'method': unknown value 'magic' (available: characteristics, transfer");
   expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial 1; tend 2 }\n",
                3, 45, "unknown simulation setting 'tend' (did you mean 't_end'?)");
   expect_error("state x\nmode a { x' = 1 }\nsimulation { domain x in [0, 1]; initial b: 1 }\n", 3,

@@ -8,10 +8,8 @@
 // finding is adding a file):
 //   frontend/       whole front end, fuzz/frontend_pipeline.hpp, size caps only;
 //   overrides/      --set values, fuzz/overrides_pipeline.hpp;
-//   frontend-open/  findings whose fix is not in yet: the fuzzer guards them,
-//                   the DISABLED_ tests below run them unguarded (they hang
-//                   today); enable them with the fix (F1b; F3 is a
-//                   DISABLED_ test only).
+//   frontend-open/  findings whose fix is not in yet (none today): the
+//                   fuzzer guards them (Guards::All), DISABLED_ tests run them.
 
 #include <gtest/gtest.h>
 
@@ -96,21 +94,6 @@ TEST(FuzzRegressions, PoleAtTheParameterDefaultsDoesNotLeak) {
   EXPECT_EQ(outcome([&] { fuzz::run_frontend(text, Guards::SizeOnly); }), "");
 }
 
-// The open findings are cheap for the fuzzer: its guards skip them at once.
-TEST(FuzzRegressions, OpenFindingsAreGuardedInTheFuzzer) {
-  const auto files = inputs("frontend-open");
-  EXPECT_FALSE(files.empty());
-  for (const auto& f : files) {
-    const auto t0 = std::chrono::steady_clock::now();
-    Stage stage = Stage::Derived;
-    EXPECT_EQ(outcome([&] { stage = fuzz::run_frontend(read_file(f.string()), Guards::All); }), "")
-        << f;
-    EXPECT_NE(stage, Stage::Derived) << f;
-    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0)
-        << f;
-  }
-}
-
 /// Expect a located ModelError (exit 1) within a few seconds.
 void expect_prompt_model_error(const std::string& text, const std::string& fragment) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -143,15 +126,18 @@ TEST(FuzzRegressions, NumericPowerTowerIsAModelError) {
                             "number too large");
 }
 
-// Open finding F1b (fuzz/regressions/frontend-open/timeout-symbolic-power-tower.model):
-// check bounds each exponent as written, but GiNaC folds (x^a)^b into
-// x^(a*b), so ((x^4096)^4096)^4096 reaches derive as x^(2^36) and
-// is_identically_zero (derive.cpp) raises random rationals to that power
-// exactly: a hang (> 60 s, then out of memory). The fuzzer guards it.
-// Expected: a ModelError ("exponent too large") from check.
-TEST(FuzzRegressions, DISABLED_SymbolicPowerTowerIsAModelError) {
+// Finding F1b (fuzz/regressions/frontend/timeout-symbolic-power-tower.model):
+// check bounded each exponent as written, but GiNaC folds (x^a)^b into
+// x^(a*b), so ((x^4096)^4096)^4096 reached derive as x^(2^36) and
+// is_identically_zero (derive.cpp) raised random rationals to that power
+// exactly: a hang (> 60 s, then out of memory). Fixed in check.cpp: the
+// folded exponent of every product and power is bounded too (x^4096*x^4096
+// as well).
+TEST(FuzzRegressions, SymbolicPowerTowerIsAModelError) {
   expect_prompt_model_error("state x\nmode m { x' = ((x^4096)^4096)^4096 }\n",
                             "exponent too large");
+  expect_prompt_model_error("state x\nmode m { x' = x^4096 * x^4096 }\n", "exponent too large");
+  expect_prompt_model_error("state x\nmode m { x' = x^4096 / x^(-4096) }\n", "exponent too large");
 }
 
 // The fuzzer's size caps (fuzz/frontend_pipeline.hpp) keep it away from
@@ -171,14 +157,22 @@ TEST(FuzzRegressions, SizeCapsSkipExpensiveDerivations) {
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 30.0);
 }
 
-// Open finding F3 (review of inputs fuzz_overrides accepts): parse_grid and
-// apply_overrides (check.cpp, `grid`) accept any axis up to 999999999 nodes
-// and any product, so `--set grid=999999999x999999999` (10^18 nodes) passes
-// the front end and the runner dies with "cannot create std::vector larger
-// than max_size()", exit 70 (runtime/include/hybgen/rt/runner.hpp, the
-// catch-all in runner_main). Expected: a UsageError naming the node limit.
-TEST(FuzzRegressions, DISABLED_UnallocatableGridIsAUsageError) {
-  EXPECT_THROW((void)fuzz::run_overrides("grid=999999999x999999999"), UsageError);
+// Finding F3 (review of inputs fuzz_overrides accepts): parse_grid and
+// apply_overrides (check.cpp, `grid`) accepted any axis up to 999999999 nodes
+// and any product, so `--set grid=999999999x999999999` (10^18 nodes) passed
+// the front end and the runner died with "cannot create std::vector larger
+// than max_size()", exit 70. Fixed: grids are limited to kMaxGridNodes (2^28)
+// nodes, in the model file and in --set.
+TEST(FuzzRegressions, UnallocatableGridIsAUsageError) {
+  try {
+    (void)fuzz::run_overrides("grid=999999999x999999999");
+    ADD_FAILURE() << "accepted";
+  } catch (const UsageError& e) {
+    EXPECT_NE(std::string(e.what()).find("more than the limit"), std::string::npos) << e.what();
+  }
+  // The limit itself is accepted (2^14 x 2^14 = 2^28 nodes), one more node is not.
+  EXPECT_NO_THROW((void)fuzz::run_overrides("grid=16384x16384"));
+  EXPECT_THROW((void)fuzz::run_overrides("grid=16384x16385"), UsageError);
 }
 
 }  // namespace

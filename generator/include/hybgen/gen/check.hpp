@@ -23,8 +23,32 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets);
 /// The simulation settings `--set` accepts (for help texts and errors).
 const std::vector<std::string>& setting_names();
 
+/// A setting's value as written: a number, or a word (e.g. a method name).
+struct SettingValue {
+  double number = 0;        ///< The number, when `has_number`.
+  bool has_number = false;  ///< Whether a number was given.
+  std::string word;         ///< The word, when one was given.
+};
+
+/// Whether `key` is a scalar simulation setting (t_end, dt, tol, max_events,
+/// method, particles, seed, step, scheme, eigenvalues) or a derivation limit
+/// (max_expr_nodes, max_expand_terms, derive_seconds); grid and domain.X are
+/// handled separately.
+bool is_simulation_setting(const std::string& key);
+
+/// Set one scalar setting of `model` (the same rules for the model file's
+/// simulation block and for --set). Returns "" on success, else why the
+/// value is invalid (the caller adds where).
+std::string set_simulation_setting(Model& model, const std::string& key, const SettingValue& v);
+
 /// Parse a grid literal such as "75x75" (UsageError if malformed).
 std::vector<long> parse_grid(const std::string& text);
+
+/// Most grid nodes a run may have (2^28: one float64 frame is then 2 GiB).
+inline constexpr long kMaxGridNodes = 1L << 28;
+
+/// Why a grid with these node counts cannot be run (too many nodes), or "".
+std::string grid_size_problem(const std::vector<long>& counts);
 
 /// Exact rational of a decimal literal ("0.25" -> 1/4, "1e-3" -> 1/1000).
 GiNaC::numeric exact_number(const std::string& literal);

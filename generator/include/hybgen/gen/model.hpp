@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "hybgen/gen/ast.hpp"
+#include "hybgen/gen/limits.hpp"
 
 namespace hybgen::gen {
 
@@ -74,6 +75,11 @@ struct Simulation {
   std::string method = "characteristics";  ///< Solver.
   double tol = 1e-10;                      ///< ODE relative tolerance.
   long max_events = 100000;                ///< Cap on resets per characteristic.
+  long particles = 1000000;                ///< Samples of method particles.
+  long seed = 1;                           ///< Random seed of method particles.
+  double step = 0;                         ///< Transfer-operator step (0: dt).
+  std::string scheme = "interpolate";      ///< Transfer operator: interpolate | conservative.
+  int eigenvalues = 6;                     ///< Eigenvalues reported by method invariant.
 };
 
 /// The checked model (output of `check`).
@@ -88,6 +94,7 @@ struct Model {
   std::vector<GuardSpec> guards;           ///< Guards.
   Simulation sim;                          ///< Simulation defaults.
   std::map<std::string, std::string> tex;  ///< TeX names of symbols (theta -> \theta).
+  DeriveLimits limits;                     ///< Resource limits of derive (--set).
 };
 
 /// A mode of the IR.

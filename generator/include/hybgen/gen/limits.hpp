@@ -1,0 +1,110 @@
+#pragma once
+/// \file limits.hpp
+/// Resource limits of the symbolic stage (issue 5, "derivation limits").
+///
+/// Symbolic work can blow up on a short input: (x+y+z+w)^4096 is 9 nodes but
+/// expands to 1.2·10^10 terms, a 10×10 symbolic inverse has millions. derive
+/// therefore runs under three limits and, when one is hit, ends with a located
+/// model error (exit 1) that names the object being derived, the limit and the
+/// `--set` key that raises it — never a hang or an out-of-memory kill:
+///  - `max_expr_nodes`: no derived expression may exceed this many tree nodes
+///    (`expr_size`), checked on every simplified result;
+///  - `max_expand_terms`: `simplify` does not expand an expression whose
+///    expansion is estimated (`expanded_terms`) above this many terms — it
+///    keeps the unexpanded, exact form instead (simplification is optional);
+///  - `derive_seconds`: a wall-clock budget, checked between GiNaC operations
+///    (cooperative) and, in the command-line tool, by a watchdog that ends
+///    the process cleanly when one operation alone overruns it (nothing has
+///    been written by then: outputs are written after derive, atomically).
+
+#include <ginac/ginac.h>
+
+#include <chrono>
+#include <cstddef>
+#include <memory>
+#include <string>
+
+#include "hybgen/gen/ast.hpp"
+#include "hybgen/gen/errors.hpp"
+
+namespace hybgen::gen {
+
+/// The limits of one derivation (defaults; `--set KEY=VALUE` overrides them).
+struct DeriveLimits {
+  std::size_t max_expr_nodes = 200000;  ///< Largest derived expression, in tree nodes.
+  double max_expand_terms = 1e5;        ///< Largest estimated expansion simplify attempts.
+  double derive_seconds = 120;          ///< Wall-clock budget of derive.
+};
+
+/// A limit was hit; derive turns it into a located ModelError naming the object.
+class LimitExceeded : public Error {
+ public:
+  /// Construct from what was exceeded (without the object).
+  explicit LimitExceeded(const std::string& message) : Error(message, ExitCode::ModelError) {}
+};
+
+/// Estimated number of terms of expand(e) for polynomial structure: sums add,
+/// products multiply, (k terms)^n gives C(n+k−1, k−1) monomials; the largest
+/// such estimate over all subexpressions (function arguments are expanded
+/// too). An upper estimate; saturates at 1e300.
+double expanded_terms(const GiNaC::ex& e);
+
+/// The limits in force on this thread while a derivation runs, and the object
+/// being derived (for messages). Scoped: constructing one activates it,
+/// destroying it restores the previous state.
+class LimitScope {
+ public:
+  /// Activate `limits` on this thread, with the deadline starting now.
+  explicit LimitScope(const DeriveLimits& limits);
+  /// Restore the previous scope (if any).
+  ~LimitScope();
+  LimitScope(const LimitScope&) = delete;             ///< Not copyable.
+  LimitScope& operator=(const LimitScope&) = delete;  ///< Not assignable.
+
+  /// Name the object now being derived, e.g. "the hybrid Jacobian of guard 'ground'".
+  void object(std::string what, SourceLoc loc);
+  /// The object now being derived.
+  [[nodiscard]] const std::string& what() const { return what_; }
+  /// Where that object was written.
+  [[nodiscard]] SourceLoc loc() const { return loc_; }
+
+  /// The active scope of this thread, or nullptr outside a derivation.
+  static LimitScope* current();
+  /// Throw LimitExceeded if the active scope's deadline has passed.
+  static void check_time();
+  /// Throw LimitExceeded if e has more nodes than the active scope allows.
+  static void check_size(const GiNaC::ex& e);
+  /// Whether expand(e) is within the active scope's term limit (true outside a scope).
+  static bool may_expand(const GiNaC::ex& e);
+
+  /// The limits.
+  [[nodiscard]] const DeriveLimits& limits() const { return limits_; }
+
+ private:
+  DeriveLimits limits_;
+  std::chrono::steady_clock::time_point deadline_;
+  std::string what_ = "the model";
+  SourceLoc loc_{1, 1};
+  LimitScope* previous_;
+};
+
+/// A watchdog for one operation that cannot be interrupted (a single GiNaC
+/// call): if it is still alive `seconds` after construction, it prints
+/// `FILE: error: deriving OBJECT took longer than S s ...` to stderr and ends
+/// the process with exit 1. For the command-line tool only (nothing is
+/// written before derive ends, so ending the process loses nothing).
+class Watchdog {
+ public:
+  /// Arm the watchdog for `file`, firing after `seconds`.
+  Watchdog(std::string file, double seconds);
+  /// Disarm it.
+  ~Watchdog();
+  Watchdog(const Watchdog&) = delete;             ///< Not copyable.
+  Watchdog& operator=(const Watchdog&) = delete;  ///< Not assignable.
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace hybgen::gen

@@ -1,0 +1,147 @@
+// Resource limits of the symbolic stage; see limits.hpp.
+
+#include "hybgen/gen/limits.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <mutex>
+#include <thread>
+
+#include "hybgen/gen/derive.hpp"
+
+namespace hybgen::gen {
+
+namespace {
+
+thread_local LimitScope* g_scope = nullptr;
+
+/// The object most recently named by any scope, for the watchdog's message.
+std::mutex g_object_mutex;
+std::string g_object = "the model";
+SourceLoc g_object_loc{1, 1};
+
+/// Estimate for e itself (not the maximum over its subexpressions).
+double own_terms(const GiNaC::ex& e) {
+  constexpr double kInf = 1e300;
+  if (GiNaC::is_a<GiNaC::add>(e)) {
+    double s = 0;
+    for (std::size_t i = 0; i < e.nops(); ++i) s += own_terms(e.op(i));
+    return std::min(s, kInf);
+  }
+  if (GiNaC::is_a<GiNaC::mul>(e)) {
+    double p = 1;
+    for (std::size_t i = 0; i < e.nops(); ++i) p = std::min(p * own_terms(e.op(i)), kInf);
+    return p;
+  }
+  if (GiNaC::is_a<GiNaC::power>(e)) {
+    const double k = own_terms(e.op(0));
+    if (GiNaC::is_a<GiNaC::numeric>(e.op(1)) &&
+        GiNaC::ex_to<GiNaC::numeric>(e.op(1)).is_pos_integer() && k > 1) {
+      const double n = GiNaC::ex_to<GiNaC::numeric>(e.op(1)).to_double();
+      const double log_c = std::lgamma(n + k) - std::lgamma(k) - std::lgamma(n + 1);
+      return log_c > std::log(kInf) ? kInf : std::exp(log_c);
+    }
+    return k;
+  }
+  return 1;  // symbols, numbers, functions (their arguments are estimated on their own)
+}
+
+}  // namespace
+
+double expanded_terms(const GiNaC::ex& e) {
+  double worst = own_terms(e);
+  for (std::size_t i = 0; i < e.nops(); ++i) worst = std::max(worst, expanded_terms(e.op(i)));
+  return worst;
+}
+
+LimitScope::LimitScope(const DeriveLimits& limits)
+    : limits_(limits),
+      deadline_(std::chrono::steady_clock::now() +
+                std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                    std::chrono::duration<double>(std::min(limits.derive_seconds, 1e9)))),
+      previous_(g_scope) {
+  g_scope = this;
+}
+
+LimitScope::~LimitScope() {
+  g_scope = previous_;
+}
+
+void LimitScope::object(std::string what, SourceLoc loc) {
+  what_ = std::move(what);
+  loc_ = loc;
+  const std::lock_guard<std::mutex> lock(g_object_mutex);
+  g_object = what_;
+  g_object_loc = loc_;
+}
+
+LimitScope* LimitScope::current() {
+  return g_scope;
+}
+
+void LimitScope::check_time() {
+  if (!g_scope || std::chrono::steady_clock::now() < g_scope->deadline_) return;
+  char secs[32];
+  std::snprintf(secs, sizeof secs, "%g", g_scope->limits_.derive_seconds);
+  throw LimitExceeded(std::string("the derivation took longer than derive_seconds = ") + secs +
+                      " s (raise it with --set derive_seconds=S)");
+}
+
+void LimitScope::check_size(const GiNaC::ex& e) {
+  if (!g_scope) return;
+  const std::size_t n = expr_size(e);
+  if (n > g_scope->limits_.max_expr_nodes)
+    throw LimitExceeded(
+        "an expression has " + std::to_string(n) +
+        " nodes, more than max_expr_nodes = " + std::to_string(g_scope->limits_.max_expr_nodes) +
+        " (raise it with --set max_expr_nodes=N)");
+}
+
+bool LimitScope::may_expand(const GiNaC::ex& e) {
+  return !g_scope || expanded_terms(e) <= g_scope->limits_.max_expand_terms;
+}
+
+struct Watchdog::State {
+  std::mutex mutex;
+  std::condition_variable cv;
+  bool done = false;
+  std::thread thread;
+};
+
+Watchdog::Watchdog(std::string file, double seconds) : state_(std::make_unique<State>()) {
+  State* s = state_.get();
+  s->thread = std::thread([s, file = std::move(file), seconds] {
+    std::unique_lock<std::mutex> lock(s->mutex);
+    const auto limit = std::chrono::duration<double>(std::min(seconds, 1e9));
+    if (s->cv.wait_for(lock, limit, [s] { return s->done; })) return;
+    std::string what;
+    SourceLoc loc;
+    {
+      const std::lock_guard<std::mutex> olock(g_object_mutex);
+      what = g_object;
+      loc = g_object_loc;
+    }
+    std::fprintf(stderr,
+                 "%s:%d:%d: error: deriving %s took longer than derive_seconds = %g s, inside one "
+                 "symbolic operation (raise it with --set derive_seconds=S, or simplify the "
+                 "model)\n",
+                 file.c_str(), loc.line, loc.col, what.c_str(), seconds);
+    std::fflush(stderr);
+    ::_exit(static_cast<int>(ExitCode::ModelError));
+  });
+}
+
+Watchdog::~Watchdog() {
+  {
+    const std::lock_guard<std::mutex> lock(state_->mutex);
+    state_->done = true;
+  }
+  state_->cv.notify_all();
+  state_->thread.join();
+}
+
+}  // namespace hybgen::gen

@@ -1,0 +1,153 @@
+// Derivation limits (issue 5; generator/include/hybgen/gen/limits.hpp): a
+// symbolic blow-up ends with a located model error that names the object
+// being derived and the limit, and the limits are settings (--set).
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <string>
+#include <thread>
+
+#include "hybgen/gen/check.hpp"
+#include "hybgen/gen/derive.hpp"
+#include "hybgen/gen/limits.hpp"
+#include "hybgen/gen/parse.hpp"
+
+namespace hybgen::gen {
+namespace {
+
+using GiNaC::ex;
+
+/// Parse, check, override and derive `text`; returns the model error's message or "".
+std::string derive_error(const std::string& text, const std::vector<std::string>& sets = {}) {
+  SourceText src("limits.model", text);
+  Model m = check(parse(src), src);
+  apply_overrides(m, sets);
+  try {
+    (void)derive(m, src);
+  } catch (const ModelError& e) {
+    EXPECT_EQ(e.exit_code(), ExitCode::ModelError);
+    return e.what();
+  }
+  return "";
+}
+
+/// Σ_{i,j<8} x^i y^j written out: 64 terms, about 300 tree nodes, already simplest.
+std::string big_polynomial(const std::string& x, const std::string& y) {
+  std::string s;
+  for (int i = 0; i < 8; ++i)
+    for (int j = 0; j < 8; ++j)
+      s += (s.empty() ? "" : " + ") + std::to_string(i + j + 1) + "*" + x + "^" +
+           std::to_string(i) + "*" + y + "^" + std::to_string(j);
+  return s;
+}
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// The estimate is exact for sums of distinct monomials raised to a power:
+// (x+y)^3 has 4 monomials, (x+y+z+w)^4096 has C(4099, 3).
+TEST(Limits, ExpandedTermsCountsMonomials) {
+  const GiNaC::realsymbol x("x"), y("y"), z("z"), w("w");
+  EXPECT_DOUBLE_EQ(expanded_terms(ex(x)), 1);
+  EXPECT_NEAR(expanded_terms(GiNaC::pow(x + y, 3)), 4, 1e-9);
+  EXPECT_NEAR(expanded_terms(GiNaC::pow(x + y, 3)),
+              static_cast<double>(GiNaC::pow(x + y, 3).expand().nops()), 1e-9);
+  EXPECT_NEAR(expanded_terms((x + y) * (z + w + 1)), 6, 1e-9);
+  const double c = 4099.0 * 4098.0 * 4097.0 / 6.0;
+  EXPECT_NEAR(expanded_terms(GiNaC::pow(x + y + z + w, 4096)) / c, 1.0, 1e-9);
+  // The maximum over subexpressions: a function argument is expanded too.
+  EXPECT_NEAR(expanded_terms(GiNaC::sin(GiNaC::pow(x + y, 3))), 4, 1e-9);
+}
+
+// (x+y+z+w)^4096 used to make simplify() ask GiNaC for 183 GB; now the
+// expansion is skipped (the exact, unexpanded form is kept) and the model
+// derives at once.
+TEST(Limits, HugeExpansionIsSkippedNotAttempted) {
+  const auto t0 = std::chrono::steady_clock::now();
+  SourceText src("limits.model",
+                 "state x, y, z, w\nmode m { x' = (x+y+z+w)^4096; y' = 1; z' = 1; w' = 1 }\n");
+  Model m = check(parse(src), src);
+  const HybridSystem sys = derive(m, src);
+  ASSERT_EQ(sys.modes.size(), 1u);
+  EXPECT_EQ(sys.modes[0].flow[0].nops(), 2u);  // still a power
+  EXPECT_LT(seconds_since(t0), 10.0);
+}
+
+// max_expr_nodes: the error names the object, the limit, the key and the place.
+TEST(Limits, ExpressionSizeLimitNamesTheObject) {
+  const std::string text =
+      "state x, y\n"
+      "mode flying {\n"
+      "  x' = " + big_polynomial("x", "y") + "\n"
+      "  y' = 1\n"
+      "}\n";
+  EXPECT_EQ(derive_error(text), "");
+  const std::string msg = derive_error(text, {"max_expr_nodes=100"});
+  EXPECT_NE(msg.find("limits.model:2:"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("the vector field of mode 'flying'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("max_expr_nodes = 100"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("--set max_expr_nodes="), std::string::npos) << msg;
+}
+
+// A guard's hybrid Jacobian is named when it is the object that grows.
+TEST(Limits, GuardObjectsAreNamed) {
+  const std::string text =
+      "state x, p\n"
+      "mode m { x' = p; p' = -1 }\n"
+      "guard hit {\n"
+      "  when x = 0 decreasing\n"
+      "  reset (x, -p * (" + big_polynomial("x", "p") + "))\n"
+      "}\n";
+  EXPECT_EQ(derive_error(text), "");
+  const std::string msg = derive_error(text, {"max_expr_nodes=200"});
+  EXPECT_NE(msg.find("guard 'hit'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("max_expr_nodes"), std::string::npos) << msg;
+}
+
+// derive_seconds: a derivation past its budget ends at the next check.
+TEST(Limits, TimeLimitEndsTheDerivation) {
+  const std::string text =
+      "state a, b, c, d\n"
+      "mode m { a' = (a+b+c+d)^40; b' = (a-b+c-d)^40; c' = (a*b+c*d)^40; d' = (a+c)^40 }\n";
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string msg = derive_error(text, {"derive_seconds=0.001"});
+  EXPECT_NE(msg.find("took longer than derive_seconds = 0.001"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("--set derive_seconds="), std::string::npos) << msg;
+  EXPECT_LT(seconds_since(t0), 30.0);
+}
+
+// The limits are settings: in the model file and by --set, with checks.
+TEST(Limits, LimitsAreSettings) {
+  SourceText src("limits.model",
+                 "state x\nmode m { x' = -x }\nsimulation {\n  domain x in [0, 1]\n  initial 1\n"
+                 "  max_expr_nodes 5000\n  derive_seconds 7\n}\n");
+  Model m = check(parse(src), src);
+  EXPECT_EQ(m.limits.max_expr_nodes, 5000u);
+  EXPECT_DOUBLE_EQ(m.limits.derive_seconds, 7);
+  apply_overrides(m, {"max_expand_terms=10", "derive_seconds=2.5"});
+  EXPECT_DOUBLE_EQ(m.limits.max_expand_terms, 10);
+  EXPECT_DOUBLE_EQ(m.limits.derive_seconds, 2.5);
+  EXPECT_THROW(apply_overrides(m, {"derive_seconds=0"}), UsageError);
+  EXPECT_THROW(apply_overrides(m, {"max_expr_nodes=12.5"}), UsageError);
+  EXPECT_THROW(apply_overrides(m, {"max_expr_nodes=fast"}), UsageError);
+}
+
+// The watchdog ends the process with exit 1 and a located message when one
+// operation overruns; disarmed in time, it does nothing.
+TEST(LimitsDeathTest, WatchdogEndsTheProcess) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_EXIT(
+      {
+        const Watchdog w("slow.model", 0.05);
+        std::this_thread::sleep_for(std::chrono::seconds(10));
+      },
+      ::testing::ExitedWithCode(1), "slow.model:1:1: error: deriving the model took longer");
+  { const Watchdog w("fast.model", 5); }
+  SUCCEED();
+}
+
+}  // namespace
+}  // namespace hybgen::gen
