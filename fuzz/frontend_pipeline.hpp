@@ -99,7 +99,7 @@ inline Stage run_frontend(std::string_view text, [[maybe_unused]] Guards guards 
   gen::ModelAst ast = gen::parse(src);
   gen::Model model = gen::check(ast, src);
   if (!within_derive_caps(model)) return Stage::Checked;
-  model.limits.derive_seconds = 20;  // a hang is a finding; 20 s is below the fuzzer's timeout
+  model.limits.derive_seconds = 5;  // below the fuzzer's -timeout=10: a hang is a finding
   gen::HybridSystem sys = gen::derive(model, src);
   sys.model = &model;
   return Stage::Derived;
