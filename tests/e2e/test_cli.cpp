@@ -15,6 +15,7 @@
 
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/rt/npy.hpp"
+#include "support/ball_closed_form.hpp"
 
 namespace {
 
@@ -201,18 +202,6 @@ TEST(Cli, RunEveryShippedModelOnASmallGrid) {
   }
 }
 
-/// Elastic bouncing ball, m = g = 1: u(t, x, p) = u0(R φ_t(R(x, p))) with the
-/// time reversal R(x, p) = (x, −p) and the periodic elastic motion φ_t:
-/// E = p²/2 + x, v0 = √(2E), period 2 v0, time since the last bounce v0 − p.
-double exact_elastic(double t, double x, double p) {
-  double p0 = -p;
-  double v0 = std::sqrt(p0 * p0 + 2 * x);
-  double tau = std::fmod(v0 - p0 + t, 2 * v0);
-  double xt = v0 * tau - tau * tau / 2, pt = v0 - tau;
-  double xf = xt, pf = -pt;
-  return std::exp(-(xf - 1) * (xf - 1) - pf * pf);
-}
-
 TEST(Cli, BouncingBallPaperConfigurationMatchesClosedForm) {
   json s = run("bouncing_ball", "paper", "--set t_end=9.8 --set dt=0.2");
   fs::path out = run_dir("paper");
@@ -229,7 +218,7 @@ TEST(Cli, BouncingBallPaperConfigurationMatchesClosedForm) {
         // The node (0, 0) is the Zeno point: stripes of every phase meet there
         // and the density has no limit (the closed form's period 2 v0 is 0).
         if (i == 0 && j == 37) continue;
-        double ue = exact_elastic(t, x, p);
+        double ue = hybgen::testing::ball_exact_elastic(x, p, t);
         err += std::fabs(arr.data[i * 75 + j] - ue);
         norm += std::fabs(ue);
       }
@@ -239,31 +228,6 @@ TEST(Cli, BouncingBallPaperConfigurationMatchesClosedForm) {
       "bouncing ball 75x75, 50 outputs to t=9.8: worst relative L1 error %.3e, solve %.4f s\n",
       worst, s["seconds"]["solve"].get<double>());
   EXPECT_LE(worst, 1e-4);
-}
-
-/// Closed-form Zeno mass of the ball (m = g = 1, restitution e < 1): the mass
-/// of initial states, anywhere in the half-plane x0 ≥ 0, that have come to rest
-/// by time t. From (x0, p0) the ball lands after t1 = p0 + v1 with speed
-/// v1 = √(p0² + 2x0); the flights then last 2e v1, 2e² v1, ..., so
-/// T_Z = p0 + v1 (1 + e)/(1 − e), increasing in x0. Hence T_Z ≤ t iff
-/// x0 ≤ x*(p0) = (v*² − p0²)/2 with v* = (t − p0)(1 − e)/(1 + e) (and v* ≥ |p0|),
-/// and the x0-integral of u0 = exp(−(x0−1)² − p0²) is exact with erf; the
-/// p0-integral (continuous integrand) uses composite Simpson on [−8, 8].
-double zeno_mass(double t, double e) {
-  const int n = 20000;
-  const double a = -8, b = 8, h = (b - a) / n;
-  double sum = 0;
-  for (int k = 0; k <= n; ++k) {
-    double p0 = a + h * k;
-    double vs = (t - p0) * (1 - e) / (1 + e);
-    double f = 0;
-    if (vs > std::fabs(p0)) {
-      double xs = (vs * vs - p0 * p0) / 2;
-      f = std::exp(-p0 * p0) * std::sqrt(M_PI) / 2 * (std::erf(xs - 1) - std::erf(-1.0));
-    }
-    sum += f * (k == 0 || k == n ? 1 : (k % 2 ? 4 : 2));
-  }
-  return sum * h / 3;
 }
 
 TEST(Cli, RestitutionMassBudget) {
@@ -277,13 +241,14 @@ TEST(Cli, RestitutionMassBudget) {
   // point, computed independently in closed form.
   double worst = 0;
   for (std::size_t k = 0; k < times.size(); ++k) {
-    double z = zeno_mass(times[k].get<double>(), 0.8);
+    double z = hybgen::testing::zeno_mass(times[k].get<double>(), 0.8);
     worst = std::max(worst, std::fabs(atom[k].get<double>() - z) / m0);
   }
   std::printf(
       "restitution e=0.8: final atom %.6f, closed-form Zeno mass %.6f, worst |diff|/m0 %.2e\n",
-      atom.back().get<double>(), zeno_mass(times.back().get<double>(), 0.8), worst);
-  EXPECT_GT(zeno_mass(10, 0.8), 0.1 * m0);  // the check is not vacuous
+      atom.back().get<double>(), hybgen::testing::zeno_mass(times.back().get<double>(), 0.8),
+      worst);
+  EXPECT_GT(hybgen::testing::zeno_mass(10, 0.8), 0.1 * m0);  // the check is not vacuous
   EXPECT_LE(worst, 2e-3);
 }
 

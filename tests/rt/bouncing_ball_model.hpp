@@ -1,7 +1,7 @@
 #pragma once
 /// \file bouncing_ball_model.hpp
-/// A hand-written `hybgen::rt::HybridModel` of the bouncing ball (what the emitter should
-/// produce for models/bouncing_ball.model), used by the runtime tests.
+/// Hand-written `hybgen::rt::HybridModel`s used by the runtime tests: the bouncing ball (what
+/// the emitter should produce for models/bouncing_ball.model) and a guard-free spiral.
 ///
 /// State (x, p), parameters (m, g, e). One mode `flight`: X = (p/m, −m g), div X = 0.
 /// Guard `ground`: s = x, decreasing; Δ(x, p) = (x, −e p); Δ⁻¹(y) = (x, −p/e);
@@ -71,5 +71,65 @@ struct BouncingBall {
 };
 
 static_assert(HybridModel<BouncingBall>);
+
+/// A guard-free test model: x' = a x − p, p' = x + a p (div = 2a). φ_t(y) = e^{at} R(t) y
+/// with R the rotation by t, so the Gaussian u0 = exp(−4|y − (1/2, 0)|²) stays a Gaussian
+/// and spirals out: u(t, y) = e^{−2at} u0-shaped around φ_t(c) with width e^{at}.
+struct Spiral2D {
+  /// Dimensions: (x, p), parameter a, one mode, no guard.
+  static constexpr int n_state = 2, n_param = 1, n_mode = 1, n_guard = 0;
+  /// Model name.
+  static constexpr const char* name = "spiral";
+  /// State names.
+  static constexpr std::array<const char*, 2> state_names{"x", "p"};
+  /// Parameter names.
+  static constexpr std::array<const char*, 1> param_names{"a"};
+  /// Default a.
+  static constexpr std::array<double, 1> param_defaults{0.15};
+  /// Mode names.
+  static constexpr std::array<const char*, 1> mode_names{"only"};
+  /// No guards.
+  static constexpr std::array<const char*, 0> guard_names{};
+  /// No guards.
+  static constexpr std::array<GuardInfo, 0> guards{};
+  /// X = (a x − p, x + a p).
+  static void flow(int, const double* x, const double* par, double* out) {
+    out[0] = par[0] * x[0] - x[1];
+    out[1] = x[0] + par[0] * x[1];
+  }
+  /// div X = 2a.
+  static double divergence(int, const double*, const double* par) { return 2.0 * par[0]; }
+  /// Unused (no guards).
+  static double guard_surface(int, const double*, const double*) { return 1.0; }
+  /// Unused (no guards).
+  static void guard_gradient(int, const double*, const double*, double* out) {
+    out[0] = out[1] = 0.0;
+  }
+  /// Unused (no guards).
+  static void reset(int, const double* x, const double*, double* out) {
+    out[0] = x[0];
+    out[1] = x[1];
+  }
+  /// Unused (no guards).
+  static void reset_inverse(int, const double* x, const double*, double* out) {
+    out[0] = x[0];
+    out[1] = x[1];
+  }
+  /// Unused (no guards).
+  static void reset_jacobian(int, const double*, const double*, double* out) {
+    out[0] = out[3] = 1.0;
+    out[1] = out[2] = 0.0;
+  }
+  /// Unused (no guards).
+  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
+  /// u0 = exp(−4((x − 1/2)² + p²)).
+  static double initial_density(int, const double* x, const double*) {
+    return std::exp(-4.0 * ((x[0] - 0.5) * (x[0] - 0.5) + x[1] * x[1]));
+  }
+  /// The whole plane.
+  static bool in_support(const double*, const double*) { return true; }
+};
+/// The HybridModel function `static_assert`.
+static_assert(HybridModel<Spiral2D>);
 
 }  // namespace hybgen::rt::testing

@@ -17,11 +17,14 @@
 
 #include "bouncing_ball_model.hpp"
 #include "hybgen/rt/budget.hpp"
+#include "support/ball_closed_form.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
 using Ball = rt::testing::BouncingBall;
+using hybgen::testing::ball_box_mass0;
+using hybgen::testing::zeno_mass;
 
 std::vector<double> output_times(int n, double dt) {
   std::vector<double> t;
@@ -47,14 +50,7 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 }
 
 // ---------------------------------------------------------------------------------------
-// The Zeno mass of the ball (m = g = 1; the closed form of test_characteristics.cpp).
-//
-// From (x0, p0), x0 ≥ 0: first impact at t1 = p0 + v1 with speed v1 = sqrt(p0² + 2 x0); the
-// flights then last 2 e^k v1 (k ≥ 1), so the Zeno time is T_Z = t1 + 2 e v1/(1 − e) =
-// p0 + v1 (1 + e)/(1 − e), and T_Z ≤ t ⇔ x0 ≤ X(p0) = (V² − p0²)/2 with V = (t − p0)(1 − e)/
-// (1 + e), non-empty iff V > |p0|. Z(t) = ∫ u0 1[T_Z ≤ t] over the WHOLE half plane x0 ≥ 0:
-// ∫ over x0 ∈ [0, X] of exp(−(x0 − 1)²) = (√π/2)(erf(X − 1) + erf(1)), and the p0 integral
-// by 64-panel, 16-point Gauss–Legendre on the interval where V > |p0| (smooth there).
+// The Zeno mass of the ball Z(t) (m = g = 1): `zeno_mass` of tests/support/ball_closed_form.hpp.
 //
 // Why atom = Z for the box B = [0, 2] × [−2, 2]: mass0 − mass(t) − outflow(t) is the mass that
 // neither stayed in B nor left it through its faces (net). The ball's density has no other
@@ -66,26 +62,6 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // Mass starting outside B and never reaching (0, 0) by t enters and leaves B only through
 // faces. Hence atom(t) = Z(t) exactly, for this (or any) box containing a neighbourhood of
 // (0, 0) in the half plane.
-double zeno_mass(double t, double e) {
-  const double c = (1.0 - e) / (1.0 + e);
-  const double p_hi = t * c / (1.0 + c), p_lo = -t * c / (1.0 - c);
-  const rt::AxisRule r = rt::gauss_legendre_rule(p_lo, p_hi, 64, 16);
-  double s = 0.0;
-  for (std::size_t i = 0; i < r.nodes.size(); ++i) {
-    const double p0 = r.nodes[i];
-    const double V = (t - p0) * c;
-    const double X = 0.5 * (V * V - p0 * p0);
-    s += r.weights[i] * std::exp(-p0 * p0) * 0.5 * std::sqrt(std::numbers::pi) *
-         (std::erf(X - 1.0) + std::erf(1.0));
-  }
-  return s;
-}
-
-/// ∫_{[0,2]×[−2,2]} exp(−(x − 1)² − p²) = π erf(1) erf(2).
-double ball_box_mass0() {
-  return std::numbers::pi * std::erf(1.0) * std::erf(2.0);
-}
-
 /// The estimated error of atom[k]: volume (mass0 and mass[k]) plus faces (space part).
 double atom_estimate(const rt::BudgetResult<2>& r, const rt::AdaptiveBudgetInfo& info,
                      std::size_t k) {
@@ -184,43 +160,7 @@ TEST(AdaptiveBudget, ElasticBallHasNoAtom) {
 //   ∫_{[−1,1]²} u(t) = e^{−2at} Π_{i} (√π/(4s)) (erf(2s(1 − c_i(t))) + erf(2s(1 + c_i(t)))),
 // s = e^{−at}, c(t) = φ_t(c). No atoms: outflow = mass0 − mass exactly.
 
-struct Spiral2D {
-  static constexpr int n_state = 2, n_param = 1, n_mode = 1, n_guard = 0;
-  static constexpr const char* name = "spiral";
-  static constexpr std::array<const char*, 2> state_names{"x", "p"};
-  static constexpr std::array<const char*, 1> param_names{"a"};
-  static constexpr std::array<double, 1> param_defaults{0.15};
-  static constexpr std::array<const char*, 1> mode_names{"only"};
-  static constexpr std::array<const char*, 0> guard_names{};
-  static constexpr std::array<rt::GuardInfo, 0> guards{};
-  static void flow(int, const double* x, const double* par, double* out) {
-    out[0] = par[0] * x[0] - x[1];
-    out[1] = x[0] + par[0] * x[1];
-  }
-  static double divergence(int, const double*, const double* par) { return 2.0 * par[0]; }
-  static double guard_surface(int, const double*, const double*) { return 1.0; }
-  static void guard_gradient(int, const double*, const double*, double* out) {
-    out[0] = out[1] = 0.0;
-  }
-  static void reset(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = x[1];
-  }
-  static void reset_inverse(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = x[1];
-  }
-  static void reset_jacobian(int, const double*, const double*, double* out) {
-    out[0] = out[3] = 1.0;
-    out[1] = out[2] = 0.0;
-  }
-  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
-  static double initial_density(int, const double* x, const double*) {
-    return std::exp(-4.0 * ((x[0] - 0.5) * (x[0] - 0.5) + x[1] * x[1]));
-  }
-  static bool in_support(const double*, const double*) { return true; }
-};
-static_assert(rt::HybridModel<Spiral2D>);
+using Spiral2D = rt::testing::Spiral2D;
 
 double spiral_mass(double t, double a) {
   const double s = std::exp(-a * t);

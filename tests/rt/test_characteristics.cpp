@@ -17,11 +17,15 @@
 
 #include "bouncing_ball_model.hpp"
 #include "hybgen/rt/characteristics.hpp"
+#include "support/ball_closed_form.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
 using Ball = rt::testing::BouncingBall;
+using hybgen::testing::ball_exact_elastic;
+using hybgen::testing::ball_u0;
+using hybgen::testing::zeno_mass;
 using P2 = std::array<double, 2>;
 
 // ---------------------------------------------------------------------------------------
@@ -37,10 +41,6 @@ using P2 = std::array<double, 2>;
 // s = 0 is the grazing point (0, 0): no crossing, hence no pre-image, and the straight
 // backward continuation leaves x ≥ 0 at once, so u(t > 0, 0, 0) = 0 (the solver's
 // convention for this single point too).
-
-double ball_u0(double x, double p) {
-  return x >= 0.0 ? std::exp(-(x - 1.0) * (x - 1.0) - p * p) : 0.0;
-}
 
 /// The admissible values of u(t, x, p): lo == hi except within 1e-9 of a discontinuity
 /// (an output time equal to a backward impact time), where both one-sided values are valid.
@@ -73,41 +73,6 @@ Admissible ball_exact(double x, double p, double T, double m, double g, double e
     T -= tau;
   }
   return {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
-}
-
-/// e = 1 only: the motion is periodic. Energy E = p²/(2m) + m g x, ground momentum
-/// P0 = sqrt(2 m E), period 2 P0/(m g). Time since the last impact: σ = (P0 − p)/(m g);
-/// going back T: σ' = (σ − T) mod period, state (P0 σ'/m − g σ'²/2, P0 − m g σ').
-double ball_exact_elastic(double x, double p, double T, double m, double g) {
-  if (T == 0.0) return ball_u0(x, p);
-  const double E = p * p / (2.0 * m) + m * g * x;
-  if (E == 0.0) return 0.0;  // grazing point, see above
-  const double P0 = std::sqrt(2.0 * m * E);
-  const double period = 2.0 * P0 / (m * g);
-  double sigma = std::fmod((P0 - p) / (m * g) - T, period);
-  if (sigma < 0.0) sigma += period;
-  return ball_u0(P0 * sigma / m - 0.5 * g * sigma * sigma, P0 - m * g * sigma);
-}
-
-/// Mass (m = g = 1) of the initial states with Zeno time T_Z ≤ t. First impact at
-/// t1 = p0 + v1 with speed v1 = sqrt(p0² + 2 x0); the flights then last 2 e^k v1, so
-/// T_Z = t1 + 2 e v1/(1 − e) = p0 + v1 (1 + e)/(1 − e). Hence T_Z ≤ t ⇔ v1 ≤ V(p0) :=
-/// (t − p0)(1 − e)/(1 + e), i.e. x0 ≤ X(p0) = (V² − p0²)/2, non-empty iff V > |p0|.
-/// ∫ over x0 ∈ [0, X] of exp(−(x0 − 1)²) = (√π/2)(erf(X − 1) + erf(1)); the p0 integral by
-/// 64-panel, 16-point Gauss–Legendre on the interval where V > |p0|.
-double zeno_mass(double t, double e) {
-  const double c = (1.0 - e) / (1.0 + e);
-  const double p_hi = t * c / (1.0 + c), p_lo = -t * c / (1.0 - c);
-  const rt::AxisRule r = rt::gauss_legendre_rule(p_lo, p_hi, 64, 16);
-  double s = 0.0;
-  for (std::size_t i = 0; i < r.nodes.size(); ++i) {
-    const double p0 = r.nodes[i];
-    const double V = (t - p0) * c;
-    const double X = 0.5 * (V * V - p0 * p0);
-    s += r.weights[i] * std::exp(-p0 * p0) * 0.5 * std::sqrt(std::numbers::pi) *
-         (std::erf(X - 1.0) + std::erf(1.0));
-  }
-  return s;
 }
 
 std::vector<double> output_times(int n, double dt) {
@@ -570,44 +535,7 @@ TEST(CharacteristicsFailure, EventCap) {
 //      convergence under refinement; the outflow itself is converged to ~1e-7.
 //  (3) e < 1: the atom is the Zeno mass (closed form above).
 
-// x' = a x − p, p' = x + a p (div = 2a): a Gaussian stays a Gaussian, spirals out.
-struct Spiral2D {
-  static constexpr int n_state = 2, n_param = 1, n_mode = 1, n_guard = 0;
-  static constexpr const char* name = "spiral";
-  static constexpr std::array<const char*, 2> state_names{"x", "p"};
-  static constexpr std::array<const char*, 1> param_names{"a"};
-  static constexpr std::array<double, 1> param_defaults{0.15};
-  static constexpr std::array<const char*, 1> mode_names{"only"};
-  static constexpr std::array<const char*, 0> guard_names{};
-  static constexpr std::array<rt::GuardInfo, 0> guards{};
-  static void flow(int, const double* x, const double* par, double* out) {
-    out[0] = par[0] * x[0] - x[1];
-    out[1] = x[0] + par[0] * x[1];
-  }
-  static double divergence(int, const double*, const double* par) { return 2.0 * par[0]; }
-  static double guard_surface(int, const double*, const double*) { return 1.0; }
-  static void guard_gradient(int, const double*, const double*, double* out) {
-    out[0] = out[1] = 0.0;
-  }
-  static void reset(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = x[1];
-  }
-  static void reset_inverse(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = x[1];
-  }
-  static void reset_jacobian(int, const double*, const double*, double* out) {
-    out[0] = out[3] = 1.0;
-    out[1] = out[2] = 0.0;
-  }
-  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
-  static double initial_density(int, const double* x, const double*) {
-    return std::exp(-4.0 * ((x[0] - 0.5) * (x[0] - 0.5) + x[1] * x[1]));
-  }
-  static bool in_support(const double*, const double*) { return true; }
-};
-static_assert(rt::HybridModel<Spiral2D>);
+using Spiral2D = rt::testing::Spiral2D;
 
 TEST(MassBudget, SmoothFlowClosesTightly) {
   rt::TensorGrid<2> box;
