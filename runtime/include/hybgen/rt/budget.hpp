@@ -80,28 +80,50 @@ struct AdaptiveOptions {
 };
 
 /// Result of `adaptive_mass`: masses per output time with estimated errors.
-struct AdaptiveMass {
-  std::vector<double> mass;     ///< Σ_modes ∫_box u(t_k), per output time.
-  std::vector<double> error;    ///< Estimated |error| of mass[k] (see the file comment).
-  double mass0 = 0.0;           ///< Σ_modes ∫_box u0 by the same cubature.
-  double mass0_error = 0.0;     ///< Estimated |error| of mass0.
-  double error_estimate = 0.0;  ///< max(mass0_error, max_k error[k]).
+/// What an adaptive cubature did (shared by `AdaptiveMass` and `AdaptiveOutflow`).
+struct CubatureStats {
+  std::vector<double> error;    ///< Estimated |error| of each time's integral (see above).
+  double error_estimate = 0.0;  ///< The largest estimated error.
   std::size_t points = 0;       ///< Points traced (each for all modes and times).
   std::size_t cells = 0;        ///< Leaf cells of the final partition.
   int iterations = 0;           ///< Refinement batches.
   bool converged = false;       ///< Whether the rel_tol target was met within max_points.
 };
 
-/// Result of `adaptive_outflow`: cumulative net outflow through the box faces.
-struct AdaptiveOutflow {
-  std::vector<double> outflow;  ///< ∫₀^{t_k} Σ_modes ∮_∂box u X·n_out, per output time.
-  std::vector<double> error;    ///< Estimated |error| of outflow[k] (space part; see above).
-  double error_estimate = 0.0;  ///< max_k error[k].
-  std::size_t points = 0;       ///< Face points traced (each for all modes and time nodes).
-  std::size_t cells = 0;        ///< Leaf cells on all faces.
-  int iterations = 0;           ///< Refinement batches.
-  bool converged = false;       ///< Whether the target was met within max_points.
+/// Result of `adaptive_mass` (`error[k]` is the estimated |error| of mass[k]).
+struct AdaptiveMass : CubatureStats {
+  std::vector<double> mass;  ///< Σ_modes ∫_box u(t_k), per output time.
+  double mass0 = 0.0;        ///< Σ_modes ∫_box u0 by the same cubature.
+  double mass0_error = 0.0;  ///< Estimated |error| of mass0 (also in error_estimate).
 };
+
+/// Result of `adaptive_outflow`: cumulative net outflow through the box faces
+/// (`error[k]`: the space part of outflow[k]'s error; points are face points).
+struct AdaptiveOutflow : CubatureStats {
+  std::vector<double> outflow;  ///< ∫₀^{t_k} Σ_modes ∮_∂box u X·n_out, per output time.
+};
+
+namespace detail {
+
+/// Copy integrals `first`..`first + n − 1` of a finished cubature into `values`, their
+/// error estimates and the statistics into `stats` (error_estimate is raised, not reset).
+template <class Cubature>
+void collect(const Cubature& cub, bool ok, std::size_t first, std::size_t n,
+             std::vector<double>& values, CubatureStats& stats) {
+  values.resize(n);
+  stats.error.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    values[k] = cub.integral(first + k);
+    stats.error[k] = cub.error(first + k);
+    stats.error_estimate = std::max(stats.error_estimate, stats.error[k]);
+  }
+  stats.points = cub.points();
+  stats.cells = cub.cells();
+  stats.iterations = cub.iterations();
+  stats.converged = ok && cub.converged();
+}
+
+}  // namespace detail
 
 /// Diagnostics of `adaptive_mass_budget`.
 struct AdaptiveBudgetInfo {
@@ -674,15 +696,7 @@ AdaptiveMass adaptive_mass(const TensorGrid<state_dim_v<M>>& box, std::span<cons
   res.mass0 = cub.integral(0);
   res.mass0_error = cub.error(0);
   res.error_estimate = res.mass0_error;
-  for (std::size_t k = 0; k < times.size(); ++k) {
-    res.mass.push_back(cub.integral(k + off));
-    res.error.push_back(cub.error(k + off));
-    res.error_estimate = std::max(res.error_estimate, res.error.back());
-  }
-  res.points = cub.points();
-  res.cells = cub.cells();
-  res.iterations = cub.iterations();
-  res.converged = ok && cub.converged();
+  detail::collect(cub, ok, off, times.size(), res.mass, res);
   return res;
 }
 
@@ -747,15 +761,7 @@ AdaptiveOutflow adaptive_outflow(const TensorGrid<state_dim_v<M>>& box,
                                                          scale, values);
   const bool ok = cub.run();
   if (!ok) failure = values.failure;
-  for (std::size_t k = 0; k < times.size(); ++k) {
-    res.outflow[k] = cub.integral(k);
-    res.error[k] = cub.error(k);
-    res.error_estimate = std::max(res.error_estimate, res.error[k]);
-  }
-  res.points = cub.points();
-  res.cells = cub.cells();
-  res.iterations = cub.iterations();
-  res.converged = ok && cub.converged();
+  detail::collect(cub, ok, 0, times.size(), res.outflow, res);
   return res;
 }
 
