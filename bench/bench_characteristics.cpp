@@ -20,21 +20,6 @@ namespace {
 using Model = hybgen_model::bouncing_ball;
 namespace rt = hybgen::rt;
 
-/// Relative L1 error over all output times and nodes (the Zeno node excluded).
-double relative_l1(const rt::TensorGrid<2>& grid, const rt::Solution<2>& sol,
-                   const std::vector<double>& times) {
-  double err = 0, norm = 0;
-  for (std::size_t k = 0; k < times.size(); ++k)
-    for (std::size_t i = 0; i < grid.size(); ++i) {
-      const auto y = grid.node(i);
-      if (y[0] == 0.0 && y[1] == 0.0) continue;  // the Zeno point: the density has no limit
-      const double ue = hybgen::testing::ball_exact_elastic(y[0], y[1], times[k]);
-      err += std::fabs(sol.at(k, 0, i) - ue);
-      norm += std::fabs(ue);
-    }
-  return err / norm;
-}
-
 void solve(benchmark::State& state, int n, double t_end, double dt) {
   rt::TensorGrid<2> grid;
   grid.axes = {rt::GridAxis{0.0, 2.0, n}, rt::GridAxis{-2.0, 2.0, n}};
@@ -52,7 +37,7 @@ void solve(benchmark::State& state, int n, double t_end, double dt) {
   if (!sol.ok()) state.SkipWithError("a characteristic failed");
   state.counters["nodes"] = static_cast<double>(grid.size());
   state.counters["outputs"] = static_cast<double>(times.size());
-  state.counters["rel_L1"] = relative_l1(grid, sol, times);
+  state.counters["rel_L1"] = hybgen::testing::ball_relative_l1(grid, sol, times);
 }
 
 /// The paper's configuration: 75×75, Δt = 0.2, to t = 9.8 (50 steps).

@@ -1,0 +1,576 @@
+#pragma once
+/// \file particles.hpp
+/// The particle method (`method=particles`): Monte-Carlo samples of the initial density,
+/// pushed forward by the hybrid flow (forward.hpp), deposited onto the grid. It is the
+/// definition-based baseline — the pushed-forward measure μ_t = (φ_t)_# (u0 dx), observed
+/// through its integrals — and an independent check of the characteristics method.
+///
+/// Sampling: importance sampling. The proposal q is piecewise constant on the cells of a
+/// tensor lattice covering the SAMPLING DOMAIN, the grid box widened by `margin`·width on
+/// every side (mass starting outside the box flows in later: for the paper's ball 9 % of the
+/// mass of u0 starts outside [0, 2] × [−2, 2], much of it on orbits through the box), per
+/// mode: q_{m,c} ∝ max(|u0_m| at the 2ᴺ corners and the centre of cell c) + floor·mean, the
+/// floor making q > 0 on the whole domain. With p(m, x) = (q_{m,c}/Q)/|c| the proposal density
+/// and F the CDF of (m, c) in flat order, particle i inverts F at (i + U_i)/n (stratified
+/// inversion: each particle draws from the slice [i/n, (i + 1)/n) of the proposal's mass),
+/// then x uniform in c; its weight is w_i = u0_m(x)/(n p(m, x)). Particle i has density
+/// n·p on its slice, so E[w_i f(m_i, x_i)] = ∫_slice u0 f and E[Σ_i w_i f] = Σ_m ∫_domain u0_m f:
+/// every estimate is UNBIASED (up to the mass of u0 outside the sampling domain) whatever
+/// the quality of q, which only sets the variance; stratification with equal slice
+/// probabilities never increases it over i.i.d. draws from p (so the i.i.d. variance estimate
+/// used below is conservative), and it makes consecutive particles neighbours in space, which
+/// keeps the deposit cache-friendly. Exact rejection sampling would need a certified bound of
+/// u0/q; point values of a generated u0 cannot certify one (a peak between the lattice points
+/// would bias rejection silently), while importance weights stay exact. A weight is exactly 0
+/// outside `M::in_support` (the characteristics method's convention); such particles are not
+/// traced.
+///
+/// Randomness: particle i draws from its own SplitMix64 stream seeded by (seed, i), so the
+/// particles — and, with the integer accumulation below, every output bit — do not depend
+/// on the number of threads or the schedule.
+///
+/// Deposit: cloud-in-cell. A particle of weight w at y in the grid box adds w·λ_j(y) to the 2ᴺ
+/// corner nodes j of its grid cell (multilinear weights, Σ_j λ_j = 1); node sums are divided
+/// by the node's dual-cell volume V_j = Π_a (h_a, or h_a/2 at the ends), so the result is a
+/// density and its trapezoid mass Σ_j V_j u_j equals the particle mass in the box. All sums
+/// are in 64-bit fixed point (w ↦ round(w·S), S = 2^⌊61 − log2(n max|w|)⌋, so no sum of ≤ n
+/// weights overflows; the corner parts of one particle sum exactly to its rounded weight):
+/// integer addition is associative, so the results are independent of the summation order;
+/// the rounding is ≤ 2⁻⁶²·n·max|w| per term.
+///
+/// Budget per output time t_k (box = the grid box, closed, with the tolerance of
+/// characteristics' in_box): mass0 = Σ w·[x_i(0) ∈ box], mass_k = Σ w·[x_i(t_k) ∈ box],
+/// atom_k = Σ w·[the particle has come to rest at a Zeno point in the box by t_k], outflow_k =
+/// Σ w·([x_i(0) ∈ box] − [x_i(t_k) ∈ box] − [atom]) (net outflow through the faces, as in
+/// characteristics.hpp; a particle that left the support, or came to rest outside the box,
+/// counts as outside). Hence mass + outflow + atom = mass0 exactly in integers, to rounding in
+/// doubles. mass_error[k] = 2σ̂ of mass_k (σ̂² = Σ w²[·] − mass_k²/n, the i.i.d. sample
+/// variance: an overestimate under stratification).
+///
+/// Failures (a trajectory hitting the event cap without the Zeno signature, or a numerical
+/// failure) are reported for the particle with the smallest index, with its start and the
+/// place; the other results are then partial.
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <span>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/forward.hpp"
+#include "hybgen/rt/model.hpp"
+
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+namespace hybgen::rt {
+
+/// Options of the particle method.
+struct ParticleOptions {
+  std::size_t particles = 1000000;  ///< Number of samples n.
+  std::uint64_t seed = 1;           ///< Seed of the particle streams.
+  ForwardOptions forward{};         ///< The forward flow (tolerances, event cap, Zeno).
+  double margin = 1.0;              ///< Sampling domain: the box widened by margin·width per side.
+  std::size_t proposal_cells = std::size_t{1} << 20;  ///< Cap on proposal cells (per mode).
+  double proposal_floor = 1e-3;  ///< Floor of q relative to its mean cell value (> 0).
+  /// Per-thread deposit arrays (no atomics) while threads × (times × modes × nodes) × 8 bytes
+  /// stay below this; above it one shared array with atomic adds.
+  std::size_t private_deposit_bytes = std::size_t{256} << 20;
+};
+
+/// A counter-based random stream: SplitMix64 (Steele, Lea, Flood 2014) started at a state
+/// derived from (seed, index) by two SplitMix64 finalisations.
+class ParticleRng {
+ public:
+  /// The stream of particle `index` under `seed`.
+  ParticleRng(std::uint64_t seed, std::uint64_t index) {
+    std::uint64_t s = seed;
+    std::uint64_t t = index ^ next_of(s);
+    state_ = next_of(t);
+  }
+  /// Next 64 random bits.
+  std::uint64_t next() { return next_of(state_); }
+  /// Uniform in [0, 1) with 53 random bits.
+  double uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
+
+ private:
+  static std::uint64_t next_of(std::uint64_t& state) {
+    std::uint64_t z = (state += 0x9E3779B97F4A7C15ULL);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+    return z ^ (z >> 31);
+  }
+  std::uint64_t state_ = 0;
+};
+
+/// One sample of the initial density: mode, state and importance weight (Σ over all samples
+/// estimates the mass of u0 in the sampling domain).
+template <std::size_t N>
+struct ParticleSample {
+  int mode = 0;               ///< Mode.
+  std::array<double, N> x{};  ///< State at t = 0.
+  double weight = 0.0;        ///< u0(x)/(n·p(mode, x)); 0 outside the support.
+};
+
+/// The importance-sampling proposal of the file doc and the draw of particle i.
+template <HybridModel M>
+class ParticleSampler {
+ public:
+  static constexpr std::size_t N = state_dim_v<M>;  ///< State dimension.
+  using State = std::array<double, N>;              ///< A state.
+
+  /// The proposal for the box of `grid` widened by opt.margin (throws std::invalid_argument
+  /// for a grid axis with fewer than 2 nodes or an empty extent).
+  ParticleSampler(const TensorGrid<N>& grid, const double* par, const ParticleOptions& opt)
+      : par_(par), n_(opt.particles), seed_(opt.seed) {
+    if (!(opt.margin >= 0.0) || !(opt.proposal_floor > 0.0))
+      throw std::invalid_argument("particles: margin must be >= 0 and proposal_floor > 0");
+    double cells = 1.0;
+    for (std::size_t a = 0; a < N; ++a) {
+      const GridAxis& ax = grid.axes[a];
+      if (ax.n < 2 || !(ax.max > ax.min))
+        throw std::invalid_argument("particles: every grid axis needs >= 2 nodes and max > min");
+      const double w = ax.max - ax.min;
+      lo_[a] = ax.min - opt.margin * w;
+      hi_[a] = ax.max + opt.margin * w;
+      cells_[a] = std::max<std::size_t>(
+          1, static_cast<std::size_t>(std::lround((ax.n - 1) * (1.0 + 2.0 * opt.margin))));
+      cells *= static_cast<double>(cells_[a]);
+    }
+    const double cap = static_cast<double>(std::max<std::size_t>(opt.proposal_cells, 1));
+    if (cells > cap) {
+      const double f = std::pow(cap / cells, 1.0 / static_cast<double>(N));
+      for (std::size_t a = 0; a < N; ++a)
+        cells_[a] = std::max<std::size_t>(
+            1, static_cast<std::size_t>(std::floor(static_cast<double>(cells_[a]) * f)));
+    }
+    ncell_ = 1;
+    vol_ = 1.0;
+    for (std::size_t a = 0; a < N; ++a) {
+      h_[a] = (hi_[a] - lo_[a]) / static_cast<double>(cells_[a]);
+      ncell_ *= cells_[a];
+      vol_ *= h_[a];
+    }
+    build(opt.proposal_floor);
+  }
+
+  /// Particle i (deterministic in (seed, i)).
+  ParticleSample<N> draw(std::size_t i) const {
+    ParticleRng rng(seed_, i);
+    ParticleSample<N> s;
+    // Stratified inversion: particle i inverts the CDF at (i + U)/n.
+    const double target =
+        std::min((static_cast<double>(i) + rng.uniform()) / static_cast<double>(n_), 1.0) *
+        cdf_.back();
+    auto it = std::upper_bound(cdf_.begin(), cdf_.end(), target);
+    std::size_t idx = static_cast<std::size_t>(it - cdf_.begin());
+    if (idx >= cdf_.size()) idx = cdf_.size() - 1;
+    while (q_[idx] == 0.0 && idx > 0) --idx;  // (never with a positive floor)
+    s.mode = static_cast<int>(idx / ncell_);
+    std::size_t c = idx % ncell_;
+    for (std::size_t a = N; a-- > 0;) {
+      const std::size_t ca = c % cells_[a];
+      c /= cells_[a];
+      s.x[a] = lo_[a] + (static_cast<double>(ca) + rng.uniform()) * h_[a];
+    }
+    if (!M::in_support(s.x.data(), par_)) return s;
+    const double u0 = M::initial_density(s.mode, s.x.data(), par_);
+    s.weight = u0 * cdf_.back() * vol_ / (static_cast<double>(n_) * q_[idx]);
+    return s;
+  }
+
+  /// Number of particles n.
+  std::size_t size() const { return n_; }
+  /// Lower corner of the sampling domain.
+  const State& lo() const { return lo_; }
+  /// Upper corner of the sampling domain.
+  const State& hi() const { return hi_; }
+  /// Proposal cells per axis.
+  const std::array<std::size_t, N>& cells() const { return cells_; }
+
+ private:
+  void build(double floor) {
+    const std::size_t nm = static_cast<std::size_t>(M::n_mode);
+    // |u0| on the lattice nodes ((cells+1) per axis) and at the cell centres.
+    std::array<std::size_t, N> nn{};
+    std::size_t nodes = 1;
+    for (std::size_t a = 0; a < N; ++a) {
+      nn[a] = cells_[a] + 1;
+      nodes *= nn[a];
+    }
+    auto u0abs = [this](int m, const State& x) {
+      if (!M::in_support(x.data(), par_)) return 0.0;
+      const double v = std::fabs(M::initial_density(m, x.data(), par_));
+      return std::isfinite(v) ? v : 0.0;
+    };
+    q_.assign(nm * ncell_, 0.0);
+    std::vector<double> nodal(nodes);
+    for (std::size_t m = 0; m < nm; ++m) {
+      for (std::size_t j = 0; j < nodes; ++j) {
+        State x;
+        std::size_t r = j;
+        for (std::size_t a = N; a-- > 0;) {
+          x[a] = lo_[a] + static_cast<double>(r % nn[a]) * h_[a];
+          r /= nn[a];
+        }
+        nodal[j] = u0abs(static_cast<int>(m), x);
+      }
+      for (std::size_t c = 0; c < ncell_; ++c) {
+        std::array<std::size_t, N> ci{};
+        std::size_t r = c;
+        State xc;
+        for (std::size_t a = N; a-- > 0;) {
+          ci[a] = r % cells_[a];
+          r /= cells_[a];
+          xc[a] = lo_[a] + (static_cast<double>(ci[a]) + 0.5) * h_[a];
+        }
+        double v = u0abs(static_cast<int>(m), xc);
+        for (std::size_t corner = 0; corner < (std::size_t{1} << N); ++corner) {
+          std::size_t j = 0;
+          for (std::size_t a = 0; a < N; ++a) j = j * nn[a] + ci[a] + ((corner >> a) & 1U);
+          v = std::max(v, nodal[j]);
+        }
+        q_[m * ncell_ + c] = v;
+      }
+    }
+    double total = 0.0;
+    for (double v : q_) total += v;
+    const double add = total > 0.0 ? floor * total / static_cast<double>(q_.size()) : 1.0;
+    cdf_.resize(q_.size());
+    double acc = 0.0;
+    for (std::size_t i = 0; i < q_.size(); ++i) {
+      q_[i] += add;
+      acc += q_[i];
+      cdf_[i] = acc;
+    }
+  }
+
+  const double* par_;
+  std::size_t n_ = 0;
+  std::uint64_t seed_ = 1;
+  State lo_{}, hi_{}, h_{};
+  std::array<std::size_t, N> cells_{};
+  std::size_t ncell_ = 1;
+  double vol_ = 1.0;
+  std::vector<double> q_, cdf_;
+};
+
+/// What a particle is at an output time.
+enum class ParticleFate {
+  state,            ///< Flowing (or ended ok): x is its state at t_k (inside the box or not).
+  outside_support,  ///< Left the support before t_k (x: its first state outside).
+  zeno,             ///< At rest at the Zeno accumulation state x since t_Z ≤ t_k.
+};
+
+/// The first failed particle (event cap without the Zeno signature, or a numerical failure).
+template <std::size_t N>
+struct ParticleFailure {
+  std::size_t index = 0;          ///< Particle index.
+  int start_mode = -1;            ///< Mode at t = 0.
+  std::array<double, N> start{};  ///< State at t = 0.
+  ForwardResult<N> result{};      ///< How and where its trajectory failed.
+  /// Whether nothing failed.
+  bool ok() const {
+    return result.status != ForwardStatus::event_cap && result.status != ForwardStatus::failed;
+  }
+};
+
+/// Result of `solve_particles`.
+template <std::size_t N>
+struct ParticleRun {
+  Solution<N> solution;            ///< Deposited density, layout [time][mode][node].
+  MassBudget budget;               ///< Particle budget of the grid box (file doc).
+  ParticleFailure<N> failure{};    ///< First failed particle, if any.
+  std::size_t particles = 0;       ///< Particles drawn.
+  std::size_t traced = 0;          ///< Particles with a nonzero weight (traced).
+  double sampled_mass = 0.0;       ///< Σ w: estimate of Σ_m ∫ u0_m over the sampling domain.
+  std::vector<double> atom_error;  ///< 2σ̂ of budget.atom[k] (as budget.mass_error for mass).
+  /// Whether every trajectory succeeded.
+  bool ok() const { return failure.ok(); }
+};
+
+namespace detail {
+
+/// Push one particle through `times`: visit(k, ParticleFate, int mode, const State& x) for
+/// every k (in order) unless the trajectory fails; returns its result.
+template <HybridModel M, class Visit>
+ForwardResult<state_dim_v<M>> push_one(ForwardFlow<M>& flow,
+                                       const ParticleSample<state_dim_v<M>>& s,
+                                       std::span<const double> times, Visit& visit) {
+  std::size_t delivered = 0;
+  auto on_output = [&](std::size_t k, int mode, const std::array<double, state_dim_v<M>>& x) {
+    delivered = k + 1;
+    visit(k, ParticleFate::state, mode, x);
+  };
+  const ForwardResult<state_dim_v<M>> r = flow.run(s.mode, s.x, times, on_output);
+  if (r.status == ForwardStatus::event_cap || r.status == ForwardStatus::failed) return r;
+  const ParticleFate fate = r.status == ForwardStatus::zeno ? ParticleFate::zeno
+                            : r.status == ForwardStatus::left_support
+                                ? ParticleFate::outside_support
+                                : ParticleFate::state;
+  for (std::size_t k = delivered; k < times.size(); ++k) visit(k, fate, r.mode, r.x);
+  return r;
+}
+
+}  // namespace detail
+
+/// Draw every particle of `sampler` and push it through the sorted output times (OpenMP,
+/// dynamic schedule): visit(std::size_t i, const ParticleSample<N>&, std::size_t k,
+/// ParticleFate, int mode, const State& x) for every traced particle i and output time k —
+/// concurrently from several threads (the visitor must be thread-safe; distinct i never
+/// share a call). Particles of zero weight are not visited. Returns the first failure.
+template <HybridModel M, class Visit>
+ParticleFailure<state_dim_v<M>> push_particles(const ParticleSampler<M>& sampler,
+                                               std::span<const double> times, const double* par,
+                                               const ForwardOptions& opt, Visit&& visit) {
+  constexpr std::size_t N = state_dim_v<M>;
+  detail::validate_times(times);
+  ParticleFailure<N> failure;
+  const auto n = static_cast<long long>(sampler.size());
+  std::atomic<long long> first_fail{n};
+  if (times.empty()) return failure;
+#pragma omp parallel
+  {
+    ForwardFlow<M> flow(par, opt);
+#pragma omp for schedule(dynamic, 64)
+    for (long long ii = 0; ii < n; ++ii) {
+      if (ii > first_fail.load(std::memory_order_relaxed)) continue;
+      const auto i = static_cast<std::size_t>(ii);
+      const ParticleSample<N> s = sampler.draw(i);
+      if (s.weight == 0.0) continue;
+      auto v = [&](std::size_t k, ParticleFate f, int mode, const std::array<double, N>& x) {
+        visit(i, s, k, f, mode, x);
+      };
+      const ForwardResult<N> r = detail::push_one<M>(flow, s, times, v);
+      if (r.status == ForwardStatus::event_cap || r.status == ForwardStatus::failed) {
+#pragma omp critical(hybgen_rt_particles_failure)
+        {
+          if (ii < first_fail.load()) {
+            first_fail.store(ii);
+            failure = ParticleFailure<N>{i, s.mode, s.x, r};
+          }
+        }
+      }
+    }
+  }
+  return failure;
+}
+
+/// The particle method on `grid` (file doc): density per output time and mode at the grid
+/// nodes, the particle mass budget of the grid box, and the first failure.
+template <HybridModel M>
+ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& grid,
+                                            std::span<const double> times, const double* par,
+                                            const ParticleOptions& opt) {
+  constexpr std::size_t N = state_dim_v<M>;
+  using State = std::array<double, N>;
+  detail::validate_times(times);
+  const ParticleSampler<M> sampler(grid, par, opt);
+  const std::size_t K = times.size();
+  const std::size_t nm = static_cast<std::size_t>(M::n_mode);
+  const std::size_t nodes = grid.size();
+  const auto n = static_cast<long long>(opt.particles);
+  ParticleRun<N> run;
+  run.particles = opt.particles;
+  run.solution.n_time = K;
+  run.solution.n_mode = nm;
+  run.solution.n_point = nodes;
+  run.solution.u.assign(K * nm * nodes, 0.0);
+  MassBudget& mb = run.budget;
+  mb.times.assign(times.begin(), times.end());
+  mb.mass.assign(K, 0.0);
+  mb.outflow.assign(K, 0.0);
+  mb.atom.assign(K, 0.0);
+  mb.mass_error.assign(K, 0.0);
+  run.atom_error.assign(K, 0.0);
+
+  // Pass 1: the fixed-point scales from max|w| (a max: independent of the order).
+  double wmax = 0.0;
+  long long traced = 0;
+#pragma omp parallel for reduction(max : wmax) reduction(+ : traced) schedule(static)
+  for (long long i = 0; i < n; ++i) {
+    const double w = std::fabs(sampler.draw(static_cast<std::size_t>(i)).weight);
+    if (!std::isfinite(w)) continue;
+    wmax = std::max(wmax, w);
+    if (w > 0.0) ++traced;
+  }
+  run.traced = static_cast<std::size_t>(traced);
+  const double nd = static_cast<double>(std::max<long long>(n, 1));
+  const double scale = wmax > 0.0 ? std::ldexp(1.0, 61 - std::ilogb(nd * wmax)) : 1.0;
+  const double scale2 = wmax > 0.0 ? std::ldexp(1.0, 61 - std::ilogb(nd * wmax * wmax)) : 1.0;
+
+  // Grid geometry.
+  std::array<double, N> lo{}, hi{}, h{}, tol{};
+  std::array<std::size_t, N> stride{};
+  std::size_t st = 1;
+  for (std::size_t a = N; a-- > 0;) {
+    const GridAxis& ax = grid.axes[a];
+    lo[a] = ax.min;
+    hi[a] = ax.max;
+    h[a] = (ax.max - ax.min) / static_cast<double>(ax.n - 1);
+    tol[a] = 1e-12 * (ax.max - ax.min);
+    stride[a] = st;
+    st *= static_cast<std::size_t>(ax.n);
+  }
+  auto in_box = [&](const State& x) {
+    for (std::size_t a = 0; a < N; ++a)
+      if (!(x[a] >= lo[a] - tol[a] && x[a] <= hi[a] + tol[a])) return false;
+    return true;
+  };
+  std::vector<std::int64_t> acc(K * nm * nodes, 0);
+#ifdef _OPENMP
+  const auto threads = static_cast<std::size_t>(std::max(omp_get_max_threads(), 1));
+#else
+  const std::size_t threads = 1;
+#endif
+  const bool private_acc = threads * acc.size() * sizeof(std::int64_t) <= opt.private_deposit_bytes;
+  // Budget accumulators: [0] mass, [1] atom, [2] outflow, [3] Σ W² box, [4] Σ W² atom.
+  std::vector<std::int64_t> sums(5 * K, 0);
+  std::int64_t mass0 = 0, sampled = 0;
+  std::atomic<long long> first_fail{n};
+  ParticleFailure<N> failure;
+  bool non_finite_weight = false;
+
+  if (K > 0) {
+#pragma omp parallel
+    {
+      ForwardFlow<M> flow(par, opt.forward);
+      std::vector<std::int64_t> local(5 * K, 0);
+      std::vector<std::int64_t> mine(private_acc ? acc.size() : 0, 0);
+      std::int64_t local_mass0 = 0, local_sampled = 0;
+      bool local_bad = false;
+#pragma omp for schedule(dynamic, 64)
+      for (long long ii = 0; ii < n; ++ii) {
+        if (ii > first_fail.load(std::memory_order_relaxed)) continue;
+        const auto i = static_cast<std::size_t>(ii);
+        const ParticleSample<N> s = sampler.draw(i);
+        if (s.weight == 0.0) continue;
+        if (!std::isfinite(s.weight)) {
+          local_bad = true;
+          continue;
+        }
+        const std::int64_t W = std::llround(s.weight * scale);
+        const std::int64_t W2 = std::llround(s.weight * s.weight * scale2);
+        const bool b0 = in_box(s.x);
+        local_sampled += W;
+        if (b0) local_mass0 += W;
+        auto visit = [&](std::size_t k, ParticleFate fate, int mode, const State& x) {
+          const bool inside = in_box(x);
+          std::int64_t* L = local.data();
+          if (fate == ParticleFate::zeno && inside) {
+            L[K + k] += W;
+            L[4 * K + k] += W2;
+            L[2 * K + k] += (b0 ? W : 0) - W;
+            return;
+          }
+          if (fate != ParticleFate::state || !inside) {
+            L[2 * K + k] += b0 ? W : 0;
+            return;
+          }
+          L[k] += W;
+          L[3 * K + k] += W2;
+          L[2 * K + k] += (b0 ? W : 0) - W;
+          // Cloud-in-cell onto the 2ᴺ corners of the grid cell of x.
+          std::array<std::size_t, N> base{};
+          std::array<double, N> f{};
+          for (std::size_t a = 0; a < N; ++a) {
+            const double sa =
+                std::clamp((x[a] - lo[a]) / h[a], 0.0, static_cast<double>(grid.axes[a].n - 1));
+            const auto ia = std::min(static_cast<std::size_t>(sa),
+                                     static_cast<std::size_t>(grid.axes[a].n - 2));
+            base[a] = ia;
+            f[a] = sa - static_cast<double>(ia);
+          }
+          const std::size_t off = (k * nm + static_cast<std::size_t>(mode)) * nodes;
+          std::int64_t rest = W;
+          constexpr std::size_t corners = std::size_t{1} << N;
+          for (std::size_t c = 0; c < corners; ++c) {
+            double lam = 1.0;
+            std::size_t node = 0;
+            for (std::size_t a = 0; a < N; ++a) {
+              const bool up = ((c >> a) & 1U) != 0;
+              lam *= up ? f[a] : 1.0 - f[a];
+              node += (base[a] + (up ? 1 : 0)) * stride[a];
+            }
+            const std::int64_t part =
+                c + 1 == corners ? rest : std::llround(s.weight * lam * scale);
+            rest -= part;
+            if (part == 0) continue;
+            if (private_acc) {
+              mine[off + node] += part;
+            } else {
+              std::atomic_ref<std::int64_t>(acc[off + node])
+                  .fetch_add(part, std::memory_order_relaxed);
+            }
+          }
+        };
+        const ForwardResult<N> r = detail::push_one<M>(flow, s, times, visit);
+        if (r.status == ForwardStatus::event_cap || r.status == ForwardStatus::failed) {
+#pragma omp critical(hybgen_rt_particles_failure)
+          {
+            if (ii < first_fail.load()) {
+              first_fail.store(ii);
+              failure = ParticleFailure<N>{i, s.mode, s.x, r};
+            }
+          }
+        }
+      }
+#pragma omp critical(hybgen_rt_particles_sums)
+      {
+        for (std::size_t j = 0; j < local.size(); ++j) sums[j] += local[j];
+        for (std::size_t j = 0; j < mine.size(); ++j) acc[j] += mine[j];
+        mass0 += local_mass0;
+        sampled += local_sampled;
+        non_finite_weight = non_finite_weight || local_bad;
+      }
+    }
+  }
+  if (non_finite_weight) throw std::runtime_error("particles: non-finite initial density");
+  run.failure = failure;
+  // Densities: node sums over dual-cell volumes.
+  const double inv = 1.0 / scale;
+  for (std::size_t j = 0; j < nodes; ++j) {
+    double V = 1.0;
+    std::size_t r = j;
+    for (std::size_t a = N; a-- > 0;) {
+      const auto na = static_cast<std::size_t>(grid.axes[a].n);
+      const std::size_t ia = r % na;
+      r /= na;
+      V *= (ia == 0 || ia + 1 == na) ? 0.5 * h[a] : h[a];
+    }
+    for (std::size_t km = 0; km < K * nm; ++km)
+      run.solution.u[km * nodes + j] = static_cast<double>(acc[km * nodes + j]) * inv / V;
+  }
+  mb.mass0 = static_cast<double>(mass0) * inv;
+  run.sampled_mass = static_cast<double>(sampled) * inv;
+  for (std::size_t k = 0; k < K; ++k) {
+    mb.mass[k] = static_cast<double>(sums[k]) * inv;
+    mb.atom[k] = static_cast<double>(sums[K + k]) * inv;
+    mb.outflow[k] = static_cast<double>(sums[2 * K + k]) * inv;
+    const double var = static_cast<double>(sums[3 * K + k]) / scale2 - mb.mass[k] * mb.mass[k] / nd;
+    mb.mass_error[k] = 2.0 * std::sqrt(std::max(var, 0.0));
+    const double var_atom =
+        static_cast<double>(sums[4 * K + k]) / scale2 - mb.atom[k] * mb.atom[k] / nd;
+    run.atom_error[k] = 2.0 * std::sqrt(std::max(var_atom, 0.0));
+  }
+  return run;
+}
+
+/// One-line description of a failed particle for an error message (exit code 3).
+template <HybridModel M>
+std::string describe(const ParticleFailure<state_dim_v<M>>& f) {
+  std::ostringstream os;
+  os << "particle " << f.index << ": " << describe<M>(f.result, f.start_mode, f.start);
+  return os.str();
+}
+
+}  // namespace hybgen::rt
