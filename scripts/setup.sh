@@ -5,7 +5,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 packages=(build-essential cmake ninja-build pkg-config libginac-dev libcln-dev libeigen3-dev
-          libgtest-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev libpng-dev libssl-dev
+          libspectra-dev libgtest-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev libpng-dev
+          libssl-dev
           clang libclang-rt-14-dev)  # clang + compiler-rt: libFuzzer harnesses (fuzz/run.sh)
 missing=()
 for p in "${packages[@]}"; do

@@ -27,6 +27,9 @@
 #ifndef HYBGEN_RUNNER_LIBS
 #define HYBGEN_RUNNER_LIBS "-lpng"
 #endif
+#ifndef HYBGEN_RUNNER_INCLUDES
+#define HYBGEN_RUNNER_INCLUDES ""
+#endif
 #ifndef HYBGEN_OPENMP_FLAGS
 #define HYBGEN_OPENMP_FLAGS "-fopenmp"
 #endif
@@ -61,11 +64,21 @@ int run_capture(const std::string& cmd, std::string& output) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : 128;
 }
 
+/// The runner's compiler: $HYBGEN_CXX when set and not empty (a path or a name on PATH),
+/// else the compiler hybgen was configured with.
+std::string runner_compiler() {
+  if (const char* c = std::getenv("HYBGEN_CXX"); c && *c) return c;
+  return HYBGEN_CXX_COMPILER;
+}
+
+/// The compiler's name and `--version` output: part of the cache key, so that changing
+/// HYBGEN_CXX (or upgrading the compiler) rebuilds the runner.
 std::string compiler_identity() {
   static const std::string id = [] {
     std::string out;
-    run_capture(shell_quote(HYBGEN_CXX_COMPILER) + " --version", out);
-    return std::string(HYBGEN_CXX_COMPILER) + "\n" + out;
+    const std::string cxx = runner_compiler();
+    run_capture(shell_quote(cxx) + " --version", out);
+    return cxx + "\n" + out;
   }();
   return id;
 }
@@ -104,6 +117,8 @@ std::string default_cache_dir() {
 std::string runner_flags(bool werror) {
   std::string f = "-std=c++20 -O3 -march=native -DNDEBUG -Wall -Wextra ";
   f += HYBGEN_OPENMP_FLAGS;
+  // Third-party headers of the runtime (Eigen, Spectra) as -isystem directories.
+  if (const std::string inc = HYBGEN_RUNNER_INCLUDES; !inc.empty()) f += " " + inc;
   if (werror) f += " -Werror";
 #ifdef HYBGEN_RUNNER_EXTRA_FLAGS
   // The sanitizer flags hybgen itself was built with (HYBGEN_SANITIZE), so
@@ -159,7 +174,7 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
   const std::string tag = std::to_string(::getpid());
   const std::string tmp_exe = r.executable + ".tmp." + tag;
   const std::string log = r.directory + "/build.log";
-  const std::string cmd = shell_quote(HYBGEN_CXX_COMPILER) + " " + flags + " -I" +
+  const std::string cmd = shell_quote(runner_compiler()) + " " + flags + " -I" +
                           shell_quote(HYBGEN_RUNTIME_INCLUDE) + " -I" + shell_quote(r.directory) +
                           " " + shell_quote(r.directory + "/main.cpp") + " -o " +
                           shell_quote(tmp_exe) + " " + HYBGEN_RUNNER_LIBS;

@@ -24,16 +24,24 @@ inline double ball_u0(double x, double p) {
 /// E = p²/(2m) + m g x, ground momentum P0 = √(2 m E), period 2 P0/(m g); time since the
 /// last impact σ = (P0 − p)/(m g); going back T: σ' = (σ − T) mod period, state
 /// (P0 σ'/m − g σ'²/2, P0 − m g σ'). At E = 0 (the Zeno point) the density has no limit;
-/// 0 is returned.
-inline double ball_exact_elastic(double x, double p, double T, double m = 1.0, double g = 1.0) {
-  if (T == 0.0) return ball_u0(x, p);
+/// 0 is returned (and for E < 0, outside the state space).
+/// The same for any initial density u0(x, p) (a callable).
+template <class U0>
+double ball_pullback_elastic(double x, double p, double T, U0&& u0, double m = 1.0,
+                             double g = 1.0) {
+  if (T == 0.0) return u0(x, p);
   const double E = p * p / (2.0 * m) + m * g * x;
-  if (E == 0.0) return 0.0;
+  if (E <= 0.0) return 0.0;
   const double P0 = std::sqrt(2.0 * m * E);
   const double period = 2.0 * P0 / (m * g);
   double sigma = std::fmod((P0 - p) / (m * g) - T, period);
   if (sigma < 0.0) sigma += period;
-  return ball_u0(P0 * sigma / m - 0.5 * g * sigma * sigma, P0 - m * g * sigma);
+  return u0(P0 * sigma / m - 0.5 * g * sigma * sigma, P0 - m * g * sigma);
+}
+
+/// `ball_pullback_elastic` of the paper's u0 (`ball_u0`).
+inline double ball_exact_elastic(double x, double p, double T, double m = 1.0, double g = 1.0) {
+  return ball_pullback_elastic(x, p, T, ball_u0, m, g);
 }
 
 /// Mass (m = g = 1) of the initial states, anywhere in the half plane x0 ≥ 0, that reach the

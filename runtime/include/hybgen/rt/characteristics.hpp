@@ -50,6 +50,7 @@
 
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/ode.hpp"
+#include "hybgen/rt/progress.hpp"
 
 namespace hybgen::rt {
 
@@ -99,10 +100,11 @@ struct TensorGrid {
 
 /// Options of the characteristics method.
 struct CharacteristicsOptions {
-  OdeOptions ode{};           ///< Tolerances and step control of the backward integration.
-  int max_events = 100000;    ///< Cap on resets crossed by one characteristic (all branches).
-  int newton_max_iter = 50;   ///< Newton iterations for a numeric Δ⁻¹.
-  double newton_tol = 1e-14;  ///< Newton stop: ‖δz‖∞ ≤ tol·(1 + ‖z‖∞).
+  OdeOptions ode{};              ///< Tolerances and step control of the backward integration.
+  int max_events = 100000;       ///< Cap on resets crossed by one characteristic (all branches).
+  int newton_max_iter = 50;      ///< Newton iterations for a numeric Δ⁻¹.
+  double newton_tol = 1e-14;     ///< Newton stop: ‖δz‖∞ ≤ tol·(1 + ‖z‖∞).
+  Progress* progress = nullptr;  ///< Advanced once per traced (mode, point) when set.
 };
 
 /// What went wrong on a characteristic.
@@ -287,6 +289,21 @@ class Tracer {
     return status_;
   }
 
+  /// The same backward trace from (y, mode) over τ ∈ [0, tau], but instead of evaluating u0
+  /// every branch reports its foot: sink(int mode', const State& foot, double weight) with
+  /// weight = exp(−∫div X)·Π 1/|J| (so u(tau, y) = Σ weight·u0_mode'(foot)). Feet outside
+  /// `in_support` are reported too (the caller drops them). Used by transfer.hpp.
+  template <class Sink>
+  TraceStatus<N> trace_feet(const State& y, int mode, double tau, Sink& sink) {
+    const std::array<double, 1> t{tau};
+    double unused = 0.0;
+    foot_ctx_ = &sink;
+    foot_fn_ = [](void* c, int m, const State& x, double w) { (*static_cast<Sink*>(c))(m, x, w); };
+    const TraceStatus<N> st = run(y, mode, t, std::span<double>(&unused, 1), nullptr);
+    foot_fn_ = nullptr;
+    return st;
+  }
+
  private:
   struct Branch {
     Vec x{};  // state and I at τ
@@ -383,6 +400,17 @@ class Tracer {
   }
 
   double contribution(const Vec& x, int mode, double w, double tau) {
+    if (foot_fn_ != nullptr) {  // trace_feet: report the foot instead of evaluating u0
+      const double wt = w * std::exp(-x[N]);
+      if (!std::isfinite(wt)) {
+        fail(TraceError::non_finite_density, x.data(), mode, -1, tau);
+        return 0.0;
+      }
+      State foot;
+      for (std::size_t i = 0; i < N; ++i) foot[i] = x[i];
+      foot_fn_(foot_ctx_, mode, foot, wt);
+      return 0.0;
+    }
     // The model contract: u0 is already 0 outside the support/region of `mode`.
     const double u0 = M::initial_density(mode, x.data(), par_);
     const double v = w * std::exp(-x[N]) * u0;
@@ -574,6 +602,8 @@ class Tracer {
   std::array<bool, kMaxEv> incoming_{};
   std::array<Branch, kMaxPending> pend_{};
   std::size_t npend_ = 0;
+  void (*foot_fn_)(void*, int, const State&, double) = nullptr;  // trace_feet's sink, or null
+  void* foot_ctx_ = nullptr;                                     // its context
 };
 
 }  // namespace detail
@@ -646,6 +676,7 @@ Solution<state_dim_v<M>> solve_points(std::size_t n_point, PointFn&& point, Face
       if (idx > first_fail.load(std::memory_order_relaxed)) continue;
       const auto m = static_cast<std::size_t>(idx / np);
       const auto i = static_cast<std::size_t>(idx % np);
+      if (opt.progress) opt.progress->advance();
       const std::array<double, N> y = point(i);
       if (!M::in_support(y.data(), par)) continue;
       const TraceStatus<N> st = tracer.run(y, static_cast<int>(m), times, buf, face(i));

@@ -1,0 +1,305 @@
+#pragma once
+/// \file methods.hpp
+/// The solver methods of `hybgen run` behind one interface: each takes the grid, the output
+/// times and the parameters and returns a `MethodResult` — densities on the grid nodes at
+/// the output times, the mass budget, and the method's own summary fields — which the runner
+/// writes out the same way whatever the method (DESIGN.md run contract).
+///
+///  - characteristics: exact backward characteristics per node (characteristics.hpp); the
+///    budget by adaptive cubature of the same characteristics (budget.hpp);
+///  - transfer: one step h as a sparse matrix, marched by mat-vecs (transfer.hpp); scheme
+///    `interpolate` (default) or `conservative` (exact mass budget);
+///  - invariant: the leading eigenvector of the transfer operator and the next eigenvalues
+///    (invariant.hpp); one frame, `invariant`, instead of the time series;
+///  - particles: Monte-Carlo samples of u0 pushed forward and deposited (particles.hpp).
+///
+/// Invariants of a successful result: solution.n_time == frame_names.size(); for the time
+/// methods frame_times == times and budget.{mass, outflow, atom} have one entry per time with
+/// mass + outflow + atom = mass0 (the atom is defined that way for characteristics and the
+/// interpolating transfer operator; it is counted for particles and the conservative one).
+
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <nlohmann/json.hpp>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "hybgen/rt/budget.hpp"
+#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/invariant.hpp"
+#include "hybgen/rt/model.hpp"
+#include "hybgen/rt/particles.hpp"
+#include "hybgen/rt/progress.hpp"
+#include "hybgen/rt/transfer.hpp"
+
+namespace hybgen::rt {
+
+/// The settings every method reads (from the run configuration).
+struct MethodSettings {
+  std::string method = "characteristics";  ///< characteristics | transfer | invariant | particles.
+  double tol = 1e-10;                      ///< ODE relative tolerance (absolute: tol/100).
+  long max_events = 100000;                ///< Cap on resets per characteristic/trajectory.
+  double budget_tol = 3e-4;                ///< characteristics: the budget cubature's rel. tol.
+  double step = 0.0;                       ///< transfer/invariant: step h (0: the output dt).
+  std::string scheme = "interpolate";      ///< transfer/invariant: interpolate | conservative.
+  int eigenvalues = 6;                     ///< invariant: eigenvalues to report (≥ 2).
+  long long particles = 1000000;           ///< particles: number of samples.
+  std::uint64_t seed = 1;                  ///< particles: random seed.
+  bool quiet = false;                      ///< No progress output.
+};
+
+/// What a method produced.
+template <std::size_t N>
+struct MethodResult {
+  Solution<N> solution;                  ///< Densities, layout [frame][mode][node].
+  std::vector<std::string> frame_names;  ///< Output file stem per frame (u_0000, …).
+  std::vector<double> frame_times;       ///< Time per frame (empty for `invariant`).
+  MassBudget budget;                     ///< Per frame time (empty for `invariant`).
+  std::vector<double> atom_error;        ///< Estimated |error| of budget.atom (may be empty).
+  nlohmann::json summary = nlohmann::json::object();  ///< Method fields for summary.json.
+  std::vector<std::string> warnings;                  ///< Printed, not fatal.
+  std::string failure;    ///< Non-empty: a numerical failure (exit 3), what/where/when.
+  double solve_s = 0.0;   ///< Seconds solving (assembly + march for transfer).
+  double budget_s = 0.0;  ///< Seconds on the mass budget (characteristics only).
+  /// Whether the method succeeded.
+  bool ok() const { return failure.empty(); }
+};
+
+namespace detail {
+
+using MethodClock = std::chrono::steady_clock;
+
+inline double seconds_since(MethodClock::time_point t0) {
+  return std::chrono::duration<double>(MethodClock::now() - t0).count();
+}
+
+inline std::string frame_name(std::size_t k) {
+  char b[32];
+  std::snprintf(b, sizeof b, "u_%04zu", k);
+  return b;
+}
+
+/// Frame names u_0000.. and times for a time series.
+template <std::size_t N>
+void set_time_frames(MethodResult<N>& r, std::span<const double> times) {
+  r.frame_times.assign(times.begin(), times.end());
+  r.frame_names.clear();
+  for (std::size_t k = 0; k < times.size(); ++k) r.frame_names.push_back(frame_name(k));
+}
+
+inline CharacteristicsOptions trace_options(const MethodSettings& s) {
+  CharacteristicsOptions opt;
+  opt.ode.rtol = s.tol;
+  opt.ode.atol = s.tol * 1e-2;
+  opt.max_events = static_cast<int>(std::min<long>(s.max_events, 1000000000L));
+  return opt;
+}
+
+inline TransferOptions transfer_options(const MethodSettings& s, double dt) {
+  TransferOptions o;
+  o.step = s.step > 0 ? s.step : dt;
+  o.scheme =
+      s.scheme == "conservative" ? TransferScheme::conservative : TransferScheme::interpolate;
+  o.trace = trace_options(s);
+  o.forward.ode.rtol = s.tol;
+  o.forward.ode.atol = s.tol * 1e-2;
+  return o;
+}
+
+inline nlohmann::json operator_summary(const TransferOptions& o, std::size_t nnz, std::size_t rows,
+                                       double seconds) {
+  return {{"scheme", o.scheme == TransferScheme::conservative ? "conservative" : "interpolate"},
+          {"step", o.step},
+          {"rows", rows},
+          {"nonzeros", nnz},
+          {"assembly_seconds", seconds}};
+}
+
+}  // namespace detail
+
+/// The characteristics method and its adaptive mass budget.
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim_v<M>>& grid,
+                                                      std::span<const double> times,
+                                                      const double* par, const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  detail::set_time_frames(r, times);
+  CharacteristicsOptions opt = detail::trace_options(s);
+  const auto t0 = detail::MethodClock::now();
+  {
+    Progress progress("characteristics", grid.size() * static_cast<std::size_t>(M::n_mode),
+                      s.quiet);
+    opt.progress = &progress;
+    r.solution = solve_grid<M>(grid, times, par, opt);
+  }
+  opt.progress = nullptr;
+  r.solve_s = detail::seconds_since(t0);
+  if (!r.solution.ok()) {
+    r.failure = describe<M>(r.solution.failure);
+    return r;
+  }
+  // The mass budget integrates u(t) adaptively (characteristics at the cubature nodes): a
+  // grid rule cannot integrate the unbounded, striped density near a Zeno point.
+  const auto t1 = detail::MethodClock::now();
+  AdaptiveOptions aopt;
+  aopt.rel_tol = s.budget_tol;
+  AdaptiveBudgetInfo info;
+  const BudgetResult<N> budget = adaptive_mass_budget<M>(grid, times, par, opt, aopt, 3, &info);
+  r.budget_s = detail::seconds_since(t1);
+  if (!budget.ok()) {
+    r.failure = "(mass budget) " + describe<M>(budget.failure);
+    return r;
+  }
+  r.budget = budget.budget;
+  if (!info.volume.converged || !info.surface.converged) {
+    char b[200];
+    std::snprintf(b, sizeof b,
+                  "the mass budget's cubature reached its point cap before its tolerance %.1e; "
+                  "the atom's error estimate in summary.json says how far it got",
+                  s.budget_tol);
+    r.warnings.push_back(b);
+  }
+  // Estimated |error| of the atom: those of mass(t), mass(0) and the outflow.
+  const MassBudget& mb = r.budget;
+  r.atom_error.assign(times.size(), 0.0);
+  for (std::size_t k = 0; k < times.size(); ++k)
+    r.atom_error[k] = (k < mb.mass_error.size() ? mb.mass_error[k] : 0.0) +
+                      (mb.mass_error.empty() ? 0.0 : mb.mass_error[0]) +
+                      (k < info.surface.error.size() ? info.surface.error[k] : 0.0);
+  r.summary["budget"] = {{"rel_tol", s.budget_tol},
+                         {"volume_points", info.volume.points},
+                         {"face_points", info.surface.points},
+                         {"converged", info.volume.converged && info.surface.converged}};
+  return r;
+}
+
+/// The transfer-operator method: assemble once, march to the output times.
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>& grid,
+                                               std::span<const double> times, double dt,
+                                               const double* par, const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  detail::set_time_frames(r, times);
+  const TransferOptions o = detail::transfer_options(s, dt);
+  for (const double t : times) (void)steps_to(t, o.step);  // throws: not a multiple of h
+  const auto t0 = detail::MethodClock::now();
+  const TransferOperator<N> op = assemble_transfer<M>(grid, par, o);
+  if (!op.ok()) {
+    r.failure = "(assembling the transfer operator) " + op.failure_message;
+    r.solve_s = detail::seconds_since(t0);
+    return r;
+  }
+  const std::vector<double> u0 = initial_vector<M>(grid, par);
+  TransferRun<N> run = march(op, u0, times);
+  r.solve_s = detail::seconds_since(t0);
+  r.solution = std::move(run.solution);
+  r.budget = std::move(run.budget);
+  nlohmann::json t =
+      detail::operator_summary(o, static_cast<std::size_t>(op.P.nonZeros()), op.size(), op.seconds);
+  t["steps"] = run.n_steps;
+  t["march_seconds"] = run.seconds;
+  if (o.scheme == TransferScheme::interpolate)
+    t["note"] =
+        "interpolating scheme: outflow is the cumulative discrete mass loss (faces plus the "
+        "scheme's conservation error) and atom is 0; use scheme=conservative for an exact "
+        "budget";
+  r.summary["transfer"] = t;
+  return r;
+}
+
+/// The invariant density (leading eigenvector of the transfer operator) and the spectrum.
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& grid, double dt,
+                                             const double* par, const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  const TransferOptions o = detail::transfer_options(s, dt);
+  const auto t0 = detail::MethodClock::now();
+  const TransferOperator<N> op = assemble_transfer<M>(grid, par, o);
+  if (!op.ok()) {
+    r.failure = "(assembling the transfer operator) " + op.failure_message;
+    r.solve_s = detail::seconds_since(t0);
+    return r;
+  }
+  InvariantOptions io;
+  io.n_eigen = std::max(2, s.eigenvalues);
+  const InvariantResult inv = invariant_density(op, io);
+  r.solve_s = detail::seconds_since(t0);
+  r.solution.n_time = 1;
+  r.solution.n_mode = op.n_mode;
+  r.solution.n_point = op.n_node;
+  r.solution.u = inv.density;
+  r.frame_names = {"invariant"};
+  nlohmann::json eig = nlohmann::json::array();
+  for (const auto& l : inv.eigenvalues)
+    eig.push_back({{"re", l.real()}, {"im", l.imag()}, {"abs", std::abs(l)}});
+  nlohmann::json j =
+      detail::operator_summary(o, static_cast<std::size_t>(op.P.nonZeros()), op.size(), op.seconds);
+  j["file"] = "invariant.npy";
+  j["eigenvalues"] = eig;
+  j["spectral_gap"] = inv.gap;
+  j["decay_rate"] = inv.decay_rate;
+  j["leak_rate"] = inv.leak_rate;
+  j["min_value"] = inv.min_value;
+  j["residual"] = inv.residual;
+  j["solver"] = inv.method;
+  j["iterations"] = inv.iterations;
+  j["converged"] = inv.converged;
+  r.summary["invariant"] = j;
+  if (!inv.converged)
+    r.warnings.push_back("the eigen-solver (" + inv.method +
+                         ") did not meet its tolerance; see invariant.residual in summary.json");
+  return r;
+}
+
+/// The particle method.
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>& grid,
+                                                std::span<const double> times, const double* par,
+                                                const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  detail::set_time_frames(r, times);
+  ParticleOptions po;
+  po.particles = static_cast<std::size_t>(s.particles);
+  po.seed = s.seed;
+  po.forward.ode.rtol = s.tol;
+  po.forward.ode.atol = s.tol * 1e-2;
+  po.forward.max_events = static_cast<int>(std::min<long>(s.max_events, 1000000000L));
+  const auto t0 = detail::MethodClock::now();
+  ParticleRun<N> run = solve_particles<M>(grid, times, par, po);
+  r.solve_s = detail::seconds_since(t0);
+  if (!run.ok()) {
+    r.failure = describe<M>(run.failure);
+    return r;
+  }
+  r.solution = std::move(run.solution);
+  r.budget = std::move(run.budget);
+  r.atom_error = run.atom_error;
+  r.summary["particles"] = {
+      {"particles", run.particles},
+      {"traced", run.traced},
+      {"seed", s.seed},
+      {"sampled_mass", run.sampled_mass},
+      {"note", "mass_error and atom_error are 2-sigma Monte-Carlo estimates"}};
+  r.summary["mass_error"] = r.budget.mass_error;
+  return r;
+}
+
+/// Dispatch on `s.method`; throws std::invalid_argument for an unknown method.
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_method(const TensorGrid<state_dim_v<M>>& grid,
+                                          std::span<const double> times, double dt,
+                                          const double* par, const MethodSettings& s) {
+  if (s.method == "characteristics") return solve_by_characteristics<M>(grid, times, par, s);
+  if (s.method == "transfer") return solve_by_transfer<M>(grid, times, dt, par, s);
+  if (s.method == "invariant") return solve_invariant<M>(grid, dt, par, s);
+  if (s.method == "particles") return solve_by_particles<M>(grid, times, par, s);
+  throw std::invalid_argument("unknown method '" + s.method + "'");
+}
+
+}  // namespace hybgen::rt

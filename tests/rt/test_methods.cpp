@@ -1,0 +1,112 @@
+// The runner's method interface (runtime/include/hybgen/rt/methods.hpp): every method on
+// the same problem (the paper's bouncing ball on a small grid) returns frames, times and a
+// budget that obey the interface's invariants, and the densities of the four methods agree
+// with the closed form within each method's own accuracy.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "bouncing_ball_model.hpp"
+#include "hybgen/rt/methods.hpp"
+#include "support/ball_closed_form.hpp"
+
+namespace {
+
+namespace rt = hybgen::rt;
+using Ball = rt::testing::BouncingBall;
+
+rt::TensorGrid<2> grid(int n) {
+  rt::TensorGrid<2> g;
+  g.axes = {rt::GridAxis{0.0, 2.0, n}, rt::GridAxis{-2.0, 2.0, n}};
+  return g;
+}
+
+const std::vector<double> kTimes{0.0, 0.5, 1.0, 1.5, 2.0};
+const std::array<double, 3> kPar{1.0, 1.0, 1.0};
+
+rt::MethodResult<2> solve(const std::string& method, int n, const std::string& scheme = "") {
+  rt::MethodSettings s;
+  s.method = method;
+  s.quiet = true;
+  s.step = 0.05;
+  s.particles = 200000;
+  s.eigenvalues = 3;
+  if (!scheme.empty()) s.scheme = scheme;
+  return rt::solve_method<Ball>(grid(n), kTimes, 0.5, kPar.data(), s);
+}
+
+// Frames, times and the budget identity mass + outflow + atom = mass0.
+void expect_time_series(const rt::MethodResult<2>& r, double budget_tol) {
+  ASSERT_TRUE(r.ok()) << r.failure;
+  EXPECT_EQ(r.solution.n_time, kTimes.size());
+  EXPECT_EQ(r.frame_names.size(), kTimes.size());
+  EXPECT_EQ(r.frame_names.front(), "u_0000");
+  EXPECT_EQ(r.frame_times, kTimes);
+  ASSERT_EQ(r.budget.mass.size(), kTimes.size());
+  for (std::size_t k = 0; k < kTimes.size(); ++k)
+    EXPECT_NEAR(r.budget.mass[k] + r.budget.outflow[k] + r.budget.atom[k], r.budget.mass0,
+                budget_tol * r.budget.mass0)
+        << "t = " << kTimes[k];
+}
+
+// Relative L1 error over all frames against the elastic closed form.
+double series_error(const rt::MethodResult<2>& r, int n) {
+  const rt::TensorGrid<2> g = grid(n);
+  return hybgen::testing::ball_relative_l1(g, r.solution, kTimes);
+}
+
+TEST(Methods, CharacteristicsAreExactToTheOdeTolerance) {
+  const auto r = solve("characteristics", 41);
+  expect_time_series(r, 1e-12);
+  EXPECT_LT(series_error(r, 41), 1e-8);
+  EXPECT_TRUE(r.summary.contains("budget"));
+  EXPECT_EQ(r.atom_error.size(), kTimes.size());
+}
+
+// Interpolation error O(Δx²/h): on 81² with h = 0.05 to t = 2 about 7 % in L1; the
+// conservative (Ulam) scheme is first order and more diffusive, but closes its budget.
+TEST(Methods, TransferOperatorSchemes) {
+  const auto interp = solve("transfer", 81);
+  expect_time_series(interp, 1e-12);
+  EXPECT_LT(series_error(interp, 81), 0.1);  // measured 0.073
+  EXPECT_EQ(interp.summary["transfer"]["steps"], 40);
+  const auto cons = solve("transfer", 81, "conservative");
+  expect_time_series(cons, 1e-12);
+  EXPECT_LT(series_error(cons, 81), 0.15);
+  EXPECT_EQ(cons.summary["transfer"]["scheme"], "conservative");
+}
+
+TEST(Methods, ParticlesAgreeWithinMonteCarloNoise) {
+  const auto r = solve("particles", 41);
+  expect_time_series(r, 1e-12);
+  EXPECT_LT(series_error(r, 41), 0.1);
+  EXPECT_EQ(r.summary["particles"]["particles"], 200000);
+}
+
+// The elastic ball conserves mass in the box only up to outflow through p = ±2: the
+// invariant density is a leading eigenvector with |λ₁| ≤ 1, one frame named `invariant`.
+TEST(Methods, InvariantIsOneFrameWithASpectrum) {
+  const auto r = solve("invariant", 41);
+  ASSERT_TRUE(r.ok()) << r.failure;
+  EXPECT_EQ(r.frame_names, std::vector<std::string>{"invariant"});
+  EXPECT_TRUE(r.frame_times.empty());
+  EXPECT_EQ(r.solution.n_time, 1u);
+  const auto& eig = r.summary["invariant"]["eigenvalues"];
+  ASSERT_GE(eig.size(), 2u);
+  EXPECT_LE(eig[0]["abs"].get<double>(), 1.0 + 1e-9);
+  EXPECT_GE(eig[0]["abs"].get<double>(), eig[1]["abs"].get<double>());
+}
+
+TEST(Methods, UnknownMethodAndStepMismatchAreErrors) {
+  rt::MethodSettings s;
+  s.method = "magic";
+  EXPECT_THROW(rt::solve_method<Ball>(grid(5), kTimes, 0.5, kPar.data(), s), std::invalid_argument);
+  s.method = "transfer";
+  s.step = 0.3;  // 0.5 is not a multiple of 0.3
+  EXPECT_THROW(rt::solve_method<Ball>(grid(5), kTimes, 0.5, kPar.data(), s), std::invalid_argument);
+}
+
+}  // namespace
