@@ -117,6 +117,16 @@ inline nlohmann::json operator_summary(const TransferOptions& o, std::size_t nnz
           {"assembly_seconds", seconds}};
 }
 
+/// Assemble the transfer operator of M with a progress bar over its rows.
+template <HybridModel M>
+TransferOperator<state_dim_v<M>> assemble(const TensorGrid<state_dim_v<M>>& grid, const double* par,
+                                          TransferOptions o, bool quiet) {
+  Progress progress("transfer operator: assembly",
+                    grid.size() * static_cast<std::size_t>(M::n_mode), quiet);
+  o.progress = &progress;
+  return assemble_transfer<M>(grid, par, o);
+}
+
 }  // namespace detail
 
 /// The characteristics method and its adaptive mass budget.
@@ -187,14 +197,18 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   const TransferOptions o = detail::transfer_options(s, dt);
   for (const double t : times) (void)steps_to(t, o.step);  // throws: not a multiple of h
   const auto t0 = detail::MethodClock::now();
-  const TransferOperator<N> op = assemble_transfer<M>(grid, par, o);
+  const TransferOperator<N> op = detail::assemble<M>(grid, par, o, s.quiet);
   if (!op.ok()) {
     r.failure = "(assembling the transfer operator) " + op.failure_message;
     r.solve_s = detail::seconds_since(t0);
     return r;
   }
   const std::vector<double> u0 = initial_vector<M>(grid, par);
-  TransferRun<N> run = march(op, u0, times);
+  Progress progress("transfer operator: march",
+                    static_cast<std::size_t>(times.empty() ? 0 : steps_to(times.back(), o.step)),
+                    s.quiet);
+  TransferRun<N> run = march(op, u0, times, &progress);
+  progress.finish();
   r.solve_s = detail::seconds_since(t0);
   r.solution = std::move(run.solution);
   r.budget = std::move(run.budget);
@@ -219,7 +233,7 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   MethodResult<N> r;
   const TransferOptions o = detail::transfer_options(s, dt);
   const auto t0 = detail::MethodClock::now();
-  const TransferOperator<N> op = assemble_transfer<M>(grid, par, o);
+  const TransferOperator<N> op = detail::assemble<M>(grid, par, o, s.quiet);
   if (!op.ok()) {
     r.failure = "(assembling the transfer operator) " + op.failure_message;
     r.solve_s = detail::seconds_since(t0);
@@ -271,7 +285,10 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   po.forward.ode.atol = s.tol * 1e-2;
   po.forward.max_events = static_cast<int>(std::min<long>(s.max_events, 1000000000L));
   const auto t0 = detail::MethodClock::now();
+  Progress progress("particles", po.particles, s.quiet);
+  po.progress = &progress;
   ParticleRun<N> run = solve_particles<M>(grid, times, par, po);
+  progress.finish();
   r.solve_s = detail::seconds_since(t0);
   if (!run.ok()) {
     r.failure = describe<M>(run.failure);

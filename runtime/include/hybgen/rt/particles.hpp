@@ -85,6 +85,7 @@ struct ParticleOptions {
   /// Per-thread deposit arrays (no atomics) while threads × (times × modes × nodes) × 8 bytes
   /// stay below this; above it one shared array with atomic adds.
   std::size_t private_deposit_bytes = std::size_t{256} << 20;
+  Progress* progress = nullptr;  ///< Advanced once per particle pushed when set.
 };
 
 /// A counter-based random stream: SplitMix64 (Steele, Lea, Flood 2014) started at a state
@@ -450,6 +451,7 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
       bool local_bad = false;
 #pragma omp for schedule(dynamic, 64)
       for (long long ii = 0; ii < n; ++ii) {
+        if (opt.progress) opt.progress->advance();
         if (ii > first_fail.load(std::memory_order_relaxed)) continue;
         const auto i = static_cast<std::size_t>(ii);
         const ParticleSample<N> s = sampler.draw(i);

@@ -59,8 +59,10 @@ class Progress {
     std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
     if (!lock.owns_lock()) return;
     const double t = std::chrono::duration<double>(Clock::now() - start_).count();
-    if (!final && (t < 1.0 || t - last_draw_ < 0.125)) return;
     const double frac = std::min(1.0, static_cast<double>(done) / static_cast<double>(total_));
+    if (final && complete_drawn_) return;  // the 100 % line is already there
+    if (frac >= 1.0 && (drawn_ || t >= 1.0)) final = true;
+    if (!final && (t < 1.0 || t - last_draw_ < 0.125)) return;
     if (!tty_) {  // a line per 10 %
       const int decile = static_cast<int>(frac * 10.0);
       if (!final && decile <= last_decile_) return;
@@ -68,6 +70,7 @@ class Progress {
     }
     last_draw_ = t;
     drawn_ = true;
+    complete_drawn_ = frac >= 1.0;
     const double eta = frac > 0 ? t * (1.0 - frac) / frac : 0.0;
     char bar[41];
     const int fill = static_cast<int>(frac * 40.0);
@@ -93,6 +96,7 @@ class Progress {
   double last_draw_ = -1.0;
   int last_decile_ = -1;
   bool drawn_ = false;
+  bool complete_drawn_ = false;
 };
 
 }  // namespace hybgen::rt

@@ -96,6 +96,7 @@ struct TransferOptions {
   /// declared as soon as the gap signature holds and t_Z ≤ h (the physical criterion for
   /// mass reaching the Zeno point within the step), not only deep inside the cascade.
   ForwardOptions forward{.ode = {}, .max_events = 1000, .zeno_time = 1.0, .zeno_ratio = 0.999};
+  Progress* progress = nullptr;  ///< Advanced once per assembled row when set.
 };
 
 /// Compressed sparse row matrix with int32 column indices and row pointers: each mat-vec
@@ -334,6 +335,7 @@ TransferOperator<state_dim_v<M>> assemble_interpolating(const TensorGrid<state_d
     };
 #pragma omp for schedule(dynamic, 256)
     for (std::int64_t r = 0; r < R; ++r) {
+      if (opt.progress) opt.progress->advance();
       if (r > first_fail.load(std::memory_order_relaxed)) continue;
       const auto m = static_cast<int>(r / nn);
       const auto i = static_cast<std::size_t>(r % nn);
@@ -412,6 +414,7 @@ TransferOperator<state_dim_v<M>> assemble_conservative(const TensorGrid<state_di
     dest.reserve(K);
 #pragma omp for schedule(dynamic, 64)
     for (std::int64_t r = 0; r < R; ++r) {
+      if (opt.progress) opt.progress->advance();
       if (r > first_fail.load(std::memory_order_relaxed)) continue;
       const auto m = static_cast<int>(r / nn);
       const auto i = static_cast<std::size_t>(r % nn);
@@ -647,10 +650,10 @@ inline long steps_to(double t, double h) {
 /// March the node densities `u0` (layout [mode][node], see `initial_vector`) with the
 /// operator to the sorted output `times` (each an integer multiple of op.step, to 1e-9
 /// relative; throws std::invalid_argument otherwise, or if the assembly failed). Never
-/// renormalises.
+/// renormalises. `progress`, if set, is advanced once per step.
 template <std::size_t N>
 TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
-                     std::span<const double> times) {
+                     std::span<const double> times, Progress* progress = nullptr) {
   detail::validate_times(times);
   if (!op.ok()) throw std::invalid_argument("transfer: the operator failed: " + op.failure_message);
   const std::size_t R = op.size();
@@ -717,6 +720,7 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
     }
     run.step_mass.push_back(s.mass);
     emit(n + 1);
+    if (progress) progress->advance();
   }
   run.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return run;
