@@ -317,23 +317,6 @@ rt::TransferOptions ulam_options(double h, int samples) {
   return o;
 }
 
-/// Mass (m = g = 1) of the initial states with Zeno time T_Z ≤ t (closed form, see
-/// test_characteristics.cpp): T_Z ≤ t ⇔ x0 ≤ X(p0) = (V² − p0²)/2, V = (t − p0)(1−e)/(1+e).
-double zeno_mass(double t, double e) {
-  const double c = (1.0 - e) / (1.0 + e);
-  const double p_hi = t * c / (1.0 + c), p_lo = -t * c / (1.0 - c);
-  const rt::AxisRule r = rt::gauss_legendre_rule(p_lo, p_hi, 64, 16);
-  double s = 0.0;
-  for (std::size_t i = 0; i < r.nodes.size(); ++i) {
-    const double p0 = r.nodes[i];
-    const double V = (t - p0) * c;
-    const double X = 0.5 * (V * V - p0 * p0);
-    s += r.weights[i] * std::exp(-p0 * p0) * 0.5 * std::sqrt(std::numbers::pi) *
-         (std::erf(X - 1.0) + std::erf(1.0));
-  }
-  return s;
-}
-
 /// Every column: entries ≥ 0, Σ_j P_ji + outflow_i + atom_i = 1 to 1e-14, Σ_j P_ji ≤ 1 + 1e-14.
 void check_columns(const rt::TransferOperator<2>& op) {
   std::vector<double> col(op.size(), 0.0);
@@ -413,7 +396,7 @@ TEST(TransferConservative, ZenoMassBecomesAnAtom) {
     EXPECT_GE(run.step_atom[n], 0.0);
     EXPECT_NEAR(run.step_mass[n + 1] + out + atom, run.budget.mass0, 1e-12) << n;
   }
-  const double zm = zeno_mass(10.0, 0.8);
+  const double zm = hybgen::testing::zeno_mass(10.0, 0.8);
   std::printf(
       "[ ulam ball e=0.8 ] 257^2 h=0.5: assembly %.3f s, atom(2, 5, 10) = %.5f %.5f "
       "%.5f, closed form at 10: %.5f, outflow(10) %.5f, mass0 %.5f\n",
