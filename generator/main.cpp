@@ -4,12 +4,17 @@
 // Every failure is a hybgen::gen::Error mapped to the exit codes of DESIGN.md;
 // anything else that escapes is a bug (exit 70).
 
+#include <fcntl.h>
+#include <sys/file.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -21,11 +26,16 @@
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/parse.hpp"
+#include "hybgen/gen/reduce.hpp"
 
 namespace {
 
 using namespace hybgen::gen;
 using Clock = std::chrono::steady_clock;
+namespace fs = std::filesystem;
+
+/// Which system of a Lie-group model the subcommands work on (--unreduced).
+ReduceTarget g_target = ReduceTarget::Reduced;
 
 /// The front half of the pipeline, shared by every subcommand.
 struct Frontend {
@@ -37,8 +47,17 @@ struct Frontend {
   Frontend(const std::string& path, const std::vector<std::string>& sets)
       : src(SourceText::load(path)) {
     const auto t0 = Clock::now();
-    ModelAst ast = parse(src);     // stage 1: text -> AST
-    model = check(ast, src);       // stage 2: AST -> Model
+    ModelAst ast = parse(src);  // stage 1: text -> AST
+    if (is_lie_model(ast)) {
+      LieModel lie = check_lie(ast, src);  // stage 2: AST -> LieModel
+      const Watchdog watchdog(src.path(), lie.base.limits.derive_seconds * 1.5 + 5);
+      model = reduce(lie, src, g_target);  // reduce: LieModel -> Model (general kind)
+    } else {
+      if (g_target == ReduceTarget::Unreduced)
+        throw UsageError("--unreduced applies to Lie-group models only ('" + src.path() +
+                         "' is a general model)");
+      model = check(ast, src);  // stage 2: AST -> Model
+    }
     apply_overrides(model, sets);  //          --set KEY=VALUE
     {
       // A single GiNaC operation cannot be interrupted: past the derivation's
@@ -58,7 +77,7 @@ struct Frontend {
   }
 };
 
-/// Run `exe config` and return its exit code.
+/// Run `exe config` and return its exit code (70 if it was killed by a signal).
 int run_process(const std::string& exe, const std::string& config) {
   std::fflush(stdout);
   std::fflush(stderr);
@@ -74,7 +93,9 @@ int run_process(const std::string& exe, const std::string& config) {
     if (errno != EINTR) throw InternalError("waitpid failed");
   }
   if (WIFEXITED(status)) return WEXITSTATUS(status);
-  std::cerr << "hybgen: the runner was killed by signal " << WTERMSIG(status) << "\n";
+  const int sig = WTERMSIG(status);
+  std::cerr << "hybgen: the runner was killed by signal " << sig << " (" << ::strsignal(sig)
+            << ")\n";
   return 70;
 }
 
@@ -123,6 +144,7 @@ BuildResult do_build(Frontend& fe, const std::string& cache, bool verbose, bool 
   BuildOptions opt;
   opt.cache_dir = cache;
   opt.verbose = verbose;
+  opt.with_transfer = method_needs_transfer(fe.model.sim.method);
   if (!quiet) std::cerr << "hybgen: building the runner of '" << fe.model.name << "'...\n";
   BuildResult b = build_runner(files, fe.model.name, opt);  // stage 5: sources -> runner
   if (!quiet)
@@ -139,6 +161,61 @@ int cmd_build(const std::string& path, const std::vector<std::string>& sets,
   return 0;
 }
 
+/// An exclusive, non-blocking flock on `lock_path`, held until destruction: two runs into
+/// the same output directory cannot interleave; the second one is refused (exit 2).
+class OutputLock {
+ public:
+  /// Lock `lock_path` (created if missing); `shown` is OUT as the user wrote it. Throws
+  /// UsageError if another process holds the lock.
+  OutputLock(const std::string& lock_path, const std::string& shown) {
+    fd_ = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+    if (fd_ < 0)
+      throw UsageError("cannot create the lock file '" + lock_path + "': " + std::strerror(errno));
+    if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+      const int err = errno;
+      ::close(fd_);
+      if (err == EWOULDBLOCK) throw UsageError("another hybgen run is writing to '" + shown + "'");
+      throw UsageError("cannot lock '" + lock_path + "': " + std::strerror(err));
+    }
+  }
+  /// Not copyable (one lock, one owner).
+  OutputLock(const OutputLock&) = delete;
+  /// Not copyable.
+  OutputLock& operator=(const OutputLock&) = delete;
+  /// Releases the lock; the (empty) lock file stays, so that no other run can lock a file
+  /// that is about to be unlinked.
+  ~OutputLock() { ::close(fd_); }
+
+ private:
+  int fd_ = -1;
+};
+
+/// The first entry of `dir` that cannot be a run output — a subdirectory, or a file other
+/// than .npy/.png/.vti/.json or an atomic write's temporary — or "" if there is none.
+std::string foreign_entry(const fs::path& dir) {
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string n = e.path().filename().string();
+    const std::string x = e.path().extension().string();
+    const bool output = x == ".npy" || x == ".png" || x == ".vti" || x == ".json";
+    if (!e.is_regular_file(ec) || !(output || n.find(".tmp.") != std::string::npos)) return n;
+  }
+  return ec ? dir.filename().string() : "";
+}
+
+/// Best effort: make renames in `dir` durable.
+void sync_directory(const fs::path& dir) {
+  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd >= 0) {
+    ::fsync(fd);
+    ::close(fd);
+  }
+}
+
+/// `hybgen run`: the runner writes into a fresh staging directory `OUT.partial-<pid>` next
+/// to OUT; only when it succeeds is the staging directory swapped into place (OUT →
+/// `OUT.old-<pid>`, staging → OUT, old removed). A failed run removes the staging directory
+/// and leaves OUT as it was. The lock `OUT.lock` serialises runs into the same OUT.
 int cmd_run(const std::string& path, const std::vector<std::string>& sets, std::string out,
             const std::string& cache, bool quiet) {
   Frontend fe(path, sets);
@@ -147,15 +224,61 @@ int cmd_run(const std::string& path, const std::vector<std::string>& sets, std::
   if (!m.sim.present)
     throw ModelError(m.path, {1, 1},
                      "the model has no simulation block, so there is nothing to run");
-  BuildResult b = do_build(fe, cache, false, quiet);
   if (out.empty()) out = "out/" + m.name;
+  // OUT as an absolute path without a trailing separator; its siblings share its name.
+  fs::path target = fs::absolute(fs::path(out)).lexically_normal();
+  if (target.filename().empty()) target = target.parent_path();
+  if (target == target.root_path())
+    throw UsageError("cannot use '" + out + "' as the output directory");
+  const fs::path parent = target.parent_path();
+  const std::string name = target.filename().string();
   std::error_code ec;
-  std::filesystem::create_directories(out, ec);
+  fs::create_directories(parent, ec);
   if (ec) throw UsageError("cannot create the output directory '" + out + "': " + ec.message());
+  const OutputLock lock((parent / (name + ".lock")).string(), out);
+
+  // OUT is replaced as a whole: refuse anything but a directory of earlier outputs.
+  if (fs::exists(target, ec)) {
+    if (!fs::is_directory(target, ec))
+      throw UsageError("the output directory '" + out + "' exists and is not a directory");
+    const fs::path cwd = fs::current_path(ec);
+    if (!ec &&
+        std::mismatch(target.begin(), target.end(), cwd.begin(), cwd.end()).first == target.end())
+      throw UsageError("refusing to replace '" + out +
+                       "': it is (or contains) the current directory; choose another --out");
+    if (const std::string f = foreign_entry(target); !f.empty())
+      throw UsageError("refusing to replace '" + out + "': it holds '" + f +
+                       "', which hybgen did not write (a run replaces the whole directory); "
+                       "choose another --out");
+  }
+  // Leftovers of runs that were killed (we hold the lock, so nobody else is using them).
+  for (const auto& e : fs::directory_iterator(parent, ec)) {
+    const std::string n = e.path().filename().string();
+    if (n.rfind(name + ".partial-", 0) == 0 || n.rfind(name + ".old-", 0) == 0)
+      fs::remove_all(e.path(), ec);
+  }
+
+  BuildResult b = do_build(fe, cache, false, quiet);
+  const std::string tag = std::to_string(::getpid());
+  const fs::path staging = parent / (name + ".partial-" + tag);
+  const fs::path old = parent / (name + ".old-" + tag);
+  fs::remove_all(staging, ec);
+  fs::create_directory(staging, ec);
+  if (ec)
+    throw UsageError("cannot create the staging directory '" + staging.string() +
+                     "': " + ec.message());
+  const bool had_outputs = fs::exists(target, ec);
+  auto unchanged = [&] {
+    return had_outputs ? "the previous outputs in '" + out + "' are unchanged"
+                       : "nothing was written to '" + out + "'";
+  };
+
   nlohmann::json cfg;
   cfg["model"] = m.name;
   cfg["method"] = m.sim.method;
-  cfg["out_dir"] = out;
+  cfg["out_dir"] = staging.string();  // where the runner writes
+  cfg["final_out_dir"] = out;         // where the outputs end up (for its messages)
+  cfg["final_out_dir"] = out;
   std::vector<double> params;
   for (const auto& p : m.params) params.push_back(p.value_d);
   cfg["params"] = params;
@@ -175,13 +298,55 @@ int cmd_run(const std::string& path, const std::vector<std::string>& sets, std::
   cfg["eigenvalues"] = m.sim.eigenvalues;
   cfg["quiet"] = quiet;
   cfg["seconds"] = {{"derive", fe.seconds}, {"build", b.seconds}};
-  const std::string config = out + "/config.json";
+  const std::string config = (staging / "config.json").string();
   try {
     write_file_atomic(config, cfg.dump(2) + "\n");
   } catch (const std::runtime_error& e) {
-    throw UsageError(e.what());
+    fs::remove_all(staging, ec);
+    throw UsageError(std::string(e.what()) + "; " + unchanged());
   }
-  return run_process(b.executable, config);
+  int rc = 70;
+  try {
+    rc = run_process(b.executable, config);
+  } catch (...) {
+    fs::remove_all(staging, ec);
+    throw;
+  }
+  if (rc != 0) {
+    fs::remove_all(staging, ec);
+    std::cerr << "hybgen: the run failed (exit " << rc << "); " << unchanged() << "\n";
+    return rc;
+  }
+  // The config as it applies to OUT (the runner has finished with the staging path).
+  cfg["out_dir"] = out;
+  try {
+    write_file_atomic(config, cfg.dump(2) + "\n");
+  } catch (const std::runtime_error& e) {
+    fs::remove_all(staging, ec);
+    throw InternalError(std::string(e.what()) + "; " + unchanged());
+  }
+  // Swap: OUT → OUT.old-<pid>, staging → OUT, remove the old outputs.
+  if (had_outputs && ::rename(target.c_str(), old.c_str()) != 0) {
+    const std::string err = std::strerror(errno);
+    fs::remove_all(staging, ec);
+    throw InternalError("cannot move the previous outputs '" + out + "' aside: " + err + "; " +
+                        unchanged());
+  }
+  if (::rename(staging.c_str(), target.c_str()) != 0) {
+    const std::string err = std::strerror(errno);
+    if (had_outputs) ::rename(old.c_str(), target.c_str());
+    fs::remove_all(staging, ec);
+    throw InternalError("cannot move the new outputs into '" + out + "': " + err + "; " +
+                        unchanged());
+  }
+  sync_directory(parent);
+  if (had_outputs) {
+    fs::remove_all(old, ec);
+    if (ec)
+      std::cerr << "hybgen: warning: cannot remove the previous outputs '" << old.string()
+                << "': " << ec.message() << "\n";
+  }
+  return 0;
 }
 
 }  // namespace
@@ -197,8 +362,12 @@ int main(int argc, char** argv) {
   std::string model, format = "text", out, cache;
   std::vector<std::string> sets;
   bool verbose = false, quiet = false;
+  bool unreduced = false;
   auto add_model = [&](CLI::App* sub) {
     sub->add_option("MODEL", model, "the .model file")->required();
+    sub->add_flag("--unreduced", unreduced,
+                  "Lie-group models: the 2n-dimensional impact system on T*G instead of the "
+                  "reduced one");
     sub->add_option("--set", sets, "override a parameter or setting: KEY=VALUE (repeatable)")
         ->type_name("KEY=VALUE");
   };
@@ -234,6 +403,7 @@ int main(int argc, char** argv) {
     app.exit(e);
     return static_cast<int>(ExitCode::UsageError);
   }
+  if (unreduced) g_target = ReduceTarget::Unreduced;
   try {
     if (*check) return cmd_check(model, sets);
     if (*derive) return cmd_derive(model, sets, format);

@@ -197,19 +197,11 @@ struct filippov {
     double r = 0.0;
     switch (k) {
       case 0: {
-        const double t0 = x[0]*x[0];
-        const double t1 = 2.0*par[0]*x[0]*x[1];
-        const double t2 = par[0]*par[0];
-        const double t3 = x[1]*x[1];
-        r = (t0 + t1 - t2*t3)/(t1 + t2*t0 - t3);
+        r = (x[0]*(x[1] + x[0]/par[0]) + x[1]*(x[0] - par[0]*x[1]))/(par[0]*(x[0]*x[0]) + 2.0*x[0]*x[1] - x[1]*x[1]/par[0]);
         break;
       }
       case 1: {
-        const double t0 = 2.0*par[0]*x[0]*x[1];
-        const double t1 = par[0]*par[0];
-        const double t2 = x[0]*x[0];
-        const double t3 = x[1]*x[1];
-        r = (t0 + t1*t2 - t3)/(t2 + t0 - t1*t3);
+        r = (x[0]*(x[1] + par[0]*x[0]) + x[1]*(x[0] - x[1]/par[0]))/(2.0*x[0]*x[1] + x[0]*x[0]/par[0] - par[0]*(x[1]*x[1]));
         break;
       }
       default:

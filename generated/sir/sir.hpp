@@ -110,7 +110,7 @@ struct sir {
     switch (k) {
       case 0: {
         out[0] = x[0];
-        out[1] = x[1]*(1.0 - par[4]);
+        out[1] = x[1] - par[4]*x[1];
         break;
       }
       default:
@@ -162,10 +162,9 @@ struct sir {
     double r = 0.0;
     switch (k) {
       case 0: {
-        const double t0 = par[2] + par[1] + par[3];
-        const double t1 = par[4] - 1.0;
-        const double t2 = par[5]*par[5];
-        r = (par[5]*t0*t1 + t2*par[2]*(t1*t1) - par[5]*par[0]*x[0]*t1)/(par[5]*par[0]*x[0] - par[5]*t0 + t2*par[2]);
+        const double t0 = par[5] - par[5]*par[4];
+        const double t1 = par[2] + par[1] + par[3];
+        r = (par[0]*x[0]*t0 + par[2]*(t0*t0) - t0*t1)/(par[5]*par[0]*x[0] - par[5]*t1 + par[5]*par[5]*par[2]);
         break;
       }
       default:

@@ -114,9 +114,10 @@ struct sir_3d {
     (void)out;
     switch (k) {
       case 0: {
+        const double t0 = x[1]*par[4];
         out[0] = x[0];
-        out[1] = x[1]*(1.0 - par[4]);
-        out[2] = x[2] + x[1]*par[4];
+        out[1] = x[1] - t0;
+        out[2] = x[2] + t0;
         break;
       }
       default:

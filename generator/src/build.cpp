@@ -114,12 +114,17 @@ std::string default_cache_dir() {
   return "/tmp/hybgen-cache-" + std::to_string(::getuid());
 }
 
-std::string runner_flags(bool werror) {
+bool method_needs_transfer(const std::string& method) {
+  return method == "transfer" || method == "invariant";
+}
+
+std::string runner_flags(bool werror, bool with_transfer) {
   std::string f = "-std=c++20 -O3 -march=native -DNDEBUG -Wall -Wextra ";
   f += HYBGEN_OPENMP_FLAGS;
   // Third-party headers of the runtime (Eigen, Spectra) as -isystem directories.
   if (const std::string inc = HYBGEN_RUNNER_INCLUDES; !inc.empty()) f += " " + inc;
   if (werror) f += " -Werror";
+  if (!with_transfer) f += " -DHYBGEN_RUNNER_WITHOUT_TRANSFER";
 #ifdef HYBGEN_RUNNER_EXTRA_FLAGS
   // The sanitizer flags hybgen itself was built with (HYBGEN_SANITIZE), so
   // that generated kernels run under ASan/UBSan too; empty otherwise.
@@ -132,7 +137,7 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
                          const BuildOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   const std::string main_src = runner_source(files, model_name);
-  const std::string flags = runner_flags(options.werror);
+  const std::string flags = runner_flags(options.werror, options.with_transfer);
   const std::string key =
       sha256_hex(std::string(generator_version()) + '\n' + files.header + '\n' + main_src + '\n' +
                  runtime_fingerprint() + '\n' + compiler_identity() + '\n' + flags + '\n' +

@@ -8,6 +8,8 @@
 
 #include "hybgen/gen/check.hpp"
 
+#include "check_internal.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <set>
@@ -838,5 +840,18 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets) {
     }
   }
 }
+
+namespace detail {
+
+GiNaC::ex convert_expression(const SourceText& src, const std::map<std::string, GiNaC::ex>& scope,
+                             const std::string& what, const ExprPtr& e) {
+  return Converter(src, scope, what).convert(e);
+}
+
+std::optional<double> finite_double(const GiNaC::ex& e) {
+  return to_finite_double(e);
+}
+
+}  // namespace detail
 
 }  // namespace hybgen::gen

@@ -5,7 +5,10 @@
 #include <cmath>
 #include <new>
 #include <random>
+#include <string>
+#include <utility>
 
+#include "hybgen/gen/dag.hpp"
 #include "hybgen/gen/limits.hpp"
 
 namespace hybgen::gen {
@@ -19,22 +22,46 @@ std::size_t expr_size(const ex& e) {
   return n;
 }
 
+namespace {
+
+/// A deterministic rank of an expression for `simplify`: the length and text of hybgen's
+/// canonical printing (dag.hpp), which does not depend on GiNaC's term order; GiNaC's own
+/// tree size does (normal() picks the sign of a numerator/denominator pair by its term
+/// order, and the sizes of the two forms differ), which made the choice, and hence the
+/// generated code, vary from run to run.
+std::pair<std::size_t, std::string> canonical_rank(const ex& e) {
+  try {
+    ExprDag dag;
+    std::string text = dag.to_ginac(dag.import(e));
+    return {text.size(), std::move(text)};
+  } catch (const InternalError&) {
+    return {expr_size(e) * 1000, ""};  // not importable (e.g. complex): GiNaC's size
+  }
+}
+
+}  // namespace
+
 ex simplify(const ex& e) {
   LimitScope::check_time();
   ex best = e;
-  std::size_t best_size = expr_size(e);
+  auto best_rank = canonical_rank(e);
   auto consider = [&](const ex& c) {
-    std::size_t s = expr_size(c);
-    if (s < best_size) best = c, best_size = s;
+    auto rank = canonical_rank(c);
+    if (rank < best_rank) best = c, best_rank = std::move(rank);
   };
-  // Expanding (and normal(), which expands numerator and denominator) is
-  // skipped when the estimated expansion exceeds the limit: the unexpanded
-  // form is exact, only larger.
+  // Candidates: e, expand(e), and numerator/denominator of normal(e) expanded, with both
+  // signs (normal() fixes the sign by GiNaC's term order). Expanding is skipped when the
+  // estimated expansion exceeds the limit: the unexpanded form is exact, only larger.
   if (LimitScope::may_expand(e)) {
     try {
       consider(e.expand());
       LimitScope::check_time();
-      if (best_size < 4000) consider(GiNaC::normal(e));
+      if (expr_size(best) < 4000) {
+        const ex nd = GiNaC::numer_denom(e);
+        const ex n = nd.op(0).expand(), d = nd.op(1).expand();
+        consider(n / d);
+        consider((-n).expand() / (-d).expand());
+      }
     } catch (const std::bad_alloc&) {
       throw LimitExceeded("simplifying an expression ran out of memory");
     } catch (const LimitExceeded&) {

@@ -303,6 +303,154 @@ std::string state_args_latex(const Model& m) {
   return s;
 }
 
+/// "(e1, e2, ...)" of names.
+std::string name_tuple(const std::vector<std::string>& v) {
+  std::string s = "(";
+  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + v[i];
+  return s + ")";
+}
+
+/// " - c" of q = φ − c: nothing for c = 0, " + 2" for c = −2, " - (a + b)" for sums.
+std::string minus_level(const ex& c, const std::function<std::string(const ex&)>& print,
+                        const std::string& open, const std::string& close) {
+  if (c.is_zero()) return "";
+  if (GiNaC::is_a<GiNaC::numeric>(c))
+    return GiNaC::ex_to<GiNaC::numeric>(c).is_negative() ? " + " + print(-c) : " - " + print(c);
+  if (GiNaC::is_a<GiNaC::add>(c)) return " - " + open + print(c) + close;
+  return " - " + print(c);
+}
+
+/// The reduction objects of a Lie-group model in text (derive --format text).
+void reduction_text(std::ostream& os, const Model& m, Printer& pr) {
+  const Reduction& r = *m.reduction;
+  const unsigned n = r.algebra_dim;
+  os << "\nLie-group reduction (paper §3.2, Impact Lie-Poisson Reduction theorem)\n";
+  os << "  group        " << r.group << ", coordinates " << name_tuple(r.coordinates)
+     << ", basis E_i = dg/dc_i at the identity " << name_tuple(r.basis) << "\n";
+  os << "  brackets     ";
+  bool any = false;
+  for (unsigned i = 0; i < n; ++i)
+    for (unsigned j = i + 1; j < n; ++j)
+      if (r.bracket[i][j] != "0") {
+        os << (any ? ", " : "") << "[" << r.basis[i] << ", " << r.basis[j]
+           << "] = " << r.bracket[i][j];
+        any = true;
+      }
+  os << (any ? "   (others zero)\n" : "all zero (abelian)\n");
+  if (r.constrained) {
+    os << "  constraints  body velocity xi(w) = " << tuple_text(pr, r.dh)
+       << "   (Euler-Poincare-Suslov, multipliers eliminated)\n";
+    os << "  energy       = " << pr.ginac(r.hamiltonian)
+       << "   (1/2 xi^T I xi on the constraints)\n";
+    os << "  ad*_{xi}     (mu' = ad*_{xi} mu + constraint forces, mu = I xi)\n";
+  } else {
+    os << "  h(zeta)      = " << pr.ginac(r.hamiltonian)
+       << "   (H(g, p) = h((l_g)^* p): left-invariant)\n";
+    os << "  zeta^#       = dh/dzeta = " << tuple_text(pr, r.dh) << "\n";
+    os << "  ad*_{dh}     (zeta' = ad*_{dh} zeta for the column vector zeta)\n";
+  }
+  for (unsigned i = 0; i < n; ++i) {
+    os << "    [";
+    for (unsigned j = 0; j < n; ++j) os << (j ? ", " : "") << pr.ginac(r.coadjoint(i, j));
+    os << "]\n";
+  }
+  os << "  q            = phi(g)"
+     << minus_level(
+            r.level, [&](const ex& e) { return pr.ginac(e); }, "(", ")")
+     << ",  phi = " << pr.ginac(r.phi) << "  ("
+     << (r.multiplicative ? "a homomorphism to R*" : "a homomorphism to R or S^1") << ")\n";
+  os << "  K            = ker phi,  k = ker dphi_e,  dphi_e = " << tuple_text(pr, r.dphi_e) << "\n";
+  os << "  q'           = " << pr.ginac(r.q_dot) << "   (depends on (zeta, q) only)\n";
+  for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
+    os << (r.constrained ? "  Delta w      = " : "  Delta zeta   = ")
+       << tuple_text(pr, r.momentum_jumps[k]) << "   (guard " << m.guards[k].name
+       << (r.constrained ? "; I B Delta w in Ann(k) + constraint forms)\n" : "; in Ann(k))\n");
+  os << "  hypotheses   normal: " << (r.normal ? "yes" : "no")
+     << ", codim1: " << (r.codim1 ? "yes" : "no")
+     << ", left_invariant: " << (r.left_invariant ? "yes" : "no") << "\n";
+}
+
+/// The reduction objects in LaTeX (derive --format latex and report.md).
+void reduction_latex(std::ostream& os, const Model& m, Printer& pr) {
+  const Reduction& r = *m.reduction;
+  const unsigned n = r.algebra_dim;
+  const std::string q = m.tex.at(r.q);
+  os << "% Lie-group reduction (Impact Lie--Poisson Reduction theorem), group " << r.group << "\n";
+  os << "\\[\n  h(\\zeta) = " << pr.latex(r.hamiltonian)
+     << ", \\qquad \\zeta^\\sharp = \\frac{\\partial h}{\\partial\\zeta} = "
+     << tuple_latex(pr, r.dh) << "\n\\]\n";
+  os << "\\[\n  \\mathrm{ad}^*_{\\partial h/\\partial\\zeta} = \\begin{pmatrix}\n";
+  for (unsigned i = 0; i < n; ++i) {
+    os << "    ";
+    for (unsigned j = 0; j < n; ++j) os << (j ? " & " : "") << pr.latex(r.coadjoint(i, j));
+    os << (i + 1 < n ? " \\\\\n" : "\n");
+  }
+  os << "  \\end{pmatrix}, \\qquad \\dot\\zeta = "
+        "\\mathrm{ad}^*_{\\partial h/\\partial\\zeta}\\,\\zeta, \\qquad \\dot "
+     << q << " = " << pr.latex(r.q_dot) << "\n\\]\n";
+  os << "\\[\n  " << q << " = " << pr.latex(r.phi)
+     << minus_level(
+            r.level, [&](const ex& e) { return pr.latex(e); }, "\\left(", "\\right)")
+     << ", \\qquad \\mathfrak k = \\ker d\\phi_e,\\ d\\phi_e = " << tuple_latex(pr, r.dphi_e);
+  for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
+    os << ", \\qquad \\Delta\\zeta_{" << tex_name(m.guards[k].name)
+       << "} = " << tuple_latex(pr, r.momentum_jumps[k]);
+  os << "\n\\]\n";
+}
+
+/// The `reduction` block of derive --format json (DESIGN.md).
+nlohmann::ordered_json reduction_json(const Model& m, Printer& pr) {
+  const Reduction& r = *m.reduction;
+  const unsigned n = r.algebra_dim;
+  auto strings = [&](const std::vector<ex>& v) {
+    std::vector<std::string> out;
+    for (const auto& e : v) out.push_back(pr.ginac(e));
+    return out;
+  };
+  nlohmann::ordered_json j;
+  j["algebra_dim"] = n;
+  j["momenta"] = r.momenta;
+  j["q"] = r.q;
+  j["group"] = r.group;
+  j["coordinates"] = r.coordinates;
+  j["basis"] = r.basis;
+  j["bracket"] = r.bracket;
+  nlohmann::ordered_json c = nlohmann::ordered_json::array();
+  for (unsigned i = 0; i < n; ++i) {
+    nlohmann::ordered_json ci = nlohmann::ordered_json::array();
+    for (unsigned k = 0; k < n; ++k) {
+      std::vector<std::string> row;
+      for (unsigned l = 0; l < n; ++l)
+        row.push_back(pr.ginac(r.structure_constants[(i * n + k) * n + l]));
+      ci.push_back(row);
+    }
+    c.push_back(ci);
+  }
+  j["structure_constants"] = c;
+  nlohmann::ordered_json ad = nlohmann::ordered_json::array();
+  for (unsigned i = 0; i < n; ++i) {
+    std::vector<std::string> row;
+    for (unsigned k = 0; k < n; ++k) row.push_back(pr.ginac(r.coadjoint(i, k)));
+    ad.push_back(row);
+  }
+  j["coadjoint"] = ad;
+  j["hamiltonian"] = pr.ginac(r.hamiltonian);
+  j["dh"] = strings(r.dh);
+  j["phi"] = pr.ginac(r.phi);
+  j["level"] = pr.ginac(r.level);
+  j["homomorphism"] = r.multiplicative ? "multiplicative" : "additive";
+  j["dphi_e"] = strings(r.dphi_e);
+  j["q_equation"] = pr.ginac(r.q_dot);
+  nlohmann::ordered_json jumps = nlohmann::ordered_json::array();
+  for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
+    jumps.push_back({{"guard", m.guards[k].name}, {"delta_zeta", strings(r.momentum_jumps[k])}});
+  j["momentum_jumps"] = jumps;
+  j["constrained"] = r.constrained;
+  j["hypotheses"] = {
+      {"normal", r.normal}, {"codim1", r.codim1}, {"left_invariant", r.left_invariant}};
+  return j;
+}
+
 std::string report_markdown(const HybridSystem& sys, Printer& pr) {
   const Model& m = *sys.model;
   std::ostringstream os;
@@ -351,8 +499,8 @@ GeneratedFiles emit(const HybridSystem& sys) {
                      return sys.guards[k].has_inverse ? sys.guards[k].reset_inverse
                                                       : m.state_symbols;
                    });
-  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", ng, n * n,
-                   [&](std::size_t k) { return sys.guards[k].reset_jacobian; });
+  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", ng,
+                   n * n, [&](std::size_t k) { return sys.guards[k].reset_jacobian; });
   hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian", ng,
                    [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
   hb.density_kernels();
@@ -374,9 +522,11 @@ std::string derive_text(const HybridSystem& sys) {
   const Model& m = *sys.model;
   Printer pr(m);
   std::ostringstream os;
-  os << "model " << m.name << " (general hybrid system: " << m.state.size() << " states, "
-     << sys.modes.size() << " mode" << (sys.modes.size() == 1 ? "" : "s") << ", "
-     << sys.guards.size() << " guard" << (sys.guards.size() == 1 ? "" : "s") << ")\n";
+  os << "model " << m.name << " ("
+     << (m.reduction ? "Lie-group impact system reduced to g* x K\\G: " : "general hybrid system: ")
+     << m.state.size() << " states, " << sys.modes.size() << " mode"
+     << (sys.modes.size() == 1 ? "" : "s") << ", " << sys.guards.size() << " guard"
+     << (sys.guards.size() == 1 ? "" : "s") << ")\n";
   os << "state       (";
   for (std::size_t i = 0; i < m.state.size(); ++i) os << (i ? ", " : "") << m.state[i];
   os << ")   measure: Lebesgue in these coordinates\n";
@@ -384,6 +534,7 @@ std::string derive_text(const HybridSystem& sys) {
   for (std::size_t j = 0; j < m.params.size(); ++j)
     os << (j ? ", " : "") << m.params[j].name << " = " << pr.ginac(m.params[j].value);
   os << "\n";
+  if (m.reduction) reduction_text(os, m, pr);
   for (const auto& md : sys.modes) {
     os << "\nmode " << md.name << "\n";
     if (md.hamiltonian)
@@ -446,6 +597,7 @@ std::string derive_latex(const HybridSystem& sys) {
   const bool multi = sys.modes.size() > 1;
   os << "% hybgen " << generator_version() << ": hybrid Frobenius--Perron PDE of '" << m.name
      << "'\n";
+  if (m.reduction) reduction_latex(os, m, pr);
   for (const auto& md : sys.modes) {
     os << "% mode " << md.name << "\n\\[\n  \\dot x = " << tuple_latex(pr, md.flow)
        << ", \\qquad \\operatorname{div}_\\mu X = " << pr.latex(md.divergence) << "\n\\]\n";
@@ -497,7 +649,7 @@ nlohmann::ordered_json derive_json(const HybridSystem& sys) {
   Printer pr(m);
   nlohmann::ordered_json j;
   j["model"] = m.name;
-  j["kind"] = "hybrid";
+  j["kind"] = m.reduction ? "lie" : "hybrid";
   j["state"] = m.state;
   nlohmann::ordered_json params = nlohmann::ordered_json::object();
   for (const auto& p : m.params) {
@@ -543,7 +695,10 @@ nlohmann::ordered_json derive_json(const HybridSystem& sys) {
     guards.push_back(gj);
   }
   j["guards"] = guards;
-  j["reduction"] = nullptr;
+  if (m.reduction)
+    j["reduction"] = reduction_json(m, pr);
+  else
+    j["reduction"] = nullptr;
   j["warnings"] = sys.warnings;
   return j;
 }

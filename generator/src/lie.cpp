@@ -217,7 +217,9 @@ LieAlgebra LieAlgebra::gl(unsigned n) {
       matrix e(n, n);
       e(a, b) = 1;
       basis.push_back(e);
-      names.push_back(std::string("E") + std::to_string(a + 1) + std::to_string(b + 1));
+      std::ostringstream name;  // (not string concatenation: GCC 12 -Wrestrict false positive)
+      name << 'E' << a + 1 << b + 1;
+      names.push_back(name.str());
     }
   return from_matrix_basis(basis, std::move(names));
 }
@@ -276,25 +278,24 @@ Components LieAlgebra::coadjoint_action(const Components& xi, const Components& 
 }
 
 std::string LieAlgebra::format(const Components& x) const {
-  std::string out;
+  std::ostringstream os;
+  bool first = true;
   for (unsigned i = 0; i < x.size() && i < n_; ++i) {
     const ex e = GiNaC::normal(x[i]);
     if (e.is_zero()) continue;
-    std::string term;
-    if (e == 1) {
-      term = names_[i];
-    } else if (e == -1) {
-      term = std::string("-") + names_[i];
-    } else {
-      term = std::string("(") + str(e) + std::string(")*") + names_[i];
-    }
-    if (!out.empty() && term[0] != '-')
-      out += " + ";
-    else if (!out.empty())
-      out += " ";
-    out += term;
+    // Sign first ("E1 - E2", "-E1"), then the coefficient unless it is ±1.
+    const bool neg =
+        GiNaC::is_a<GiNaC::numeric>(e) && GiNaC::ex_to<GiNaC::numeric>(e).is_negative();
+    const ex mag = neg ? ex(-e) : e;
+    if (first)
+      os << (neg ? "-" : "");
+    else
+      os << (neg ? " - " : " + ");
+    if (mag != 1) os << "(" << mag << ")*";
+    os << names_[i];
+    first = false;
   }
-  return out.empty() ? "0" : out;
+  return first ? std::string("0") : os.str();
 }
 
 // --------------------------------------------------------------- MatrixGroup

@@ -29,8 +29,9 @@ constexpr int kMaxHeight = 512;
 constexpr long kMaxGridCount = 100000000;
 
 /// The statement keywords (used to explain a missing '}').
-constexpr std::string_view kStatementKeywords[] = {"model", "parameter", "state",
-                                                   "mode",  "guard",     "simulation"};
+constexpr std::string_view kStatementKeywords[] = {
+    "model",   "parameter", "state",   "mode",        "guard",      "simulation", "group",
+    "momenta", "inertia",   "reduced", "hamiltonian", "velocities", "constraint"};
 
 bool is_digit(char c) {
   return c >= '0' && c <= '9';
@@ -366,6 +367,7 @@ class Parser {
   //            | 'mode' IDENT '{' { mode_item [';'] } '}'
   //            | 'guard' IDENT '{' { guard_item [';'] } '}'
   //            | 'simulation' '{' { sim_item [';'] } '}'
+  //            | lie_statement
   void parse_statement(ModelAst& ast) {
     const Token& t = tok();
     if (t.kind != Tok::Ident)
@@ -376,8 +378,133 @@ class Parser {
     if (t.text == "mode") return parse_mode_statement(ast);
     if (t.text == "guard") return parse_guard_statement(ast);
     if (t.text == "simulation") return parse_simulation_statement(ast);
+    if (t.text == "group" || t.text == "momenta" || t.text == "hamiltonian" ||
+        t.text == "inertia" || t.text == "reduced" || t.text == "velocities" ||
+        t.text == "constraint")
+      return parse_lie_statement(ast);
     fail(t.loc, "unknown statement '" + shorten(t.text) +
-                    "' (expected model, parameter, state, mode, guard or simulation)");
+                    "' (expected model, parameter, state, mode, guard or simulation), or in a "
+                    "Lie-group model group, momenta, hamiltonian, inertia or reduced");
+  }
+
+  // lie_statement := 'group' IDENT group_def
+  //                | 'momenta' IDENT { ',' IDENT }
+  //                | 'hamiltonian' expr
+  //                | 'inertia' matrix
+  //                | 'reduced' IDENT '=' expr
+  //                | 'velocities' IDENT { ',' IDENT }
+  //                | 'constraint' IDENT '=' expr
+  void parse_lie_statement(ModelAst& ast) {
+    if (!ast.lie) ast.lie.emplace();
+    LieDecl& lie = *ast.lie;
+    const Token kw = take();
+    auto twice = [&](SourceLoc first) {
+      fail(kw.loc, "a second '" + kw.text + "' statement (the first is at " + loc_str(first) + ")");
+    };
+    if (kw.text == "group") {
+      if (lie.group.loc.line != 0) twice(lie.group.loc);
+      lie.group.loc = kw.loc;
+      lie.group.name = expect_name("a group name after 'group'");
+      parse_group_def(lie.group);
+    } else if (kw.text == "momenta") {
+      if (!lie.momenta.empty()) twice(lie.momenta_loc);
+      lie.momenta_loc = kw.loc;
+      lie.momenta = parse_name_list("a momentum name", "'momenta'");
+    } else if (kw.text == "hamiltonian") {
+      if (lie.hamiltonian) twice(lie.hamiltonian_loc);
+      lie.hamiltonian_loc = kw.loc;
+      lie.hamiltonian = parse_expr().node;
+    } else if (kw.text == "velocities") {
+      if (!lie.velocities.empty()) twice(lie.velocities_loc);
+      lie.velocities_loc = kw.loc;
+      lie.velocities = parse_name_list("a velocity name", "'velocities'");
+    } else if (kw.text == "constraint") {
+      if (tok().kind != Tok::Ident) unexpected("a velocity name after 'constraint'");
+      Parsed lhs = parse_expr();
+      expect_punct("=", "in the constraint 'NAME = EXPR'");
+      Parsed rhs = parse_expr();
+      lie.constraints.push_back({std::move(lhs.node), "=", std::move(rhs.node), lhs.start});
+    } else if (kw.text == "inertia") {
+      if (lie.inertia) twice(lie.inertia_loc);
+      lie.inertia_loc = kw.loc;
+      lie.inertia = parse_matrix("after 'inertia'");
+    } else {
+      if (lie.reduced) twice(lie.reduced_loc);
+      lie.reduced_loc = kw.loc;
+      lie.reduced = expect_name("the name of the reduced coordinate after 'reduced'");
+      expect_punct("=", "after 'reduced " + lie.reduced->name + "'");
+      lie.reduced_expr = parse_expr().node;
+    }
+  }
+
+  // group_def := '=' IDENT '(' NUMBER ')'                          (gl(N))
+  //            | '(' IDENT { ',' IDENT } ')' '=' matrix 'at' '(' expr { ',' expr } ')'
+  void parse_group_def(GroupDecl& group) {
+    if (at_punct("(")) {
+      const SourceLoc open = take().loc;
+      for (;;) {
+        group.coordinates.push_back(expect_name("a coordinate name"));
+        if (at_punct(")")) break;
+        if (!at_punct(","))
+          unexpected("',' or ')' in the coordinates of group '" + group.name.name +
+                     "' (opened at " + loc_str(open) + ")");
+        take();
+      }
+      take();
+      expect_punct("=", "after the coordinates of group '" + group.name.name + "'");
+      group.matrix = parse_matrix("after 'group " + group.name.name + "(...) ='");
+      if (!at_word("at"))
+        unexpected(
+            "'at (c1, ..., cn)' (the coordinates of the identity) after the matrix of group '" +
+            group.name.name + "'");
+      group.identity_loc = take().loc;
+      const SourceLoc popen = expect_punct("(", "after 'at'").loc;
+      for (;;) {
+        group.identity.push_back(parse_expr().node);
+        if (at_punct(")")) break;
+        if (!at_punct(","))
+          unexpected("',' or ')' in the identity point (opened at " + loc_str(popen) + ")");
+        take();
+      }
+      take();
+      return;
+    }
+    expect_punct("=", "after 'group " + group.name.name + "' (write 'group " + group.name.name +
+                          " = gl(2)' or 'group " + group.name.name +
+                          "(x, y) = [[...]] at (0, 0)')");
+    if (!at_word("gl")) unexpected("'gl(N)' or coordinates '(c1, ..., cn)' before '='");
+    group.shortcut = take().text;
+    expect_punct("(", "after 'gl'");
+    const Token& t = tok();
+    const bool integer = t.kind == Tok::Number && std::all_of(t.text.begin(), t.text.end(),
+                                                              [](char c) { return is_digit(c); });
+    if (!integer || t.text.size() > 2) unexpected("a matrix size N (1 to 99) in 'gl(N)'");
+    group.shortcut_n = std::stol(take().text);
+    if (group.shortcut_n < 1) fail(t.loc, "gl(N) needs N >= 1");
+    expect_punct(")", "after 'gl(N'");
+  }
+
+  // matrix := '[' row { ',' row } ']'      row := '[' expr { ',' expr } ']'
+  MatrixLiteral parse_matrix(const std::string& context) {
+    MatrixLiteral m;
+    m.loc = expect_punct("[", "(a matrix [[a, b], [c, d]]) " + context).loc;
+    for (;;) {
+      const SourceLoc ropen = expect_punct("[", "to open a matrix row").loc;
+      std::vector<ExprPtr> row;
+      for (;;) {
+        row.push_back(parse_expr().node);
+        if (at_punct("]")) break;
+        if (!at_punct(",")) unexpected("',' or ']' in the matrix row opened at " + loc_str(ropen));
+        take();
+      }
+      take();
+      m.rows.push_back(std::move(row));
+      if (at_punct("]")) break;
+      if (!at_punct(",")) unexpected("',' or ']' in the matrix opened at " + loc_str(m.loc));
+      take();
+    }
+    take();
+    return m;
   }
 
   // statement := 'model' IDENT

@@ -5,6 +5,7 @@
 
 #include "hybgen/gen/check.hpp"
 #include "hybgen/gen/parse.hpp"
+#include "hybgen/gen/reduce.hpp"
 
 namespace hybgen::gen {
 namespace {
@@ -191,6 +192,91 @@ simulation { domain x in [-1, 1]; initial B: exp(-x^2) }
 )");
   EXPECT_TRUE(k.sim.initial[0].is_zero());
   EXPECT_FALSE(k.sim.initial[1].is_zero());
+}
+
+// --- Lie-group models: check_lie (reduce.hpp) -------------------------------
+
+/// Expect check_lie of `text` to fail at LINE:COL with `fragment`.
+void expect_lie_error(const std::string& text, int line, int col, const std::string& fragment) {
+  SourceText src("t.model", text);
+  try {
+    check_lie(parse(src), src);
+    ADD_FAILURE() << "no error for:\n" << text;
+  } catch (const ModelError& e) {
+    const std::string what = e.what();
+    const std::string prefix =
+        "t.model:" + std::to_string(line) + ":" + std::to_string(col) + ": error: ";
+    EXPECT_EQ(what.rfind(prefix, 0), 0u) << what;
+    EXPECT_NE(what.find(fragment), std::string::npos) << what;
+  }
+}
+
+const char* kLieHead = R"(model t
+parameter e = 1/2
+group A = gl(2)
+momenta z1, z2, z3, z4
+hamiltonian (z1^2 + z2^2 + z3^2 + z4^2)/2
+reduced q = det(A) - 1
+)";
+
+TEST(CheckLie, GoodModel) {
+  const std::string text = std::string(kLieHead) +
+                           "guard g { when q = 0 decreasing; reset restitution e }\n"
+                           "simulation { domain z1 in [-1, 1]; domain z2 in [-1, 1]\n"
+                           "  domain z3 in [-1, 1]; domain z4 in [-1, 1]; domain q in [0, 1]\n"
+                           "  grid 3x3x3x3x3; initial exp(-q) }\n";
+  SourceText src("t.model", text);
+  const ModelAst ast = parse(src);
+  ASSERT_TRUE(is_lie_model(ast));
+  const LieModel lm = check_lie(ast, src);
+  EXPECT_EQ(lm.base.state, (std::vector<std::string>{"z1", "z2", "z3", "z4", "q"}));
+  EXPECT_EQ(lm.coordinate_names, (std::vector<std::string>{"a11", "a12", "a21", "a22"}));
+  EXPECT_EQ(lm.group.algebra().dim(), 4u);
+  ASSERT_EQ(lm.impacts.size(), 1u);
+  EXPECT_EQ(lm.impacts[0].kind, ResetDecl::Kind::Restitution);
+  // e is the model's parameter symbol, q = det(A) − 1 in the coordinates.
+  EXPECT_TRUE(lm.impacts[0].restitution == lm.base.params[0].symbol);
+  const auto& c = lm.group.coords();
+  EXPECT_TRUE((lm.q_expr - (c[0] * c[3] - c[1] * c[2] - 1)).expand().is_zero());
+  EXPECT_TRUE(lm.base.sim.present);
+  EXPECT_EQ(lm.base.sim.grid, (std::vector<long>{3, 3, 3, 3, 3}));
+  EXPECT_FALSE(is_lie_model(parse(SourceText("b.model", kBall))));
+}
+
+TEST(CheckLie, Errors) {
+  expect_lie_error(std::string(kLieHead) + "state x\n", 7, 7, "no 'state' statement");
+  expect_lie_error(std::string(kLieHead) + "mode m { x' = 1 }\n", 7, 6, "no modes");
+  expect_lie_error("momenta a, b\nhamiltonian a^2\nreduced q = 1\n", 1, 1, "needs a group");
+  expect_lie_error("group A = gl(2)\nhamiltonian 1\nreduced q = det(A)\n", 1, 1, "its momenta");
+  expect_lie_error("group A = gl(2)\nmomenta a, b\nhamiltonian a^2\nreduced q = det(A)\n", 2, 1,
+                   "needs 4 momenta");
+  expect_lie_error("group A = gl(2)\nmomenta z1, z2, z3, z4\nreduced q = det(A)\n", 1, 1,
+                   "needs a Hamiltonian");
+  expect_lie_error("group A = gl(2)\nmomenta z1, z2, z3, z4\nhamiltonian z1^2\n", 1, 1,
+                   "reduced coordinate");
+  expect_lie_error(
+      std::string(kLieHead) + "guard g { from flow; when q = 0 decreasing; reset elastic }\n", 7,
+      16, "omit 'from'");
+  // A coordinate named like a parameter.
+  expect_lie_error(
+      "parameter x = 1\ngroup g(x) = [[1, x], [0, 1]] at (0)\nmomenta z\n"
+      "hamiltonian z^2\nreduced q = x\n",
+      2, 9, "clashes");
+  // Not a group: g(c0) is not the identity (hypothesis lie_algebra, at `group`).
+  expect_lie_error(
+      "group g(x) = [[2, x], [0, 1]] at (0)\nmomenta z\nhamiltonian z^2\nreduced q = x\n", 1, 1,
+      "hypothesis 'lie_algebra' fails");
+  expect_lie_error("group g(x) = [[1, x], [0]] at (0)\nmomenta z\nhamiltonian z^2\nreduced q = x\n",
+                   1, 24, "must be square");
+  expect_lie_error(
+      "group g(x) = [[1, x], [0, 1]] at (0, 1)\nmomenta z\nhamiltonian z^2\nreduced q = x\n", 1, 31,
+      "identity point has 2 values");
+  // q must be a function on the group.
+  expect_lie_error("group A = gl(1)\nmomenta z\nhamiltonian z^2\nreduced q = z\n", 4, 13,
+                   "function on the group");
+  // Inertia of the wrong size.
+  expect_lie_error("group A = gl(1)\nmomenta z\ninertia [[1, 0], [0, 1]]\nreduced q = det(A)\n", 3,
+                   9, "must be 1x1");
 }
 
 }  // namespace

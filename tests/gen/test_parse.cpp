@@ -802,5 +802,102 @@ TEST(ParseRobustness, LargeValidInputIsFast) {
   EXPECT_LT(ms, 5000);
 }
 
+// --- Lie-group models (docs/model-language.md, "Lie-group models") ----------
+
+TEST(ParseLie, DocumentationExample) {
+  // The second ```text block of the documentation is the gl2 example.
+  std::ifstream in(std::string(HYBGEN_SOURCE_DIR) + "/docs/model-language.md");
+  ASSERT_TRUE(in);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  const std::string doc = ss.str();
+  const std::size_t section = doc.find("## Lie-group models");
+  ASSERT_NE(section, std::string::npos);
+  const std::size_t begin = doc.find("```text\n", section) + 8;
+  const std::string example = doc.substr(begin, doc.find("```", begin) - begin);
+  const ModelAst ast = parse_text(example);
+  ASSERT_TRUE(ast.lie);
+  const LieDecl& lie = *ast.lie;
+  EXPECT_EQ(lie.group.name.name, "A");
+  EXPECT_EQ(lie.group.shortcut, "gl");
+  EXPECT_EQ(lie.group.shortcut_n, 2);
+  ASSERT_EQ(lie.momenta.size(), 4U);
+  EXPECT_EQ(lie.momenta[3].name, "zeta4");
+  EXPECT_EQ(dump(lie.hamiltonian),
+            "(/ (+ (+ (+ (^ zeta1 2) (^ zeta2 2)) (^ zeta3 2)) (^ zeta4 2)) 2)");
+  ASSERT_TRUE(lie.reduced);
+  EXPECT_EQ(lie.reduced->name, "q");
+  EXPECT_EQ(dump(lie.reduced_expr), "(- det[A] 1)");
+  EXPECT_TRUE(ast.states.empty());
+  EXPECT_TRUE(ast.modes.empty());
+  ASSERT_EQ(ast.guards.size(), 1U);
+  ASSERT_TRUE(ast.simulation);
+  EXPECT_EQ(ast.simulation->domains.size(), 5U);
+}
+
+TEST(ParseLie, ParametrisedGroupAndInertia) {
+  const ModelAst ast = parse_text(
+      "group g(x, y, theta) = [[cos(theta), -sin(theta), x],\n"   // 1
+      "  [sin(theta), cos(theta), y], [0, 0, 1]] at (0, 0, 0)\n"  // 2
+      "momenta v, w, omega\n"                                     // 3
+      "inertia [[m, 0, 0], [0, m, 0], [0, 0, I]]\n"               // 4
+      "reduced q = theta\n");                                     // 5
+  ASSERT_TRUE(ast.lie);
+  const GroupDecl& g = ast.lie->group;
+  EXPECT_EQ(at(g.loc), "1:1");
+  EXPECT_EQ(g.name.name, "g");
+  EXPECT_TRUE(g.shortcut.empty());
+  ASSERT_EQ(g.coordinates.size(), 3U);
+  EXPECT_EQ(g.coordinates[2].name, "theta");
+  EXPECT_EQ(at(g.coordinates[2].loc), "1:15");
+  ASSERT_EQ(g.matrix.rows.size(), 3U);
+  EXPECT_EQ(at(g.matrix.loc), "1:24");
+  EXPECT_EQ(dump(g.matrix.rows[0][1]), "(u- sin[theta])");
+  EXPECT_EQ(dump(g.matrix.rows[2][2]), "1");
+  ASSERT_EQ(g.identity.size(), 3U);
+  EXPECT_EQ(at(g.identity_loc), "2:43");
+  ASSERT_TRUE(ast.lie->inertia);
+  EXPECT_EQ(ast.lie->inertia->rows.size(), 3U);
+  EXPECT_EQ(dump(ast.lie->inertia->rows[2][2]), "I");
+  EXPECT_EQ(at(ast.lie->inertia_loc), "4:1");
+  EXPECT_EQ(at(ast.lie->reduced_loc), "5:1");
+  EXPECT_FALSE(ast.lie->hamiltonian);
+}
+
+TEST(ParseLie, VelocitiesAndConstraints) {
+  const ModelAst ast = parse_text(
+      "velocities v, w, omega\n"    // 1
+      "constraint w = 0\n"          // 2
+      "constraint v = 2*omega\n");  // 3
+  ASSERT_TRUE(ast.lie);
+  ASSERT_EQ(ast.lie->velocities.size(), 3U);
+  EXPECT_EQ(ast.lie->velocities[2].name, "omega");
+  EXPECT_EQ(at(ast.lie->velocities_loc), "1:1");
+  ASSERT_EQ(ast.lie->constraints.size(), 2U);
+  EXPECT_EQ(dump(ast.lie->constraints[0].lhs), "w");
+  EXPECT_EQ(dump(ast.lie->constraints[1].rhs), "(* 2 omega)");
+  EXPECT_EQ(at(ast.lie->constraints[1].loc), "3:12");
+  expect_error("constraint 1 = 0\n", 1, 12, "a velocity name after 'constraint'");
+  expect_error("constraint w 0\n", 1, 14, "'=' in the constraint");
+}
+
+TEST(ParseLie, GeneralModelsHaveNoLieDecl) {
+  EXPECT_FALSE(parse_text(kBouncingBall).lie);
+}
+
+TEST(ParseLieErrors, Statements) {
+  expect_error("group A = gl(x)\n", 1, 14, "a matrix size N");
+  expect_error("group A = sl(2)\n", 1, 11, "'gl(N)'");
+  expect_error("group A = gl(0)\n", 1, 14, "N >= 1");
+  expect_error("group A = gl(2)\ngroup B = gl(3)\n", 2, 1, "a second 'group' statement");
+  expect_error("momenta a\nmomenta b\n", 2, 1, "a second 'momenta'");
+  expect_error("reduced q det(A)\n", 1, 11, "'=' after 'reduced q'");
+  expect_error("group g(x) = [[1, x], [0, 1]]\n", 2, 1, "'at (c1, ..., cn)'");
+  expect_error("group g(x) = [[1, x] [0, 1]] at (0)\n", 1, 22, "',' or ']' in the matrix");
+  expect_error("group g(x = [[1]] at (0)\n", 1, 11, "',' or ')' in the coordinates");
+  expect_error("group g(x) = [[1, x], [0, 1]] at (0\n", 2, 1, "',' or ')' in the identity");
+  expect_error("inertia [1, 2]\n", 1, 10, "'[' to open a matrix row");
+}
+
 }  // namespace
 }  // namespace hybgen::gen

@@ -150,6 +150,46 @@ struct SimulationDecl {
   std::vector<Setting> settings;     ///< t_end, dt, method, tol, ...
 };
 
+/// A matrix literal `[[e11, e12], [e21, e22]]`, rows in order.
+struct MatrixLiteral {
+  std::vector<std::vector<ExprPtr>> rows;  ///< Entries, row by row.
+  SourceLoc loc;                           ///< Position of the opening '['.
+};
+
+/// `group NAME = gl(N)` or `group NAME(c1, ..., cn) = MATRIX at (v1, ..., vn)`:
+/// a matrix Lie group by a shortcut or by a parametrisation g(c) with g(c0) = 1.
+struct GroupDecl {
+  Name name;                      ///< The group's name (used as `det(NAME)`).
+  SourceLoc loc;                  ///< Position of the `group` keyword.
+  std::string shortcut;           ///< "gl" for `gl(N)`, else "".
+  long shortcut_n = 0;            ///< N of `gl(N)`.
+  std::vector<Name> coordinates;  ///< c1..cn (parametrised form).
+  MatrixLiteral matrix;           ///< g(c) (parametrised form).
+  std::vector<ExprPtr> identity;  ///< c0 with g(c0) = identity (parametrised form).
+  SourceLoc identity_loc;         ///< Position of the `at` keyword.
+};
+
+/// The statements of a Lie-group model (docs/model-language.md, "Lie-group
+/// models"): present iff the file has one of the statements `group`,
+/// `momenta`, `hamiltonian`, `inertia`, `velocities`, `constraint` or
+/// `reduced` at the top level.
+struct LieDecl {
+  GroupDecl group;            ///< The group.
+  std::vector<Name> momenta;  ///< ζ_1..ζ_n, one per basis element E_i = ∂g/∂c_i(c0).
+  SourceLoc momenta_loc;      ///< Position of the `momenta` keyword.
+  ExprPtr hamiltonian;        ///< h(ζ) (`hamiltonian EXPR`), or null.
+  SourceLoc hamiltonian_loc;  ///< Position of the `hamiltonian` keyword.
+  std::optional<MatrixLiteral> inertia;  ///< `inertia MATRIX`: h = ½ ζᵀ I⁻¹ ζ.
+  SourceLoc inertia_loc;                 ///< Position of the `inertia` keyword.
+  std::vector<Name>
+      velocities;            ///< `velocities v1, ...`: body velocities ξ_i (constrained models).
+  SourceLoc velocities_loc;  ///< Position of the `velocities` keyword.
+  std::vector<Relation> constraints;  ///< `constraint NAME = EXPR`: ξ_NAME, linear in the others.
+  std::optional<Name> reduced;        ///< `reduced q = EXPR`: the name of q.
+  ExprPtr reduced_expr;               ///< φ(g) − c as an expression in the coordinates.
+  SourceLoc reduced_loc;              ///< Position of the `reduced` keyword.
+};
+
 /// A whole `.model` file.
 struct ModelAst {
   std::string path;                          ///< File path as given (for diagnostics).
@@ -159,6 +199,7 @@ struct ModelAst {
   std::vector<ModeDecl> modes;               ///< Modes in order.
   std::vector<GuardDecl> guards;             ///< Guards in order.
   std::optional<SimulationDecl> simulation;  ///< The simulation block, if any.
+  std::optional<LieDecl> lie;                ///< Lie-group statements (a `lie` model), if any.
 };
 
 }  // namespace hybgen::gen

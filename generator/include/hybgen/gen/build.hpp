@@ -26,14 +26,22 @@ struct BuildOptions {
   std::string cache_dir;  ///< Cache root ("" = default_cache_dir()).
   bool werror = false;    ///< Compile with -Werror (tests).
   bool verbose = false;   ///< Print the compiler command.
+  /// Compile the transfer-operator methods (transfer, invariant) into the runner. They pull
+  /// in Eigen and Spectra, which more than double the compile time, so a runner for
+  /// characteristics or particles is built without them (-DHYBGEN_RUNNER_WITHOUT_TRANSFER;
+  /// a separate cache entry, since the flags are part of the key).
+  bool with_transfer = true;
 };
+
+/// Whether `method` needs a runner built with the transfer operator.
+bool method_needs_transfer(const std::string& method);
 
 /// The default cache root: $HYBGEN_CACHE, else $XDG_CACHE_HOME/hybgen, else
 /// ~/.cache/hybgen.
 std::string default_cache_dir();
 
 /// The compiler flags a runner is built with (part of the cache key).
-std::string runner_flags(bool werror);
+std::string runner_flags(bool werror, bool with_transfer = true);
 
 /// Stage 5: build (or reuse) the runner of `files`. Throws BuildError (exit 4)
 /// with the compiler log's path when compilation fails.

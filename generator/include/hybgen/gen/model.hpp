@@ -82,6 +82,36 @@ struct Simulation {
   int eigenvalues = 6;                     ///< Eigenvalues reported by method invariant.
 };
 
+/// What the reduce stage derived for a Lie-group model (paper §3.2): carried by
+/// the reduced Model so that derive's output can show it (derive JSON
+/// `reduction` block). Every expression is in the momenta ζ, q and the
+/// parameters, except `phi` (in the group coordinates).
+struct Reduction {
+  std::string group;                              ///< Group name (e.g. "A").
+  std::vector<std::string> coordinates;           ///< Coordinates c_i of the group.
+  std::vector<std::string> basis;                 ///< Names of E_i = ∂g/∂c_i(c0).
+  unsigned algebra_dim = 0;                       ///< n = dim 𝔤.
+  std::vector<std::string> momenta;               ///< ζ_1..ζ_n (state names).
+  std::string q;                                  ///< Name of the reduced coordinate on K\G.
+  std::vector<GiNaC::ex> structure_constants;     ///< C_ij^k at [(i n + j) n + k].
+  std::vector<std::vector<std::string>> bracket;  ///< [E_i, E_j] as text, e.g. "E12 - E21".
+  GiNaC::ex hamiltonian;                          ///< h(ζ) = H restricted to 𝔤*.
+  std::vector<GiNaC::ex> dh;                      ///< ζ^♯ = ∂h/∂ζ.
+  GiNaC::matrix coadjoint;                        ///< ad*_{∂h/∂ζ} acting on column vectors ζ.
+  GiNaC::ex phi;                                  ///< The homomorphism φ(g) (coordinates).
+  GiNaC::ex level;                                ///< q = φ(g) − level.
+  bool multiplicative = false;                    ///< φ: G → ℝ* (det) rather than ℝ or S¹.
+  std::vector<GiNaC::ex> dphi_e;                  ///< dφ at the identity; 𝔨 = ker dφ_e.
+  GiNaC::ex q_dot;                                ///< q' (the theorem's d π (ℓ_σ)_* ζ^♯).
+  std::vector<std::vector<GiNaC::ex>> momentum_jumps;  ///< Δζ per guard.
+  bool normal = true;                                  ///< 𝔨 is an ideal (K normal).
+  bool codim1 = true;                                  ///< 𝔨 has codimension 1.
+  bool left_invariant = true;                          ///< H is left-invariant (h given on 𝔤*).
+  /// Nonholonomic (`velocities`/`constraint`): the state holds body velocities
+  /// w (ξ = ξ(w), `dh` = ξ) and `momentum_jumps` are jumps Δw, not Δζ.
+  bool constrained = false;
+};
+
 /// The checked model (output of `check`).
 struct Model {
   std::string name;                        ///< Model name.
@@ -95,6 +125,7 @@ struct Model {
   Simulation sim;                          ///< Simulation defaults.
   std::map<std::string, std::string> tex;  ///< TeX names of symbols (theta -> \theta).
   DeriveLimits limits;                     ///< Resource limits of derive (--set).
+  std::optional<Reduction> reduction;      ///< Set when reduced from a Lie-group model.
 };
 
 /// A mode of the IR.

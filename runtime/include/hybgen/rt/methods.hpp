@@ -28,11 +28,16 @@
 
 #include "hybgen/rt/budget.hpp"
 #include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/invariant.hpp"
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/particles.hpp"
 #include "hybgen/rt/progress.hpp"
+
+// The transfer-operator methods need Eigen and Spectra, which more than double a runner's
+// compile time: runners for the other methods are built with HYBGEN_RUNNER_WITHOUT_TRANSFER.
+#ifndef HYBGEN_RUNNER_WITHOUT_TRANSFER
+#include "hybgen/rt/invariant.hpp"
 #include "hybgen/rt/transfer.hpp"
+#endif
 
 namespace hybgen::rt {
 
@@ -97,6 +102,7 @@ inline CharacteristicsOptions trace_options(const MethodSettings& s) {
   return opt;
 }
 
+#ifndef HYBGEN_RUNNER_WITHOUT_TRANSFER
 inline TransferOptions transfer_options(const MethodSettings& s, double dt) {
   TransferOptions o;
   o.step = s.step > 0 ? s.step : dt;
@@ -126,6 +132,8 @@ TransferOperator<state_dim_v<M>> assemble(const TensorGrid<state_dim_v<M>>& grid
   o.progress = &progress;
   return assemble_transfer<M>(grid, par, o);
 }
+
+#endif  // HYBGEN_RUNNER_WITHOUT_TRANSFER
 
 }  // namespace detail
 
@@ -186,6 +194,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   return r;
 }
 
+#ifndef HYBGEN_RUNNER_WITHOUT_TRANSFER
 /// The transfer-operator method: assemble once, march to the output times.
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>& grid,
@@ -270,6 +279,8 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   return r;
 }
 
+#endif  // HYBGEN_RUNNER_WITHOUT_TRANSFER
+
 /// The particle method.
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>& grid,
@@ -313,8 +324,17 @@ MethodResult<state_dim_v<M>> solve_method(const TensorGrid<state_dim_v<M>>& grid
                                           std::span<const double> times, double dt,
                                           const double* par, const MethodSettings& s) {
   if (s.method == "characteristics") return solve_by_characteristics<M>(grid, times, par, s);
+#ifndef HYBGEN_RUNNER_WITHOUT_TRANSFER
   if (s.method == "transfer") return solve_by_transfer<M>(grid, times, dt, par, s);
   if (s.method == "invariant") return solve_invariant<M>(grid, dt, par, s);
+#else
+  (void)dt;
+  if (s.method == "transfer" || s.method == "invariant")
+    throw std::invalid_argument(
+        "this runner was built without the transfer operator "
+        "(HYBGEN_RUNNER_WITHOUT_TRANSFER); rebuild it for method " +
+        s.method);
+#endif
   if (s.method == "particles") return solve_by_particles<M>(grid, times, par, s);
   throw std::invalid_argument("unknown method '" + s.method + "'");
 }

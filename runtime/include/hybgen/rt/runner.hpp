@@ -5,12 +5,18 @@
 /// executes the runner, which solves, writes the outputs of DESIGN.md's run
 /// contract and prints the mass budget.
 ///
-/// Exit codes: 0 success; 3 numerical failure (what, where, when); 2 a bad
-/// config; 70 anything unexpected (including I/O failures, which name the file).
+/// Exit codes: 0 success; 3 numerical failure (what, where, when: a pre-flight
+/// failure at t = 0, see preflight.hpp, or a failed characteristic with its
+/// backward time); 2 a bad config; 70 anything unexpected, including I/O
+/// failures such as a full disk (the message names the file). I/O failures stay
+/// 70, not 3: DESIGN.md reserves 3 for the numerics, and the runner writes into
+/// the staging directory `hybgen run` gives it, so on any non-zero exit the
+/// previous outputs are untouched and `hybgen run` says so.
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
@@ -21,11 +27,12 @@
 #include <vector>
 
 #include "hybgen/rt/atomic_file.hpp"
-#include "hybgen/rt/budget.hpp"
 #include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods.hpp"
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/npy.hpp"
 #include "hybgen/rt/png.hpp"
+#include "hybgen/rt/preflight.hpp"
 #include "hybgen/rt/vti.hpp"
 
 namespace hybgen::rt {
@@ -33,8 +40,9 @@ namespace hybgen::rt {
 /// A run's settings, read from the config file `hybgen run` writes.
 struct RunConfig {
   std::string model;                    ///< Model name.
-  std::string method;                   ///< Solver ("characteristics").
-  std::string out_dir;                  ///< Output directory (exists).
+  std::string method;                   ///< Solver (see methods.hpp).
+  std::string out_dir;                  ///< Output directory (exists; hybgen's staging dir).
+  std::string final_dir;                ///< Where the outputs end up (messages only).
   std::vector<double> params;           ///< Parameter values, model order.
   std::vector<std::string> axis_names;  ///< State names.
   std::vector<GridAxis> axes;           ///< Grid axes.
@@ -43,6 +51,11 @@ struct RunConfig {
   double tol = 1e-10;                   ///< ODE relative tolerance.
   long max_events = 100000;             ///< Cap on resets per characteristic.
   double budget_tol = 3e-4;             ///< Relative tolerance of the mass budget's cubature.
+  double step = 0.0;                    ///< Transfer-operator step (0: dt).
+  std::string scheme = "interpolate";   ///< Transfer operator: interpolate | conservative.
+  int eigenvalues = 6;                  ///< Eigenvalues reported by method invariant.
+  long long particles = 1000000;        ///< Samples of method particles.
+  std::uint64_t seed = 1;               ///< Seed of method particles.
   bool quiet = false;                   ///< No progress output.
   nlohmann::json seconds;               ///< Timings of the earlier stages.
 };
@@ -80,18 +93,24 @@ RunConfig read_config(const std::string& path) {
     c.model = j.at("model").get<std::string>();
     c.method = j.at("method").get<std::string>();
     c.out_dir = j.at("out_dir").get<std::string>();
+    c.final_dir = j.value("final_out_dir", c.out_dir);
     c.params = j.at("params").get<std::vector<double>>();
     for (const auto& a : j.at("axes")) {
       c.axis_names.push_back(a.at("name").get<std::string>());
-      c.axes.push_back(
-          {a.at("min").get<double>(), a.at("max").get<double>(), a.at("n").get<int>()});
+      c.axes.push_back({a.at("min").template get<double>(), a.at("max").template get<double>(),
+                        a.at("n").get<int>()});
     }
-    c.t_end = j.at("t_end").get<double>();
-    c.dt = j.at("dt").get<double>();
+    c.t_end = j.at("t_end").template get<double>();
+    c.dt = j.at("dt").template get<double>();
     c.tol = j.value("tol", 1e-10);
     c.max_events = j.value("max_events", 100000L);
     c.budget_tol = j.value("budget_tol", 3e-4);
     c.quiet = j.value("quiet", false);
+    c.step = j.value("step", 0.0);
+    c.scheme = j.value("scheme", std::string("interpolate"));
+    c.eigenvalues = j.value("eigenvalues", 6);
+    c.particles = j.value("particles", 1000000LL);
+    c.seed = j.value("seed", std::uint64_t{1});
     c.seconds = j.value("seconds", nlohmann::json::object());
   } catch (const std::exception& e) {
     throw ConfigError("bad run configuration '" + path + "': " + e.what());
@@ -108,7 +127,13 @@ RunConfig read_config(const std::string& path) {
   for (double p : c.params)
     if (!std::isfinite(p)) throw ConfigError("a parameter value is not finite");
   if (!(c.t_end > 0) || !(c.dt > 0)) throw ConfigError("t_end and dt must be positive");
-  if (c.method != "characteristics") throw ConfigError("unknown method '" + c.method + "'");
+  if (c.method != "characteristics" && c.method != "transfer" && c.method != "invariant" &&
+      c.method != "particles")
+    throw ConfigError("unknown method '" + c.method + "'");
+  if (c.scheme != "interpolate" && c.scheme != "conservative")
+    throw ConfigError("unknown transfer scheme '" + c.scheme + "'");
+  if (!(c.step >= 0) || c.particles < 1 || c.eigenvalues < 1)
+    throw ConfigError("step, particles and eigenvalues must be positive");
   return c;
 }
 
@@ -120,61 +145,68 @@ inline std::string fmt(const char* f, double v) {
   return b;
 }
 
-inline std::string frame_name(std::size_t k) {
-  char b[32];
-  std::snprintf(b, sizeof b, "u_%04zu", k);
-  return b;
-}
-
 }  // namespace detail
 
-/// Solve, write the outputs and the summary; returns the exit code.
+/// Solve with the configured method, write the outputs and the summary; returns the exit
+/// code.
 template <HybridModel M>
-int run_characteristics(const RunConfig& c) {
+int run_model(const RunConfig& c) {
   constexpr std::size_t N = state_dim_v<M>;
   using Clock = std::chrono::steady_clock;
   const double* par = c.params.data();
   TensorGrid<N> grid;
   for (std::size_t a = 0; a < N; ++a) grid.axes[a] = c.axes[a];
   const std::vector<double> times = output_times(c.t_end, c.dt);
-  CharacteristicsOptions opt;
-  opt.ode.rtol = c.tol;
-  opt.ode.atol = c.tol * 1e-2;
-  opt.max_events = static_cast<int>(std::min<long>(c.max_events, 1000000000L));
+  MethodSettings ms;
+  ms.method = c.method;
+  ms.tol = c.tol;
+  ms.max_events = c.max_events;
+  ms.budget_tol = c.budget_tol;
+  ms.step = c.step;
+  ms.scheme = c.scheme;
+  ms.eigenvalues = c.eigenvalues;
+  ms.particles = c.particles;
+  ms.seed = c.seed;
+  ms.quiet = c.quiet;
+  const CharacteristicsOptions opt = detail::trace_options(ms);
 
-  if (!c.quiet)
-    std::fprintf(stderr, "hybgen: solving %s on %zu nodes x %d mode(s), %zu output times...\n",
-                 c.model.c_str(), grid.size(), M::n_mode, times.size());
-  const auto t0 = Clock::now();
-  const Solution<N> sol = solve_grid<M>(grid, times, par, opt);
-  const double solve_s = std::chrono::duration<double>(Clock::now() - t0).count();
-  if (!sol.ok()) {
-    std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe<M>(sol.failure).c_str());
+  if (!c.quiet) {
+    if (c.method == "invariant")
+      std::fprintf(stderr, "hybgen: %s: invariant density on %zu nodes x %d mode(s)...\n",
+                   c.model.c_str(), grid.size(), M::n_mode);
+    else
+      std::fprintf(stderr, "hybgen: %s: %s on %zu nodes x %d mode(s), %zu output times...\n",
+                   c.model.c_str(), c.method.c_str(), grid.size(), M::n_mode, times.size());
+  }
+  // Pre-flight (t = 0): u0 ≥ 0 and finite on the grid; at every crossing point of every guard
+  // in the box, a finite reset landing in the support and the box, not on a guard that fires
+  // at once, J finite and ≠ 0, no grazing, a converging numeric inverse (preflight.hpp).
+  {
+    PreflightOptions popt;
+    popt.newton_max_iter = opt.newton_max_iter;
+    popt.newton_tol = opt.newton_tol;
+    const PreflightFailure<N> pf = preflight<M>(grid, par, popt);
+    if (!pf.ok()) {
+      std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
+      return 3;
+    }
+  }
+  MethodResult<N> res;
+  try {
+    res = solve_method<M>(grid, times, c.dt, par, ms);
+  } catch (const std::invalid_argument& e) {
+    throw ConfigError(e.what());  // e.g. an output time that is not a multiple of the step
+  }
+  for (const auto& w : res.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
+  if (!res.ok()) {
+    std::fprintf(stderr, "hybgen: numerical failure: %s\n", res.failure.c_str());
     return 3;
   }
-  const auto t1 = Clock::now();
-  // The mass budget integrates u(t) adaptively (characteristics at the
-  // cubature nodes): a grid rule cannot integrate the unbounded, striped
-  // density near a Zeno point, where the atom forms.
-  AdaptiveOptions aopt;
-  aopt.rel_tol = c.budget_tol;
-  AdaptiveBudgetInfo info;
-  const BudgetResult<N> budget = adaptive_mass_budget<M>(grid, times, par, opt, aopt, 3, &info);
-  const double budget_s = std::chrono::duration<double>(Clock::now() - t1).count();
-  if (!info.volume.converged || !info.surface.converged)
-    std::fprintf(stderr,
-                 "hybgen: warning: the mass budget's cubature reached its point cap before its "
-                 "tolerance %.1e; the atom's error estimate in summary.json says how far it got\n",
-                 c.budget_tol);
-  if (!budget.ok()) {
-    std::fprintf(stderr, "hybgen: numerical failure (mass budget): %s\n",
-                 describe<M>(budget.failure).c_str());
-    return 3;
-  }
 
-  // Outputs: one .npy per output time (sum over modes; per mode too when there
-  // are several), a picture and a VTK image.
+  // Outputs: one .npy per frame (sum over modes; per mode too when there are several), a
+  // picture and a VTK image.
   const auto t2 = Clock::now();
+  const Solution<N>& sol = res.solution;
   const std::filesystem::path out(c.out_dir);
   const std::size_t n_node = grid.size();
   std::vector<std::size_t> shape;
@@ -192,15 +224,16 @@ int run_characteristics(const RunConfig& c) {
   }
   nlohmann::json files = nlohmann::json::array(), mode_files = nlohmann::json::object();
   std::vector<double> total(n_node);
-  for (std::size_t k = 0; k < times.size(); ++k) {
+  Progress progress("writing outputs", sol.n_time, c.quiet);
+  for (std::size_t k = 0; k < sol.n_time; ++k) {
     std::fill(total.begin(), total.end(), 0.0);
     for (std::size_t m = 0; m < sol.n_mode; ++m) {
-      auto s = sol.slice(k, m);
-      for (std::size_t i = 0; i < n_node; ++i) total[i] += s[i];
+      auto sl = sol.slice(k, m);
+      for (std::size_t i = 0; i < n_node; ++i) total[i] += sl[i];
     }
-    const std::string base = detail::frame_name(k);
+    const std::string base = res.frame_names[k];
     write_npy((out / (base + ".npy")).string(), total, shape);
-    files.push_back(base + ".npy");
+    if (!res.frame_times.empty()) files.push_back(base + ".npy");
     if (M::n_mode > 1) {
       for (std::size_t m = 0; m < sol.n_mode; ++m) {
         const std::string name = base + "_" + M::mode_names[m] + ".npy";
@@ -208,7 +241,10 @@ int run_characteristics(const RunConfig& c) {
         mode_files[M::mode_names[m]].push_back(name);
       }
     }
-    std::string title = c.model + "   t = " + detail::fmt("%.3f", times[k]);
+    std::string title = c.model + "   ";
+    title += res.frame_times.empty()
+                 ? std::string("invariant density (transfer operator)")
+                 : c.method + "   t = " + detail::fmt("%.3f", res.frame_times[k]);
     if (M::n_mode > 1) title += "   (sum over modes)";
     const std::string png = (out / (base + ".png")).string();
     if constexpr (N == 1) {
@@ -241,14 +277,18 @@ int run_characteristics(const RunConfig& c) {
                         c.axis_names[1], c.axes[1].min, c.axes[1].max,
                         title + "   marginal over " + others);
     }
+    // VTK image data for ParaView: every dimension up to 3 (VTK images have at most 3 axes).
     if constexpr (N <= 3)
       write_vti((out / (base + ".vti")).string(), total.data(), shape, origins, spacings,
                 c.axis_names, "u");
+    progress.advance();
   }
+  progress.finish();
   const double output_s = std::chrono::duration<double>(Clock::now() - t2).count();
 
-  // summary.json (DESIGN.md run contract, extended with the atom and per-mode files).
-  const MassBudget& mb = budget.budget;
+  // summary.json (DESIGN.md run contract, extended with the atom, per-mode files and the
+  // method's own fields).
+  const MassBudget& mb = res.budget;
   nlohmann::json s;
   s["model"] = c.model;
   s["method"] = c.method;
@@ -259,7 +299,7 @@ int run_characteristics(const RunConfig& c) {
                     {"max", c.axes[a].max},
                     {"n", c.axes[a].n}});
   s["grid"] = {{"axes", axes}};
-  s["times"] = times;
+  s["times"] = res.frame_times;
   s["files"] = files;
   if (M::n_mode > 1) s["mode_files"] = mode_files;
   s["modes"] = std::vector<std::string>(M::mode_names.begin(), M::mode_names.end());
@@ -271,38 +311,41 @@ int run_characteristics(const RunConfig& c) {
   s["mass"] = mb.mass;
   s["outflow"] = mb.outflow;
   s["atom"] = mb.atom;
-  // Estimated |error| of the atom: those of mass(t), mass(0) and the outflow.
-  std::vector<double> atom_error(times.size(), 0.0);
-  for (std::size_t k = 0; k < times.size(); ++k)
-    atom_error[k] = (k < mb.mass_error.size() ? mb.mass_error[k] : 0.0) +
-                    (mb.mass_error.empty() ? 0.0 : mb.mass_error[0]) +
-                    (k < info.surface.error.size() ? info.surface.error[k] : 0.0);
-  s["atom_error"] = atom_error;
-  s["budget"] = {{"rel_tol", c.budget_tol},
-                 {"volume_points", info.volume.points},
-                 {"face_points", info.surface.points},
-                 {"converged", info.volume.converged && info.surface.converged}};
+  s["atom_error"] = res.atom_error;
+  for (const auto& [key, value] : res.summary.items()) s[key] = value;
   nlohmann::json secs = c.seconds.is_object() ? c.seconds : nlohmann::json::object();
-  secs["solve"] = solve_s;
-  secs["budget"] = budget_s;
+  secs["solve"] = res.solve_s;
+  secs["budget"] = res.budget_s;
   secs["output"] = output_s;
   s["seconds"] = secs;
   write_file_atomic((out / "summary.json").string(), s.dump(2) + "\n");
 
   if (!c.quiet) {
-    std::printf(
-        "%s: characteristics on %zu nodes, %zu output times: solve %.3f s, budget %.3f s, "
-        "output %.3f s\n",
-        c.model.c_str(), n_node, times.size(), solve_s, budget_s, output_s);
-    std::printf("mass budget (initial mass on the grid %.6g):\n", mb.mass0);
-    std::printf("  %10s %14s %14s %14s %11s\n", "t", "grid", "outflow", "atom", "+/- atom");
-    const std::size_t K = times.size(), stride = std::max<std::size_t>(1, (K + 9) / 10);
-    for (std::size_t k = 0; k < K; ++k)
-      if (k % stride == 0 || k + 1 == K)
-        std::printf("  %10.4f %14.6e %14.6e %14.6e %11.2e\n", times[k], mb.mass[k], mb.outflow[k],
-                    mb.atom[k], atom_error[k]);
-    std::printf("outputs in %s: u_0000..%s .npy/.png/.vti, summary.json\n", c.out_dir.c_str(),
-                detail::frame_name(K - 1).c_str());
+    std::printf("%s: %s on %zu nodes, %zu frame(s): solve %.3f s, budget %.3f s, output %.3f s\n",
+                c.model.c_str(), c.method.c_str(), n_node, sol.n_time, res.solve_s, res.budget_s,
+                output_s);
+    if (res.summary.contains("invariant")) {
+      const auto& inv = res.summary["invariant"];
+      std::printf("leading eigenvalues of the transfer operator (step %g):\n",
+                  inv["step"].template get<double>());
+      for (const auto& l : inv["eigenvalues"])
+        std::printf("  %+.10f %+.10fi   |lambda| = %.10f\n", l["re"].template get<double>(),
+                    l["im"].template get<double>(), l["abs"].template get<double>());
+      std::printf("spectral gap %.3e, decay rate %.4g per unit time\n",
+                  inv["spectral_gap"].template get<double>(),
+                  inv["decay_rate"].template get<double>());
+      std::printf("outputs in %s: invariant .npy/.png/.vti, summary.json\n", c.final_dir.c_str());
+    } else {
+      std::printf("mass budget (initial mass on the grid %.6g):\n", mb.mass0);
+      std::printf("  %10s %14s %14s %14s %11s\n", "t", "grid", "outflow", "atom", "+/- atom");
+      const std::size_t K = mb.mass.size(), stride = std::max<std::size_t>(1, (K + 9) / 10);
+      for (std::size_t k = 0; k < K; ++k)
+        if (k % stride == 0 || k + 1 == K)
+          std::printf("  %10.4f %14.6e %14.6e %14.6e %11.2e\n", times[k], mb.mass[k], mb.outflow[k],
+                      mb.atom[k], k < res.atom_error.size() ? res.atom_error[k] : 0.0);
+      std::printf("outputs in %s: %s..%s .npy/.png/.vti, summary.json\n", c.final_dir.c_str(),
+                  res.frame_names.front().c_str(), res.frame_names.back().c_str());
+    }
   }
   return 0;
 }
@@ -317,7 +360,7 @@ int runner_main(int argc, char** argv) {
   }
   try {
     const RunConfig c = read_config<M>(argv[1]);
-    return run_characteristics<M>(c);
+    return run_model<M>(c);
   } catch (const ConfigError& e) {
     std::fprintf(stderr, "hybgen: error: %s\n", e.what());
     return 2;

@@ -1,0 +1,415 @@
+// The reduce stage: LieModel -> general Model. See reduce.hpp for the maths.
+
+#include "hybgen/gen/reduce.hpp"
+
+#include <cctype>
+#include <set>
+#include <sstream>
+
+#include "hybgen/gen/derive.hpp"
+
+namespace hybgen::gen {
+
+namespace {
+
+using GiNaC::ex;
+using GiNaC::matrix;
+
+std::string str(const ex& e) {
+  std::ostringstream os;
+  os << e;
+  return os.str();
+}
+
+ModelError hypothesis_error(const SourceText& src, SourceLoc loc, const LieError& e) {
+  return src.error(loc, "hypothesis '" + e.hypothesis() + "' fails: " + e.what());
+}
+
+/// s(q) of a guard, checked to be a function of q (and parameters) only.
+void require_level_set(const LieModel& lm, const GuardSpec& g, const SourceText& src) {
+  const std::size_t n = lm.base.state.size() - 1;
+  for (std::size_t i = 0; i < n; ++i)
+    if (g.surface.has(lm.base.state_symbols[i]))
+      throw src.error(g.surface_loc, "the surface of guard '" + g.name +
+                                         "' depends on the momentum " + lm.base.state[i] +
+                                         ": in a Lie-group model an impact surface is a " +
+                                         "level set of the reduced coordinate (write 'when " +
+                                         lm.base.state[n] + " = c')");
+}
+
+/// TeX name like check's: zeta1 -> \zeta_{1}, a11 -> a_{11}, p_a11 -> p_{a11}.
+std::string tex_of(const std::string& nm) {
+  static const std::set<std::string> greek = {"alpha", "beta",  "gamma", "delta", "epsilon", "zeta",
+                                              "eta",   "theta", "iota",  "kappa", "lambda",  "mu",
+                                              "nu",    "xi",    "rho",   "sigma", "tau",     "phi",
+                                              "chi",   "psi",   "omega"};
+  const auto us = nm.find('_');
+  if (us != std::string::npos && us + 1 < nm.size())
+    return tex_of(nm.substr(0, us)) + "_{" + nm.substr(us + 1) + "}";
+  std::size_t k = nm.size();
+  while (k > 0 && std::isdigit(static_cast<unsigned char>(nm[k - 1]))) --k;
+  const std::string base = nm.substr(0, k), sub = nm.substr(k);
+  std::string t = greek.count(base) ? "\\" + base
+                  : base.size() > 1 ? "\\mathrm{" + base + "}"
+                                    : base;
+  if (!sub.empty()) t += "_{" + sub + "}";
+  return t;
+}
+
+/// q' = dφ_e(ζ^♯) (additive) or (q + c) dφ_e(ζ^♯) (multiplicative), with the
+/// factor (q + c) kept and dφ_e(ζ^♯) expanded (a canonical form); checked
+/// against q_equation's result, which proved that q' depends on (ζ, q) only.
+ex factored_q_dot(const Reduction& red, const std::vector<ex>& sharp, const ex& q,
+                  const QEquation& qe) {
+  ex rate = 0;
+  for (std::size_t i = 0; i < sharp.size(); ++i) rate += red.dphi_e[i] * sharp[i];
+  rate = rate.expand();
+  const ex q_dot = red.multiplicative ? (q + red.level) * rate : rate;
+  if (!is_identically_zero((q_dot - qe.q_dot).expand(), {}))
+    throw InternalError("the q equation's two forms disagree");
+  return q_dot;
+}
+
+Model reduced(const LieModel& lm, const SourceText& src) {
+  const LieAlgebra& alg = lm.group.algebra();
+  const unsigned n = alg.dim();
+  const Model& b = lm.base;
+  const std::vector<ex> zeta(b.state_symbols.begin(), b.state_symbols.begin() + n);
+  const ex q = b.state_symbols[n];
+
+  // codim1: a codimension-1 ideal exists iff Ann([𝔤, 𝔤]) ≠ 0.
+  if (codim1_ideal_forms(alg).empty())
+    throw hypothesis_error(
+        src, lm.group_loc,
+        LieError("codim1", "the Lie algebra of group '" + lm.group_name +
+                               "' is perfect ([g, g] = g, as for so(3)): the group has no normal "
+                               "subgroup of codimension 1, so no impact surface is a coset of "
+                               "one and the impact system cannot be reduced"));
+
+  // φ with φ(e) = 0 (additive) or 1 (multiplicative): q = φ − level.
+  const ex q0 = simplify(lm.group.at_identity(lm.q_expr));
+  const ex phi = lm.q_expr - q0 + 1, level = 1 - q0;
+  Reduction red;
+  red.dphi_e = lm.group.differential_at_identity(phi);
+  try {
+    require_normal_kernel(alg, red.dphi_e);
+  } catch (const LieError& e) {
+    throw hypothesis_error(src, lm.reduced_loc, e);
+  }
+  const LiePoisson lp = lie_poisson(alg, zeta, lm.h);
+  QEquation qe;
+  try {
+    qe = q_equation(lm.group, phi, level, lp.dh, q);
+  } catch (const LieError& e) {
+    throw hypothesis_error(src, lm.reduced_loc, e);
+  }
+  red.multiplicative = qe.kind == HomomorphismKind::Multiplicative;
+  red.phi = (red.multiplicative ? phi : phi - 1).expand();
+  red.level = (red.multiplicative ? level : level - 1).expand();
+  red.q_dot = factored_q_dot(red, lp.dh, q, qe);
+  const std::vector<Components> kernel = kernel_of_form(red.dphi_e);
+
+  // Every derived expression is handed on EXPANDED: GiNaC's automatic
+  // evaluation orders sums by hash and may store a factor (a − b) as −(b − a),
+  // so "the smallest form" of an unexpanded sum is not reproducible from run to
+  // run; the expanded form is canonical (the printers sort its terms), which
+  // keeps generated/ byte-identical.
+  auto canonical = [](std::vector<ex> v) {
+    for (auto& e : v) e = e.expand();
+    return v;
+  };
+  Model out = b;
+  out.modes[0].flow = canonical(lp.zeta_dot);
+  out.modes[0].flow.push_back(red.q_dot);
+  for (std::size_t k = 0; k < out.guards.size(); ++k) {
+    GuardSpec& g = out.guards[k];
+    const LieImpact& imp = lm.impacts[k];
+    require_level_set(lm, g, src);
+    std::vector<ex> reset;
+    if (imp.kind == ResetDecl::Kind::Elastic || imp.kind == ResetDecl::Kind::Restitution) {
+      Components dz;
+      try {
+        dz = momentum_jump(red.dphi_e, zeta, lm.h, imp.restitution);
+      } catch (const LieError& e) {
+        throw hypothesis_error(src, g.reset_loc, e);
+      }
+      dz = canonical(dz);
+      for (unsigned i = 0; i < n; ++i) reset.push_back((zeta[i] + dz[i]).expand());
+      reset.push_back(q);
+      red.momentum_jumps.push_back(dz);
+    } else {
+      reset = g.reset_kind == ResetDecl::Kind::Explicit ? g.reset : b.state_symbols;
+      if (!is_identically_zero(reset[n] - q, {}))
+        throw hypothesis_error(
+            src, g.reset_loc,
+            LieError("reset", "the reset must keep the reduced coordinate (" + b.state[n] + " -> " +
+                                  b.state[n] + "): the group element does not jump"));
+      Components dz;
+      for (unsigned i = 0; i < n; ++i) dz.push_back((reset[i] - zeta[i]).expand());
+      for (const auto& kv : kernel) {
+        ex pair = 0;
+        for (unsigned i = 0; i < n; ++i) pair += dz[i] * kv[i];
+        if (!is_identically_zero(pair, {}))
+          throw hypothesis_error(src, g.reset_loc,
+                                 LieError("reset",
+                                          "the momentum jump must annihilate the Lie algebra of K "
+                                          "(Delta zeta in Ann(k), the theorem), but it pairs to " +
+                                              str(simplify(pair)) + " with " + alg.format(kv)));
+      }
+      red.momentum_jumps.push_back(dz);
+    }
+    g.reset_kind = ResetDecl::Kind::Explicit;
+    g.reset = reset;
+  }
+
+  for (const auto& cn : lm.coordinate_names) out.tex[cn] = tex_of(cn);
+  red.group = lm.group_name;
+  red.coordinates = lm.coordinate_names;
+  red.basis = alg.names();
+  red.algebra_dim = n;
+  red.momenta.assign(b.state.begin(), b.state.begin() + n);
+  red.q = b.state[n];
+  red.bracket.assign(n, std::vector<std::string>(n));
+  for (unsigned i = 0; i < n; ++i)
+    for (unsigned j = 0; j < n; ++j) {
+      Components ei(n, ex(0)), ej(n, ex(0));
+      ei[i] = 1;
+      ej[j] = 1;
+      red.bracket[i][j] = alg.format(alg.bracket(ei, ej));
+      for (unsigned k = 0; k < n; ++k) red.structure_constants.push_back(alg.c(i, j, k));
+    }
+  red.hamiltonian = lm.h.expand();
+  red.dh = canonical(lp.dh);
+  red.coadjoint = lp.ad_star;
+  for (unsigned i = 0; i < n; ++i)
+    for (unsigned j = 0; j < n; ++j) red.coadjoint(i, j) = red.coadjoint(i, j).expand();
+  out.reduction = std::move(red);
+  return out;
+}
+
+/// The Euler–Poincaré–Suslov reduction of a constrained model: the body
+/// velocity ξ = B w on the constraint distribution (B = ∂ξ/∂w), μ = I ξ,
+/// μ' = ad*_ξ μ + λ_k a_k; applying Bᵀ (Bᵀ a_k = 0) eliminates the multipliers:
+///     w' = (BᵀIB)⁻¹ Bᵀ ad*_ξ (I ξ),   q' as in the theorem with ζ^♯ = ξ.
+/// The corner conditions with constraints: I B Δw ∈ Ann(𝔨) + span(a_k), so
+/// Δw = α M⁻¹ s with M = BᵀIB, s = Bᵀσ, and the normal velocity sᵀw becomes
+/// −e times itself: Δw = −(1 + e) (sᵀw)/(sᵀM⁻¹s) M⁻¹ s.
+Model reduced_constrained(const LieModel& lm, const SourceText& src) {
+  const LieAlgebra& alg = lm.group.algebra();
+  const unsigned n = alg.dim();
+  const Model& b = lm.base;
+  const auto r = static_cast<unsigned>(b.state.size() - 1);
+  const std::vector<ex> w(b.state_symbols.begin(), b.state_symbols.begin() + r);
+  const ex q = b.state_symbols[r];
+  if (codim1_ideal_forms(alg).empty())
+    throw hypothesis_error(src, lm.group_loc,
+                           LieError("codim1", "the Lie algebra of group '" + lm.group_name +
+                                                  "' is perfect ([g, g] = g): no normal subgroup "
+                                                  "of codimension 1"));
+  const ex q0 = simplify(lm.group.at_identity(lm.q_expr));
+  const ex phi = lm.q_expr - q0 + 1, level = 1 - q0;
+  Reduction red;
+  red.dphi_e = lm.group.differential_at_identity(phi);
+  try {
+    require_normal_kernel(alg, red.dphi_e);
+  } catch (const LieError& e) {
+    throw hypothesis_error(src, lm.reduced_loc, e);
+  }
+  const std::vector<ex>& xi = lm.xi_of_w;
+  matrix B(n, r), I = lm.inertia;
+  for (unsigned i = 0; i < n; ++i)
+    for (unsigned k = 0; k < r; ++k) B(i, k) = xi[i].diff(GiNaC::ex_to<GiNaC::symbol>(w[k]));
+  const matrix M = B.transpose().mul(I).mul(B);
+  matrix Minv;
+  try {
+    Minv = M.inverse(GiNaC::solve_algo::gauss);
+  } catch (const std::exception&) {
+    throw hypothesis_error(src, lm.hamiltonian_loc,
+                           LieError("quadratic",
+                                    "the kinetic energy is degenerate on the "
+                                    "constraint distribution (B^T I B singular)"));
+  }
+  for (unsigned i = 0; i < r; ++i)
+    for (unsigned j = 0; j < r; ++j) Minv(i, j) = GiNaC::normal(Minv(i, j));
+  Components mu(n, ex(0));
+  for (unsigned i = 0; i < n; ++i)
+    for (unsigned j = 0; j < n; ++j) mu[i] += I(i, j) * xi[j];
+  const Components adm = alg.coadjoint_action(Components(xi.begin(), xi.end()), mu);
+  std::vector<ex> wdot(r, ex(0));
+  for (unsigned k = 0; k < r; ++k) {
+    ex rhs_k = 0;
+    for (unsigned i = 0; i < n; ++i) rhs_k += B(i, k) * adm[i];
+    for (unsigned j = 0; j < r; ++j) wdot[j] += Minv(j, k) * rhs_k;
+  }
+  for (auto& e : wdot) e = e.expand();
+  QEquation qe;
+  try {
+    qe = q_equation(lm.group, phi, level, Components(xi.begin(), xi.end()), q);
+  } catch (const LieError& e) {
+    throw hypothesis_error(src, lm.reduced_loc, e);
+  }
+  red.multiplicative = qe.kind == HomomorphismKind::Multiplicative;
+  red.phi = (red.multiplicative ? phi : phi - 1).expand();
+  red.level = (red.multiplicative ? level : level - 1).expand();
+  red.q_dot = factored_q_dot(red, xi, q, qe);
+  // s = Bᵀσ: the normal velocity σ(ξ) = sᵀw.
+  Components s(r, ex(0));
+  for (unsigned k = 0; k < r; ++k)
+    for (unsigned i = 0; i < n; ++i) s[k] += B(i, k) * red.dphi_e[i];
+  ex den = 0, sw = 0;
+  Components Ms(r, ex(0));
+  for (unsigned j = 0; j < r; ++j) {
+    for (unsigned k = 0; k < r; ++k) Ms[j] += Minv(j, k) * s[k];
+    den += s[j] * Ms[j];
+    sw += s[j] * w[j];
+  }
+  Model out = b;
+  out.modes[0].flow = wdot;
+  out.modes[0].flow.push_back(red.q_dot);
+  for (std::size_t k = 0; k < out.guards.size(); ++k) {
+    GuardSpec& g = out.guards[k];
+    const LieImpact& imp = lm.impacts[k];
+    require_level_set(lm, g, src);
+    std::vector<ex> reset;
+    Components dw(r, ex(0));
+    if (imp.kind == ResetDecl::Kind::Elastic || imp.kind == ResetDecl::Kind::Restitution) {
+      if (is_identically_zero(den, {}))
+        throw hypothesis_error(src, g.reset_loc,
+                               LieError("codim1",
+                                        "the constrained motion has no velocity "
+                                        "normal to the surface (s^T M^-1 s = 0)"));
+      for (unsigned j = 0; j < r; ++j)
+        dw[j] = (-(1 + imp.restitution) * sw / den * Ms[j]).normal().expand();
+      for (unsigned j = 0; j < r; ++j) reset.push_back((w[j] + dw[j]).expand());
+      reset.push_back(q);
+    } else {
+      reset = g.reset_kind == ResetDecl::Kind::Explicit ? g.reset : b.state_symbols;
+      if (!is_identically_zero(reset[r] - q, {}))
+        throw hypothesis_error(src, g.reset_loc,
+                               LieError("reset", "the reset must keep the reduced coordinate"));
+      for (unsigned j = 0; j < r; ++j) dw[j] = (reset[j] - w[j]).expand();
+      // I B Δw ∈ Ann(𝔨) + span(a): it annihilates 𝔨 ∩ B(ℝ^r) = {B u : sᵀu = 0}.
+      bool s_zero = true;
+      for (const auto& e : s) s_zero = s_zero && is_identically_zero(e, {});
+      if (!s_zero)
+        for (const auto& u : kernel_of_form(s)) {
+          ex pair = 0;
+          for (unsigned i = 0; i < r; ++i)
+            for (unsigned j = 0; j < r; ++j) pair += dw[i] * M(i, j) * u[j];
+          if (!is_identically_zero(pair, {}))
+            throw hypothesis_error(
+                src, g.reset_loc,
+                LieError("reset",
+                         "the momentum jump I B Delta w must annihilate the allowed "
+                         "directions of K (the theorem with constraints)"));
+        }
+    }
+    red.momentum_jumps.push_back(dw);
+    g.reset_kind = ResetDecl::Kind::Explicit;
+    g.reset = reset;
+  }
+  red.constrained = true;
+  red.group = lm.group_name;
+  red.coordinates = lm.coordinate_names;
+  red.basis = alg.names();
+  red.algebra_dim = n;
+  red.momenta.assign(b.state.begin(), b.state.begin() + r);
+  red.q = b.state[r];
+  red.bracket.assign(n, std::vector<std::string>(n));
+  for (unsigned i = 0; i < n; ++i)
+    for (unsigned j = 0; j < n; ++j) {
+      Components ei(n, ex(0)), ej(n, ex(0));
+      ei[i] = 1;
+      ej[j] = 1;
+      red.bracket[i][j] = alg.format(alg.bracket(ei, ej));
+      for (unsigned k = 0; k < n; ++k) red.structure_constants.push_back(alg.c(i, j, k));
+    }
+  red.hamiltonian = lm.h.expand();
+  for (const auto& e : xi) red.dh.push_back(e.expand());
+  red.coadjoint = alg.coadjoint(Components(xi.begin(), xi.end()));
+  for (unsigned i = 0; i < n; ++i)
+    for (unsigned j = 0; j < n; ++j) red.coadjoint(i, j) = red.coadjoint(i, j).expand();
+  for (const auto& cn : lm.coordinate_names) out.tex[cn] = tex_of(cn);
+  out.reduction = std::move(red);
+  return out;
+}
+
+Model unreduced(const LieModel& lm, const SourceText& src) {
+  if (!lm.xi_of_w.empty())
+    throw src.error(lm.group_loc,
+                    "the unreduced twin of a constrained (nonholonomic) model is not "
+                    "supported");
+  const LieAlgebra& alg = lm.group.algebra();
+  const unsigned n = alg.dim();
+  const Model& b = lm.base;
+  const std::vector<ex>& c = lm.group.coords();
+  const matrix& L = lm.group.left_trivialization();
+  Model out;
+  out.name = b.name + "_unreduced";
+  out.path = b.path;
+  out.source_hash = b.source_hash;
+  out.params = b.params;
+  out.limits = b.limits;
+  std::set<std::string> taken;
+  for (const auto& p : b.params) taken.insert(p.name);
+  for (unsigned i = 0; i < n; ++i) {
+    out.state.push_back(lm.coordinate_names[i]);
+    out.state_symbols.push_back(c[i]);
+    taken.insert(lm.coordinate_names[i]);
+  }
+  std::vector<ex> p;
+  for (unsigned i = 0; i < n; ++i) {
+    std::string name = "p_" + lm.coordinate_names[i];
+    while (taken.count(name)) name += "_";
+    taken.insert(name);
+    p.push_back(GiNaC::realsymbol(name));
+    out.state.push_back(name);
+    out.state_symbols.push_back(p.back());
+  }
+  for (const auto& s : out.state) out.tex[s] = tex_of(s);
+  for (const auto& pr : b.params) out.tex[pr.name] = b.tex.at(pr.name);
+  // ζ = (ℓ_g)^* p: ζ_i = p(g E_i) = Σ_j p_j L_ji(c).
+  GiNaC::exmap zeta_of;
+  for (unsigned i = 0; i < n; ++i) {
+    ex zi = 0;
+    for (unsigned j = 0; j < n; ++j) zi += p[j] * L(j, i);
+    zeta_of[b.state_symbols[i]] = zi;
+  }
+  ModeSpec mode;
+  mode.name = "flow";
+  mode.loc = lm.group_loc;
+  mode.hamiltonian = lm.h.subs(zeta_of, GiNaC::subs_options::no_pattern).expand();
+  for (unsigned i = 0; i < n; ++i) {
+    mode.coordinates.push_back(static_cast<int>(i));
+    mode.momenta.push_back(static_cast<int>(n + i));
+  }
+  out.modes.push_back(mode);
+  const ex q = b.state_symbols[n];
+  for (std::size_t k = 0; k < b.guards.size(); ++k) {
+    GuardSpec g = b.guards[k];
+    const LieImpact& imp = lm.impacts[k];
+    require_level_set(lm, g, src);
+    g.surface = g.surface.subs(GiNaC::exmap{{q, lm.q_expr}}, GiNaC::subs_options::no_pattern);
+    if (imp.kind == ResetDecl::Kind::Elastic || imp.kind == ResetDecl::Kind::Restitution) {
+      g.reset_kind = imp.kind;
+      g.restitution = imp.restitution;
+    } else if (g.reset_kind == ResetDecl::Kind::Explicit) {
+      throw src.error(g.reset_loc,
+                      "the unreduced twin supports elastic, restitution and identity resets "
+                      "only (this reset is explicit)");
+    }
+    out.guards.push_back(g);
+  }
+  out.sim.present = false;
+  out.sim.initial.assign(1, ex(0));
+  return out;
+}
+
+}  // namespace
+
+Model reduce(const LieModel& lie, const SourceText& src, ReduceTarget target) {
+  if (target == ReduceTarget::Unreduced) return unreduced(lie, src);
+  return lie.xi_of_w.empty() ? reduced(lie, src) : reduced_constrained(lie, src);
+}
+
+}  // namespace hybgen::gen

@@ -1,0 +1,462 @@
+#pragma once
+/// \file preflight.hpp
+/// The pre-flight scan: forward checks made once, at t = 0, before the solve, of what the
+/// backward characteristics cannot see (or see only late and far from the cause).
+///
+///  1. The initial density: at every grid node inside `in_support` and for every mode,
+///     u0 must be finite and ≥ 0 (a density).
+///  2. Every guard g: its crossing points in the grid box are found on the grid edges — a sign
+///     change of s_g between two neighbouring nodes is refined by bisection onto s_g = 0; a node
+///     with s_g = 0 exactly is one too — and kept when inside `in_support`. At each crossing
+///     point x* (∇s·X_from(x*) has the firing sign `direction`):
+///       - X_from(x*) and div X_from(x*) are finite;
+///       - Δ(x*) is finite, in the support and in the grid box (a reset that lands outside
+///         the domain loses its mass to no face of the box: the atom of the budget would absorb
+///         it silently);
+///       - Δ(x*) is not on a guard h of the target mode that fires there at once
+///         (|s_h(Δx*)| ≤ surface_tol·|∇s_h|·diam and sign(∇s_h·X_to(Δx*)) = direction_h:
+///         an instantaneous re-trigger, the paper's H.5);
+///       - J_g(x*) is finite and ≠ 0;
+///       - for a numeric inverse (Newton), Newton from Δ(x*) — started at Δ(x*) itself, as the
+///         characteristics do — converges.
+///     Grazing: at any point x* of S_g found in the support (firing or not) where the flow is
+///     tangent to the guard, |∇s·X| ≤ graze_tol·|∇s||X|, the orbit through x* is followed a
+///     short time δ both ways (RK4); if it passes from the pre-firing side of S_g to the firing
+///     side, the guard fires at a tangency — the event location is ill-conditioned and J's
+///     denominator ∇s·X vanishes — and that is reported. A tangency the orbit does not cross
+///     (the bouncing ball's Zeno point (0, 0): x(t) = −g t²/2 ≤ 0 on both sides) is no crossing
+///     and passes.
+///
+/// Cost: O(grid nodes · (N + guards)) model evaluations plus a bisection per crossing edge;
+/// OpenMP over the nodes from 2¹⁸ nodes on (one thread below). The failure reported is the one with
+/// the smallest (guard, node) index, so the message does not depend on the number of threads.
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstddef>
+#include <iomanip>
+#include <limits>
+#include <sstream>
+#include <string>
+
+#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/model.hpp"
+
+namespace hybgen::rt {
+
+/// What the pre-flight scan found wrong.
+enum class PreflightError {
+  none,                   ///< Nothing.
+  negative_density,       ///< u0 < 0 at a grid node in the support.
+  non_finite_density,     ///< u0 not finite at a grid node in the support.
+  non_finite_guard,       ///< s_g not finite at a grid node in the support.
+  non_finite_flow,        ///< X_from or div X_from not finite at a crossing point.
+  non_finite_reset,       ///< Δ(x*) not finite.
+  reset_outside_support,  ///< Δ(x*) outside `in_support`.
+  reset_outside_box,      ///< Δ(x*) outside the grid box.
+  reset_retriggers,       ///< Δ(x*) on a guard of the target mode that fires at once.
+  zero_jacobian,          ///< J(x*) = 0 or not finite.
+  inverse_failed,         ///< Newton for Δ⁻¹ at Δ(x*) did not converge.
+  grazing,                ///< The flow is tangent to the guard where the orbit crosses it.
+};
+
+/// Human-readable name of a `PreflightError`.
+inline const char* preflight_error_name(PreflightError e) {
+  switch (e) {
+    case PreflightError::none:
+      return "no error";
+    case PreflightError::negative_density:
+      return "negative initial density";
+    case PreflightError::non_finite_density:
+      return "non-finite initial density";
+    case PreflightError::non_finite_guard:
+      return "non-finite guard function";
+    case PreflightError::non_finite_flow:
+      return "non-finite vector field or divergence";
+    case PreflightError::non_finite_reset:
+      return "non-finite reset";
+    case PreflightError::reset_outside_support:
+      return "the reset lands outside the support (the state space)";
+    case PreflightError::reset_outside_box:
+      return "the reset lands outside the domain (the grid box)";
+    case PreflightError::reset_retriggers:
+      return "the reset lands on a guard that fires again at once (instantaneous re-trigger)";
+    case PreflightError::zero_jacobian:
+      return "zero or non-finite hybrid Jacobian";
+    case PreflightError::inverse_failed:
+      return "Newton iteration for the inverse reset did not converge";
+    case PreflightError::grazing:
+      return "grazing: the flow is tangent to the guard at a crossing";
+  }
+  return "?";
+}
+
+/// Tolerances of the pre-flight scan.
+struct PreflightOptions {
+  /// Grazing when |∇s·X| ≤ graze_tol·|∇s||X| at a crossing. Near a fold of S (where ∇s·X
+  /// changes sign) edge crossings have a ratio of order (grid spacing)/(scale), far above 1e-8
+  /// for every grid hybgen allows (≤ 2²⁸ nodes); only a tangency met to ~8 digits trips it.
+  double graze_tol = 1e-8;
+  /// Δ(x*) is on S_h when |s_h| ≤ surface_tol·|∇s_h|·diam(box): bisection leaves s_g(x*) at
+  /// rounding level, which Δ maps to O(ε·|DΔ|·scale), far below 1e-9.
+  double surface_tol = 1e-9;
+  int newton_max_iter = 50;   ///< As CharacteristicsOptions::newton_max_iter.
+  double newton_tol = 1e-14;  ///< As CharacteristicsOptions::newton_tol.
+};
+
+/// The first failure of the pre-flight scan, with where it happened.
+template <std::size_t N>
+struct PreflightFailure {
+  PreflightError error = PreflightError::none;  ///< What.
+  int mode = -1;                  ///< Mode of the node (density) or source mode (guards).
+  int guard = -1;                 ///< Guard scanned, or −1 for the density.
+  int other_guard = -1;           ///< The re-triggered guard (reset_retriggers), else −1.
+  std::array<double, N> state{};  ///< The grid node or the crossing point x*.
+  std::array<double, N> image{};  ///< Δ(x*) (reset errors), else unused.
+  double value = 0.0;             ///< u0, J or |∇s·X|/(|∇s||X|), whichever applies.
+  std::size_t node = 0;           ///< Flat index of the grid node (the edge's first node).
+  /// Whether nothing failed.
+  bool ok() const { return error == PreflightError::none; }
+};
+
+/// Grids smaller than this are scanned by one thread: the scan costs ~40–60 ns per node and
+/// guard (0.2 ms for 75×75), less than starting a thread team on a busy machine.
+inline constexpr std::size_t kPreflightParallelMin = std::size_t{1} << 18;
+
+namespace detail {
+
+/// Keeps the failure with the smallest index across threads.
+template <std::size_t N>
+struct FirstFailure {
+  std::atomic<std::size_t> index{std::numeric_limits<std::size_t>::max()};  ///< Its index.
+  PreflightFailure<N> failure{};                                            ///< The failure.
+  /// Whether index `i` can still improve on the recorded failure.
+  bool wanted(std::size_t i) const { return i < index.load(std::memory_order_relaxed); }
+  /// Record `f` found at index `i` if it comes first.
+  void offer(std::size_t i, const PreflightFailure<N>& f) {
+#pragma omp critical(hybgen_rt_preflight_failure)
+    {
+      if (i < index.load()) {
+        index.store(i);
+        failure = f;
+      }
+    }
+  }
+};
+
+/// One RK4 step of mode m's flow (sign +1 forward, −1 backward) of size h.
+template <HybridModel M>
+void rk4_step(int m, std::array<double, state_dim_v<M>>& x, double h, double sign,
+              const double* par) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> k1{}, k2{}, k3{}, k4{}, t{};
+  auto f = [&](const std::array<double, N>& y, std::array<double, N>& out) {
+    M::flow(m, y.data(), par, out.data());
+    for (double& v : out) v *= sign;
+  };
+  f(x, k1);
+  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + 0.5 * h * k1[i];
+  f(t, k2);
+  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + 0.5 * h * k2[i];
+  f(t, k3);
+  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + h * k3[i];
+  f(t, k4);
+  for (std::size_t i = 0; i < N; ++i) x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+}
+
+/// Whether the orbit of mode m through x (on S_g) passes from the pre-firing side of S_g to
+/// the firing side: s_g(φ_{−δ}x)·dir < 0 < s_g(φ_δ x)·dir, with δ|X| = 1e-3·diam (20 RK4
+/// steps each way; the sign of s at displacement 1e-3·diam is far above the steps' error).
+template <HybridModel M>
+bool orbit_crosses(int g, int m, const std::array<double, state_dim_v<M>>& x, double speed,
+                   double diam, const double* par) {
+  const int dir = guard_info<M>(static_cast<std::size_t>(g)).direction;
+  const double delta = 1e-3 * diam / speed;
+  constexpr int steps = 20;
+  std::array<double, state_dim_v<M>> fwd = x, bwd = x;
+  for (int k = 0; k < steps; ++k) {
+    rk4_step<M>(m, fwd, delta / steps, 1.0, par);
+    rk4_step<M>(m, bwd, delta / steps, -1.0, par);
+  }
+  const double after = M::guard_surface(g, fwd.data(), par) * dir;
+  const double before = M::guard_surface(g, bwd.data(), par) * dir;
+  return after > 0.0 && before < 0.0;
+}
+
+/// Newton for Δ_g(z) = y from z = y (as the characteristics' Tracer does).
+template <HybridModel M>
+bool newton_converges(int g, const std::array<double, state_dim_v<M>>& y, const double* par,
+                      const PreflightOptions& opt) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> z = y, r{};
+  std::array<double, N * N> A{};
+  for (int it = 0; it < opt.newton_max_iter; ++it) {
+    M::reset(g, z.data(), par, r.data());
+    for (std::size_t i = 0; i < N; ++i) r[i] -= y[i];
+    M::reset_jacobian(g, z.data(), par, A.data());
+    if (!solve_linear<N>(A, r)) return false;
+    double dz = 0.0, zn = 0.0;
+    for (std::size_t i = 0; i < N; ++i) {
+      z[i] -= r[i];
+      dz = std::max(dz, std::fabs(r[i]));
+      zn = std::max(zn, std::fabs(z[i]));
+    }
+    if (!std::isfinite(dz) || !std::isfinite(zn)) return false;
+    if (dz <= opt.newton_tol * (1.0 + zn)) return true;
+  }
+  return false;
+}
+
+/// All checks at a point x of S_g inside the support; returns the failure (ok() if none).
+template <HybridModel M>
+PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, state_dim_v<M>>& x,
+                                                const std::array<double, state_dim_v<M>>& lo,
+                                                const std::array<double, state_dim_v<M>>& hi,
+                                                double diam, const double* par,
+                                                const PreflightOptions& opt) {
+  constexpr std::size_t N = state_dim_v<M>;
+  const GuardInfo gi = guard_info<M>(static_cast<std::size_t>(g));
+  PreflightFailure<N> f;
+  f.guard = g;
+  f.mode = gi.from;
+  f.state = x;
+  auto fail = [&f](PreflightError e, double v) {
+    f.error = e;
+    f.value = v;
+    return f;
+  };
+  std::array<double, N> X{}, grad{};
+  M::flow(gi.from, x.data(), par, X.data());
+  const double div = M::divergence(gi.from, x.data(), par);
+  if (!all_finite(X) || !std::isfinite(div)) return fail(PreflightError::non_finite_flow, div);
+  M::guard_gradient(g, x.data(), par, grad.data());
+  const double rate = dot<N>(grad.data(), X.data());
+  const double gn = std::sqrt(dot<N>(grad.data(), grad.data()));
+  const double xn = std::sqrt(dot<N>(X.data(), X.data()));
+  if (!std::isfinite(rate)) return fail(PreflightError::non_finite_flow, rate);
+  // Grazing: tangent here, and the orbit crosses S_g in the firing direction.
+  if (xn > 0.0 && gn > 0.0 && std::fabs(rate) <= opt.graze_tol * gn * xn &&
+      orbit_crosses<M>(g, gi.from, x, xn, diam, par))
+    return fail(PreflightError::grazing, std::fabs(rate) / (gn * xn));
+  if (!(rate * gi.direction > 0.0)) return f;  // the guard does not fire here
+  std::array<double, N> y{};
+  M::reset(g, x.data(), par, y.data());
+  f.image = y;
+  if (!all_finite(y)) return fail(PreflightError::non_finite_reset, 0.0);
+  const double J = M::hybrid_jacobian(g, x.data(), par);
+  if (!std::isfinite(J) || J == 0.0) return fail(PreflightError::zero_jacobian, J);
+  if (!M::in_support(y.data(), par)) return fail(PreflightError::reset_outside_support, 0.0);
+  if (!in_box<N>(y.data(), lo, hi)) return fail(PreflightError::reset_outside_box, 0.0);
+  for (std::size_t h = 0; h < static_cast<std::size_t>(M::n_guard); ++h) {
+    const GuardInfo hi_ = guard_info<M>(h);
+    if (hi_.from != gi.to) continue;
+    const int hh = static_cast<int>(h);
+    std::array<double, N> gh{}, Xt{};
+    M::guard_gradient(hh, y.data(), par, gh.data());
+    const double ghn = std::sqrt(dot<N>(gh.data(), gh.data()));
+    if (!(std::fabs(M::guard_surface(hh, y.data(), par)) <= opt.surface_tol * ghn * diam)) continue;
+    M::flow(gi.to, y.data(), par, Xt.data());
+    if (dot<N>(gh.data(), Xt.data()) * hi_.direction > 0.0) {
+      f.other_guard = hh;
+      return fail(PreflightError::reset_retriggers, 0.0);
+    }
+  }
+  if (!gi.has_inverse && !newton_converges<M>(g, y, par, opt))
+    return fail(PreflightError::inverse_failed, 0.0);
+  return f;
+}
+
+}  // namespace detail
+
+/// Check u0 at every grid node in the support, for every mode: finite and ≥ 0. Returns the
+/// failure at the smallest (mode, node) index.
+template <HybridModel M>
+PreflightFailure<state_dim_v<M>> check_initial_density(const TensorGrid<state_dim_v<M>>& grid,
+                                                       const double* par) {
+  constexpr std::size_t N = state_dim_v<M>;
+  const std::size_t n = grid.size(), nm = static_cast<std::size_t>(M::n_mode);
+  const auto total = static_cast<long long>(n * nm);
+  detail::FirstFailure<N> first;
+#pragma omp parallel for schedule(static) if (n * nm >= kPreflightParallelMin)
+  for (long long idx = 0; idx < total; ++idx) {
+    const auto ui = static_cast<std::size_t>(idx);
+    if (!first.wanted(ui)) continue;
+    const std::size_t m = ui / n, i = ui % n;
+    const std::array<double, N> y = grid.node(i);
+    if (!M::in_support(y.data(), par)) continue;
+    const double u = M::initial_density(static_cast<int>(m), y.data(), par);
+    if (u >= 0.0 && std::isfinite(u)) continue;
+    PreflightFailure<N> f;
+    f.error =
+        std::isfinite(u) ? PreflightError::negative_density : PreflightError::non_finite_density;
+    f.mode = static_cast<int>(m);
+    f.state = y;
+    f.value = u;
+    f.node = i;
+    first.offer(ui, f);
+  }
+  return first.failure;
+}
+
+/// Scan guard g's crossing points on the grid edges (see the file comment). Returns the
+/// failure at the smallest node index (the edge's first node; per node, axes in order).
+template <HybridModel M>
+PreflightFailure<state_dim_v<M>> check_guard(int g, const TensorGrid<state_dim_v<M>>& grid,
+                                             const double* par, const PreflightOptions& opt = {}) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> lo{}, hi{};
+  std::array<std::size_t, N> stride{}, count{};
+  double diam = 0.0;
+  std::size_t s = 1;
+  for (std::size_t a = N; a-- > 0;) {
+    lo[a] = grid.axes[a].min;
+    hi[a] = grid.axes[a].max;
+    diam = std::max(diam, hi[a] - lo[a]);
+    count[a] = static_cast<std::size_t>(std::max(grid.axes[a].n, 1));
+    stride[a] = s;
+    s *= count[a];
+  }
+  const std::size_t n = grid.size();
+  detail::FirstFailure<N> first;
+#pragma omp parallel for schedule(dynamic, 256) if (n >= kPreflightParallelMin)
+  for (long long idx = 0; idx < static_cast<long long>(n); ++idx) {
+    const auto i = static_cast<std::size_t>(idx);
+    if (!first.wanted(i)) continue;
+    const std::array<double, N> y = grid.node(i);
+    const bool in_y = M::in_support(y.data(), par);
+    const double sy = M::guard_surface(g, y.data(), par);
+    if (in_y && !std::isfinite(sy)) {
+      PreflightFailure<N> f;
+      f.error = PreflightError::non_finite_guard;
+      f.guard = g;
+      f.mode = detail::guard_info<M>(static_cast<std::size_t>(g)).from;
+      f.state = y;
+      f.value = sy;
+      f.node = i;
+      first.offer(i, f);
+      continue;
+    }
+    if (in_y && sy == 0.0) {  // the node is on S_g
+      PreflightFailure<N> f = detail::check_crossing<M>(g, y, lo, hi, diam, par, opt);
+      if (!f.ok()) {
+        f.node = i;
+        first.offer(i, f);
+        continue;
+      }
+    }
+    if (!std::isfinite(sy) || sy == 0.0) continue;
+    for (std::size_t a = 0; a < N; ++a) {
+      if ((i / stride[a]) % count[a] + 1 >= count[a]) continue;  // last node on axis a
+      std::array<double, N> b = grid.node(i + stride[a]);
+      const double sb = M::guard_surface(g, b.data(), par);
+      if (!std::isfinite(sb) || sb == 0.0 || (sb < 0.0) == (sy < 0.0)) continue;
+      // Bisection on the edge [y, b] along axis a: s(lo_) has the sign of sy.
+      double l = y[a], r = b[a];
+      std::array<double, N> x = y;
+      for (int it = 0; it < 200; ++it) {
+        const double mid = 0.5 * (l + r);
+        if (mid <= l || mid >= r) break;
+        x[a] = mid;
+        const double sm = M::guard_surface(g, x.data(), par);
+        if (sm == 0.0) {
+          l = r = mid;
+          break;
+        }
+        if ((sm < 0.0) == (sy < 0.0))
+          l = mid;
+        else
+          r = mid;
+      }
+      // The end with the smaller |s| (both ends bracket the root to rounding).
+      x[a] = l;
+      const double sl = std::fabs(M::guard_surface(g, x.data(), par));
+      x[a] = r;
+      if (!(std::fabs(M::guard_surface(g, x.data(), par)) <= sl)) x[a] = l;
+      if (!M::in_support(x.data(), par)) continue;
+      PreflightFailure<N> f = detail::check_crossing<M>(g, x, lo, hi, diam, par, opt);
+      if (!f.ok()) {
+        f.node = i;
+        first.offer(i, f);
+        break;
+      }
+    }
+  }
+  return first.failure;
+}
+
+/// The whole pre-flight scan: the initial density, then every guard in order. Returns the
+/// first failure (ok() if none).
+template <HybridModel M>
+PreflightFailure<state_dim_v<M>> preflight(const TensorGrid<state_dim_v<M>>& grid,
+                                           const double* par, const PreflightOptions& opt = {}) {
+  PreflightFailure<state_dim_v<M>> f = check_initial_density<M>(grid, par);
+  for (int g = 0; g < M::n_guard && f.ok(); ++g) f = check_guard<M>(g, grid, par, opt);
+  return f;
+}
+
+/// One-line description of a pre-flight failure for an error message (exit code 3), e.g.
+/// "pre-flight scan of guard 'ground' at t = 0: the reset lands outside the domain (the grid
+/// box) at the crossing point (x = 0, p = -2) in mode 'flight': Delta = (x = 0, p = 3)".
+template <HybridModel M>
+std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::ostringstream os;
+  os << std::setprecision(17);
+  auto point = [&os](const std::array<double, N>& x) {
+    os << '(';
+    for (std::size_t i = 0; i < N; ++i) os << (i ? ", " : "") << M::state_names[i] << " = " << x[i];
+    os << ')';
+  };
+  auto mode_name = [](int m) -> const char* {
+    return m >= 0 && m < M::n_mode ? M::mode_names[static_cast<std::size_t>(m)] : "?";
+  };
+  auto guard_name = [](int g) -> const char* {
+    return g >= 0 && g < M::n_guard ? M::guard_names[static_cast<std::size_t>(g)] : "?";
+  };
+  if (f.guard < 0) {
+    os << "pre-flight scan of the initial density at t = 0: " << preflight_error_name(f.error)
+       << " u0 = " << f.value << " at the grid node ";
+    point(f.state);
+    os << " in mode '" << mode_name(f.mode) << "'";
+    return os.str();
+  }
+  os << "pre-flight scan of guard '" << guard_name(f.guard)
+     << "' at t = 0: " << preflight_error_name(f.error);
+  os << (f.error == PreflightError::non_finite_guard ? " at the grid node " : " at the point ");
+  point(f.state);
+  os << " of its surface in mode '" << mode_name(f.mode) << "'";
+  switch (f.error) {
+    case PreflightError::non_finite_guard:
+      os << ": s = " << f.value;
+      break;
+    case PreflightError::grazing:
+      os << ": |grad s . X| / (|grad s| |X|) = " << f.value
+         << ", and the orbit crosses the surface there";
+      break;
+    case PreflightError::zero_jacobian:
+      os << ": J = " << f.value;
+      break;
+    case PreflightError::non_finite_reset:
+    case PreflightError::reset_outside_support:
+    case PreflightError::reset_outside_box:
+    case PreflightError::inverse_failed:
+      os << ": Delta = ";
+      point(f.image);
+      break;
+    case PreflightError::reset_retriggers: {
+      const auto to = detail::guard_info<M>(static_cast<std::size_t>(f.guard)).to;
+      os << ": Delta = ";
+      point(f.image);
+      os << " is on guard '" << guard_name(f.other_guard) << "' of mode '" << mode_name(to)
+         << "', which fires there at once";
+      break;
+    }
+    default:
+      break;
+  }
+  return os.str();
+}
+
+}  // namespace hybgen::rt
