@@ -436,7 +436,7 @@ std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
          << ", and the orbit crosses the surface there";
       break;
     case PreflightError::zero_jacobian:
-      os << ": J = " << f.value;
+      os << ": J = " << f.value + 0.0;  // + 0.0: print -0 as 0
       break;
     case PreflightError::non_finite_reset:
     case PreflightError::reset_outside_support:
