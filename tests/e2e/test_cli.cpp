@@ -16,6 +16,7 @@
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/rt/npy.hpp"
 #include "support/ball_closed_form.hpp"
+#include "support/shell.hpp"
 
 namespace {
 
@@ -27,25 +28,14 @@ const std::string kExe = HYBGEN_EXE;
 const fs::path kWork = fs::path(HYBGEN_BINARY_DIR) / "e2e";
 const std::string kCache = (kWork / "cache").string();
 
-struct Result {
-  int code = -1;
-  std::string out;  // stdout + stderr
-};
+using Result = hybgen::testing::ShellResult;  // out: stdout (+ stderr where merged)
 
 /// Run hybgen with `args` from the source directory; capture all output.
 Result hybgen(const std::string& args) {
   fs::create_directories(kWork);
   std::string cmd =
       "cd '" + kSrc + "' && HYBGEN_CACHE='" + kCache + "' '" + kExe + "' " + args + " 2>&1";
-  Result r;
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  std::size_t got;
-  while ((got = std::fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, got);
-  int status = ::pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128;
-  return r;
+  return hybgen::testing::run_shell(cmd);
 }
 
 std::string write_model(const std::string& name, const std::string& text) {

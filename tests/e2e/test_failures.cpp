@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "hybgen/gen/fs.hpp"
+#include "support/shell.hpp"
 
 namespace {
 
@@ -32,10 +33,7 @@ const std::string kExe = HYBGEN_EXE;
 const fs::path kWork = fs::path(HYBGEN_BINARY_DIR) / "e2e_failures";
 const std::string kCache = (kWork / "cache").string();
 
-struct Result {
-  int code = -1;
-  std::string out;  // stdout + stderr
-};
+using Result = hybgen::testing::ShellResult;  // out: stdout (+ stderr where merged)
 
 /// Run `prefix hybgen args` (prefix: environment assignments or shell set-up ending in
 /// "&&" or a space) from the source directory with HYBGEN_CACHE = `cache`.
@@ -44,15 +42,7 @@ Result hybgen(const std::string& args, const std::string& prefix = "",
   fs::create_directories(kWork);
   const std::string cmd = "cd '" + kSrc + "' && " + prefix + " HYBGEN_CACHE='" + cache + "' '" +
                           kExe + "' " + args + " 2>&1";
-  Result r;
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  std::size_t got;
-  while ((got = std::fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, got);
-  const int status = ::pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128;
-  return r;
+  return hybgen::testing::run_shell(cmd);
 }
 
 /// A fresh (removed) output directory for test `name`, and its leftovers' siblings.

@@ -14,6 +14,7 @@
 
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/rt/npy.hpp"
+#include "support/shell.hpp"
 
 namespace {
 
@@ -25,26 +26,14 @@ const std::string kExe = HYBGEN_EXE;
 const fs::path kWork = fs::path(HYBGEN_BINARY_DIR) / "e2e_lie";
 const std::string kCache = (kWork / "cache").string();
 
-struct Result {
-  int code = -1;
-  std::string out;  // stdout + stderr
-  std::string stdout_only;
-};
+using Result = hybgen::testing::ShellResult;  // out: stdout (+ stderr where merged)
 
 /// Run hybgen with `args` from the source directory, with this test's own cache.
 Result hybgen(const std::string& args, bool merge = true) {
   fs::create_directories(kWork);
   const std::string cmd = "cd '" + kSrc + "' && HYBGEN_CACHE='" + kCache + "' '" + kExe + "' " +
                           args + (merge ? " 2>&1" : " 2>/dev/null");
-  Result r;
-  FILE* p = ::popen(cmd.c_str(), "r");
-  if (!p) return r;
-  char buf[4096];
-  std::size_t got;
-  while ((got = std::fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, got);
-  const int status = ::pclose(p);
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128;
-  return r;
+  return hybgen::testing::run_shell(cmd);
 }
 
 TEST(LieCli, CheckShippedLieModels) {
