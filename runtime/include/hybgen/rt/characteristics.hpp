@@ -238,6 +238,33 @@ inline GuardInfo guard_info(std::size_t g) {
   }
 }
 
+/// Δ_g⁻¹(y) by Newton's method on Δ_g(z) = y from z = y, into z: stops when
+/// ‖δz‖∞ ≤ tol·(1 + ‖z‖∞); false if the Jacobian is singular, a value is not finite, or
+/// `max_iter` iterations do not reach the tolerance.
+template <HybridModel M>
+bool newton_reset_inverse(int g, const double* y, const double* par, int max_iter, double tol,
+                          std::array<double, state_dim_v<M>>& z) {
+  constexpr std::size_t N = state_dim_v<M>;
+  for (std::size_t i = 0; i < N; ++i) z[i] = y[i];
+  std::array<double, N * N> A;
+  std::array<double, N> r;
+  for (int it = 0; it < max_iter; ++it) {
+    M::reset(g, z.data(), par, r.data());
+    for (std::size_t i = 0; i < N; ++i) r[i] -= y[i];
+    M::reset_jacobian(g, z.data(), par, A.data());
+    if (!solve_linear<N>(A, r)) return false;
+    double dz = 0.0, zn = 0.0;
+    for (std::size_t i = 0; i < N; ++i) {
+      z[i] -= r[i];
+      dz = std::max(dz, std::fabs(r[i]));
+      zn = std::max(zn, std::fabs(z[i]));
+    }
+    if (!std::isfinite(dz) || !std::isfinite(zn)) return false;
+    if (dz <= tol * (1.0 + zn)) return true;
+  }
+  return false;
+}
+
 /// Throws std::invalid_argument unless the output times are finite, ≥ 0 and sorted.
 inline void validate_times(std::span<const double> times) {
   for (std::size_t k = 0; k < times.size(); ++k) {
@@ -333,24 +360,7 @@ class Tracer {
   }
 
   bool newton_inverse(int g, const double* y, State& z) {
-    for (std::size_t i = 0; i < N; ++i) z[i] = y[i];
-    std::array<double, N * N> A;
-    State r;
-    for (int it = 0; it < opt_.newton_max_iter; ++it) {
-      M::reset(g, z.data(), par_, r.data());
-      for (std::size_t i = 0; i < N; ++i) r[i] -= y[i];
-      M::reset_jacobian(g, z.data(), par_, A.data());
-      if (!solve_linear<N>(A, r)) return false;
-      double dz = 0.0, zn = 0.0;
-      for (std::size_t i = 0; i < N; ++i) {
-        z[i] -= r[i];
-        dz = std::max(dz, std::fabs(r[i]));
-        zn = std::max(zn, std::fabs(z[i]));
-      }
-      if (!std::isfinite(dz) || !std::isfinite(zn)) return false;
-      if (dz <= opt_.newton_tol * (1.0 + zn)) return true;
-    }
-    return false;
+    return newton_reset_inverse<M>(g, y, par_, opt_.newton_max_iter, opt_.newton_tol, z);
   }
 
   bool reset_inverse(int g, const double* y, State& z) {

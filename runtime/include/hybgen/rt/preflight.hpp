@@ -185,28 +185,12 @@ bool orbit_crosses(int g, int m, const std::array<double, state_dim_v<M>>& x, do
   return after > 0.0 && before < 0.0;
 }
 
-/// Newton for Δ_g(z) = y from z = y (as the characteristics' Tracer does).
+/// Whether Newton for Δ_g(z) = y from z = y converges (the characteristics' Tracer's).
 template <HybridModel M>
 bool newton_converges(int g, const std::array<double, state_dim_v<M>>& y, const double* par,
                       const PreflightOptions& opt) {
-  constexpr std::size_t N = state_dim_v<M>;
-  std::array<double, N> z = y, r{};
-  std::array<double, N * N> A{};
-  for (int it = 0; it < opt.newton_max_iter; ++it) {
-    M::reset(g, z.data(), par, r.data());
-    for (std::size_t i = 0; i < N; ++i) r[i] -= y[i];
-    M::reset_jacobian(g, z.data(), par, A.data());
-    if (!solve_linear<N>(A, r)) return false;
-    double dz = 0.0, zn = 0.0;
-    for (std::size_t i = 0; i < N; ++i) {
-      z[i] -= r[i];
-      dz = std::max(dz, std::fabs(r[i]));
-      zn = std::max(zn, std::fabs(z[i]));
-    }
-    if (!std::isfinite(dz) || !std::isfinite(zn)) return false;
-    if (dz <= opt.newton_tol * (1.0 + zn)) return true;
-  }
-  return false;
+  std::array<double, state_dim_v<M>> z{};
+  return newton_reset_inverse<M>(g, y.data(), par, opt.newton_max_iter, opt.newton_tol, z);
 }
 
 /// All checks at a point x of S_g inside the support; returns the failure (ok() if none).
