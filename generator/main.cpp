@@ -34,8 +34,13 @@ using namespace hybgen::gen;
 using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
 
-/// Which system of a Lie-group model the subcommands work on (--unreduced).
-ReduceTarget g_target = ReduceTarget::Reduced;
+/// What every subcommand is asked to work on: the model file, its --set
+/// overrides and, for a Lie-group model, which system (--unreduced).
+struct Request {
+  std::string path;                             ///< The .model file.
+  std::vector<std::string> sets;                ///< --set KEY=VALUE, in order.
+  ReduceTarget target = ReduceTarget::Reduced;  ///< --unreduced: the twin on T*G.
+};
 
 /// The front half of the pipeline, shared by every subcommand.
 struct Frontend {
@@ -44,21 +49,20 @@ struct Frontend {
   HybridSystem sys;
   double seconds = 0;
 
-  Frontend(const std::string& path, const std::vector<std::string>& sets)
-      : src(SourceText::load(path)) {
+  explicit Frontend(const Request& req) : src(SourceText::load(req.path)) {
     const auto t0 = Clock::now();
     ModelAst ast = parse(src);  // stage 1: text -> AST
     if (is_lie_model(ast)) {
       LieModel lie = check_lie(ast, src);  // stage 2: AST -> LieModel
       const Watchdog watchdog(src.path(), lie.base.limits.derive_seconds * 1.5 + 5);
-      model = reduce(lie, src, g_target);  // reduce: LieModel -> Model (general kind)
+      model = reduce(lie, src, req.target);  // reduce: LieModel -> Model (general kind)
     } else {
-      if (g_target == ReduceTarget::Unreduced)
+      if (req.target == ReduceTarget::Unreduced)
         throw UsageError("--unreduced applies to Lie-group models only ('" + src.path() +
                          "' is a general model)");
       model = check(ast, src);  // stage 2: AST -> Model
     }
-    apply_overrides(model, sets);  //          --set KEY=VALUE
+    apply_overrides(model, req.sets);  //          --set KEY=VALUE
     {
       // A single GiNaC operation cannot be interrupted: past the derivation's
       // own budget (checked between operations) the watchdog ends the process
@@ -99,8 +103,8 @@ int run_process(const std::string& exe, const std::string& config) {
   return 70;
 }
 
-int cmd_check(const std::string& path, const std::vector<std::string>& sets) {
-  Frontend fe(path, sets);
+int cmd_check(const Request& req) {
+  Frontend fe(req);
   fe.print_warnings();
   std::cout << fe.src.path() << ": ok: model '" << fe.model.name << "', " << fe.model.state.size()
             << " states, " << fe.sys.modes.size() << " modes, " << fe.sys.guards.size()
@@ -108,9 +112,8 @@ int cmd_check(const std::string& path, const std::vector<std::string>& sets) {
   return 0;
 }
 
-int cmd_derive(const std::string& path, const std::vector<std::string>& sets,
-               const std::string& format) {
-  Frontend fe(path, sets);
+int cmd_derive(const Request& req, const std::string& format) {
+  Frontend fe(req);
   if (format == "json") {
     std::cout << derive_json(fe.sys).dump(2) << "\n";
   } else if (format == "latex") {
@@ -122,8 +125,8 @@ int cmd_derive(const std::string& path, const std::vector<std::string>& sets,
   return 0;
 }
 
-int cmd_generate(const std::string& path, const std::vector<std::string>& sets, std::string dir) {
-  Frontend fe(path, sets);
+int cmd_generate(const Request& req, std::string dir) {
+  Frontend fe(req);
   fe.print_warnings();
   GeneratedFiles files = emit(fe.sys);  // stage 4: IR -> sources
   if (dir.empty()) dir = "generated/" + fe.model.name;
@@ -152,9 +155,8 @@ BuildResult do_build(Frontend& fe, const std::string& cache, bool verbose, bool 
   return b;
 }
 
-int cmd_build(const std::string& path, const std::vector<std::string>& sets,
-              const std::string& cache, bool verbose) {
-  Frontend fe(path, sets);
+int cmd_build(const Request& req, const std::string& cache, bool verbose) {
+  Frontend fe(req);
   fe.print_warnings();
   BuildResult b = do_build(fe, cache, verbose, false);
   std::cout << b.executable << "\n";
@@ -216,9 +218,8 @@ void sync_directory(const fs::path& dir) {
 /// to OUT; only when it succeeds is the staging directory swapped into place (OUT →
 /// `OUT.old-<pid>`, staging → OUT, old removed). A failed run removes the staging directory
 /// and leaves OUT as it was. The lock `OUT.lock` serialises runs into the same OUT.
-int cmd_run(const std::string& path, const std::vector<std::string>& sets, std::string out,
-            const std::string& cache, bool quiet) {
-  Frontend fe(path, sets);
+int cmd_run(const Request& req, std::string out, const std::string& cache, bool quiet) {
+  Frontend fe(req);
   fe.print_warnings();
   const Model& m = fe.model;
   if (!m.sim.present)
@@ -403,13 +404,13 @@ int main(int argc, char** argv) {
     app.exit(e);
     return static_cast<int>(ExitCode::UsageError);
   }
-  if (unreduced) g_target = ReduceTarget::Unreduced;
+  const Request req{model, sets, unreduced ? ReduceTarget::Unreduced : ReduceTarget::Reduced};
   try {
-    if (*check) return cmd_check(model, sets);
-    if (*derive) return cmd_derive(model, sets, format);
-    if (*generate) return cmd_generate(model, sets, out);
-    if (*build) return cmd_build(model, sets, cache, verbose);
-    if (*run) return cmd_run(model, sets, out, cache, quiet);
+    if (*check) return cmd_check(req);
+    if (*derive) return cmd_derive(req, format);
+    if (*generate) return cmd_generate(req, out);
+    if (*build) return cmd_build(req, cache, verbose);
+    if (*run) return cmd_run(req, out, cache, quiet);
   } catch (const ModelError& e) {
     std::cerr << e.what() << "\n";
     return static_cast<int>(e.exit_code());
