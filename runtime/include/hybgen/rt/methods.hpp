@@ -114,13 +114,24 @@ inline TransferOptions transfer_options(const MethodSettings& s, double dt) {
   return o;
 }
 
-inline nlohmann::json operator_summary(const TransferOptions& o, std::size_t nnz, std::size_t rows,
-                                       double seconds) {
+/// The operator's part of summary.json: scheme, step, size, assembly time.
+template <std::size_t N>
+nlohmann::json operator_summary(const TransferOptions& o, const TransferOperator<N>& op) {
   return {{"scheme", o.scheme == TransferScheme::conservative ? "conservative" : "interpolate"},
           {"step", o.step},
-          {"rows", rows},
-          {"nonzeros", nnz},
-          {"assembly_seconds", seconds}};
+          {"rows", op.size()},
+          {"nonzeros", static_cast<std::size_t>(op.P.nonZeros())},
+          {"assembly_seconds", op.seconds}};
+}
+
+/// Whether the assembly failed; if so, r carries the failure and the time spent.
+template <std::size_t N>
+bool assembly_failed(const TransferOperator<N>& op, MethodResult<N>& r,
+                     MethodClock::time_point t0) {
+  if (op.ok()) return false;
+  r.failure = "(assembling the transfer operator) " + op.failure_message;
+  r.solve_s = seconds_since(t0);
+  return true;
 }
 
 /// Assemble the transfer operator of M with a progress bar over its rows.
@@ -207,11 +218,7 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   for (const double t : times) (void)steps_to(t, o.step);  // throws: not a multiple of h
   const auto t0 = detail::MethodClock::now();
   const TransferOperator<N> op = detail::assemble<M>(grid, par, o, s.quiet);
-  if (!op.ok()) {
-    r.failure = "(assembling the transfer operator) " + op.failure_message;
-    r.solve_s = detail::seconds_since(t0);
-    return r;
-  }
+  if (detail::assembly_failed(op, r, t0)) return r;
   const std::vector<double> u0 = initial_vector<M>(grid, par);
   Progress progress("transfer operator: march",
                     static_cast<std::size_t>(times.empty() ? 0 : steps_to(times.back(), o.step)),
@@ -221,8 +228,7 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   r.solve_s = detail::seconds_since(t0);
   r.solution = std::move(run.solution);
   r.budget = std::move(run.budget);
-  nlohmann::json t =
-      detail::operator_summary(o, static_cast<std::size_t>(op.P.nonZeros()), op.size(), op.seconds);
+  nlohmann::json t = detail::operator_summary(o, op);
   t["steps"] = run.n_steps;
   t["march_seconds"] = run.seconds;
   if (o.scheme == TransferScheme::interpolate)
@@ -243,11 +249,7 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   const TransferOptions o = detail::transfer_options(s, dt);
   const auto t0 = detail::MethodClock::now();
   const TransferOperator<N> op = detail::assemble<M>(grid, par, o, s.quiet);
-  if (!op.ok()) {
-    r.failure = "(assembling the transfer operator) " + op.failure_message;
-    r.solve_s = detail::seconds_since(t0);
-    return r;
-  }
+  if (detail::assembly_failed(op, r, t0)) return r;
   InvariantOptions io;
   io.n_eigen = std::max(2, s.eigenvalues);
   const InvariantResult inv = invariant_density(op, io);
@@ -260,8 +262,7 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   nlohmann::json eig = nlohmann::json::array();
   for (const auto& l : inv.eigenvalues)
     eig.push_back({{"re", l.real()}, {"im", l.imag()}, {"abs", std::abs(l)}});
-  nlohmann::json j =
-      detail::operator_summary(o, static_cast<std::size_t>(op.P.nonZeros()), op.size(), op.seconds);
+  nlohmann::json j = detail::operator_summary(o, op);
   j["file"] = "invariant.npy";
   j["eigenvalues"] = eig;
   j["spectral_gap"] = inv.gap;
