@@ -210,37 +210,7 @@ TEST(AdaptiveBudget, SmoothSpiralClosesTightly) {
 //   A: x' = +1, guard "up" A → B at x = 1 (increasing); B: x' = −2, guard "down" B → A at
 //   x = −1 (decreasing). u jumps where histories are cut; the faces are points (D = 0).
 
-struct TwoMode1D {
-  static constexpr int n_state = 1, n_param = 0, n_mode = 2, n_guard = 2;
-  static constexpr const char* name = "two_mode";
-  static constexpr std::array<const char*, 1> state_names{"x"};
-  static constexpr std::array<const char*, 0> param_names{};
-  static constexpr std::array<double, 0> param_defaults{};
-  static constexpr std::array<const char*, 2> mode_names{"A", "B"};
-  static constexpr std::array<const char*, 2> guard_names{"up", "down"};
-  static constexpr std::array<rt::GuardInfo, 2> guards{rt::GuardInfo{0, 1, 1, true},
-                                                       rt::GuardInfo{1, 0, -1, true}};
-  static void flow(int m, const double*, const double*, double* out) {
-    out[0] = m == 0 ? 1.0 : -2.0;
-  }
-  static double divergence(int, const double*, const double*) { return 0.0; }
-  static double guard_surface(int g, const double* x, const double*) {
-    return g == 0 ? x[0] - 1.0 : x[0] + 1.0;
-  }
-  static void guard_gradient(int, const double*, const double*, double* out) { out[0] = 1.0; }
-  static void reset(int, const double* x, const double*, double* out) { out[0] = x[0]; }
-  static void reset_inverse(int, const double* x, const double*, double* out) { out[0] = x[0]; }
-  static void reset_jacobian(int, const double*, const double*, double* out) { out[0] = 1.0; }
-  static double hybrid_jacobian(int g, const double*, const double*) {
-    return g == 0 ? -2.0 : -0.5;
-  }
-  static double initial_density(int m, const double* x, const double*) {
-    return m == 0 ? std::exp(-4.0 * (x[0] - 0.5) * (x[0] - 0.5))
-                  : 0.5 * std::exp(-4.0 * (x[0] + 0.2) * (x[0] + 0.2));
-  }
-  static bool in_support(const double*, const double*) { return true; }
-};
-static_assert(rt::HybridModel<TwoMode1D>);
+using TwoMode1D = rt::testing::TwoModeLine;
 
 TEST(AdaptiveBudget, TwoModeLineCloses) {
   rt::TensorGrid<1> box;

@@ -27,6 +27,7 @@ using hybgen::testing::ball_exact_elastic;
 using hybgen::testing::ball_u0;
 using hybgen::testing::zeno_mass;
 using P2 = std::array<double, 2>;
+using TwoMode1D = rt::testing::TwoModeLine;
 
 // ---------------------------------------------------------------------------------------
 // Closed forms of the bouncing ball (parameters m, g, e).
@@ -300,38 +301,6 @@ TEST(Characteristics, DivergenceFactor) {
 //   mode B, x(τ) = x + 2τ: symmetric, kill at −1 (from x < −1), reset branch at +1 with
 //     weight 1/|J0| = 1/2 (from x ≤ 1).
 // A single-path method (dropping the straight continuation at a reset image) fails here.
-
-struct TwoMode1D {
-  static constexpr int n_state = 1, n_param = 0, n_mode = 2, n_guard = 2;
-  static constexpr const char* name = "two_mode";
-  static constexpr std::array<const char*, 1> state_names{"x"};
-  static constexpr std::array<const char*, 0> param_names{};
-  static constexpr std::array<double, 0> param_defaults{};
-  static constexpr std::array<const char*, 2> mode_names{"A", "B"};
-  static constexpr std::array<const char*, 2> guard_names{"up", "down"};
-  static constexpr std::array<rt::GuardInfo, 2> guards{rt::GuardInfo{0, 1, 1, true},
-                                                       rt::GuardInfo{1, 0, -1, true}};
-  static void flow(int m, const double*, const double*, double* out) {
-    out[0] = m == 0 ? 1.0 : -2.0;
-  }
-  static double divergence(int, const double*, const double*) { return 0.0; }
-  static double guard_surface(int g, const double* x, const double*) {
-    return g == 0 ? x[0] - 1.0 : x[0] + 1.0;
-  }
-  static void guard_gradient(int, const double*, const double*, double* out) { out[0] = 1.0; }
-  static void reset(int, const double* x, const double*, double* out) { out[0] = x[0]; }
-  static void reset_inverse(int, const double* x, const double*, double* out) { out[0] = x[0]; }
-  static void reset_jacobian(int, const double*, const double*, double* out) { out[0] = 1.0; }
-  static double hybrid_jacobian(int g, const double*, const double*) {
-    return g == 0 ? -2.0 : -0.5;
-  }
-  static double initial_density(int m, const double* x, const double*) {
-    return m == 0 ? std::exp(-4.0 * (x[0] - 0.5) * (x[0] - 0.5))
-                  : 0.5 * std::exp(-4.0 * (x[0] + 0.2) * (x[0] + 0.2));
-  }
-  static bool in_support(const double*, const double*) { return true; }
-};
-static_assert(rt::HybridModel<TwoMode1D>);
 
 double two_mode_exact(int mode, double x, double T) {
   const double inf = std::numeric_limits<double>::infinity();
