@@ -289,6 +289,20 @@ void validate_grid(const TensorGrid<N>& grid, std::size_t n_mode) {
     throw std::length_error("transfer: more than 2^31 unknowns (int32 CSR indices)");
 }
 
+/// An operator without entries: its grid, modes, step, scheme and quadrature weights.
+template <std::size_t N>
+TransferOperator<N> empty_operator(const TensorGrid<N>& grid, int n_mode, double step,
+                                   TransferScheme scheme) {
+  TransferOperator<N> op;
+  op.grid = grid;
+  op.n_mode = static_cast<std::size_t>(n_mode);
+  op.n_node = grid.size();
+  op.step = step;
+  op.scheme = scheme;
+  op.weight = trapezoid_weights(grid, op.n_mode);
+  return op;
+}
+
 /// The interpolating operator (see the file comment). Rows in parallel, dynamic schedule
 /// (traces differ in cost: a reset costs an event location), per-thread row blocks.
 template <HybridModel M>
@@ -298,13 +312,8 @@ TransferOperator<state_dim_v<M>> assemble_interpolating(const TensorGrid<state_d
   constexpr std::size_t N = state_dim_v<M>;
   constexpr std::size_t C = std::size_t{1} << N;
   using State = std::array<double, N>;
-  TransferOperator<N> op;
-  op.grid = grid;
-  op.n_mode = static_cast<std::size_t>(M::n_mode);
-  op.n_node = grid.size();
-  op.step = opt.step;
-  op.scheme = TransferScheme::interpolate;
-  op.weight = trapezoid_weights(grid, op.n_mode);
+  TransferOperator<N> op =
+      empty_operator<N>(grid, M::n_mode, opt.step, TransferScheme::interpolate);
   const auto R = static_cast<std::int64_t>(op.size());
   const auto nn = static_cast<std::int64_t>(op.n_node);
   int threads = 1;
@@ -375,13 +384,8 @@ TransferOperator<state_dim_v<M>> assemble_conservative(const TensorGrid<state_di
                                                        const TransferOptions& opt) {
   constexpr std::size_t N = state_dim_v<M>;
   using State = std::array<double, N>;
-  TransferOperator<N> op;
-  op.grid = grid;
-  op.n_mode = static_cast<std::size_t>(M::n_mode);
-  op.n_node = grid.size();
-  op.step = opt.step;
-  op.scheme = TransferScheme::conservative;
-  op.weight = trapezoid_weights(grid, op.n_mode);
+  TransferOperator<N> op =
+      empty_operator<N>(grid, M::n_mode, opt.step, TransferScheme::conservative);
   const auto R = static_cast<std::int64_t>(op.size());
   const auto nn = static_cast<std::int64_t>(op.n_node);
   op.outflow.assign(static_cast<std::size_t>(R), 0.0);
