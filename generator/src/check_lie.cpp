@@ -66,9 +66,83 @@ ExprPtr zero_at(SourceLoc loc) {
   return z;
 }
 
+/// The Lie algebra of `group NAME = algebra(E1, ..., En) { [Ei, Ej] = EXPR, ... }`:
+/// each EXPR must be a linear combination Σ_k C_ij^k E_k of the basis names with
+/// coefficients in the parameters; unlisted brackets are 0, [E_j, E_i] = −[E_i, E_j]
+/// is implied, and a bracket given twice (in either order) is an error.
+/// from_structure_constants then checks antisymmetry and Jacobi (LieError).
+LieAlgebra algebra_of_brackets(const GroupDecl& gd, const std::map<std::string, ex>& params,
+                               const std::map<std::string, ex>& names, const SourceText& src) {
+  const std::size_t n = gd.basis.size();
+  // The Jacobi check is O(n⁵): the same bound as gl(N ≤ 6), dimension 36.
+  constexpr std::size_t kMaxBasis = 36;
+  if (n > kMaxBasis)
+    throw src.error(gd.basis[kMaxBasis].loc,
+                    "a Lie algebra given by structure constants is limited to " +
+                        std::to_string(kMaxBasis) + " basis elements (the dimension of gl(6))");
+  std::map<std::string, ex> scope = params;
+  std::map<std::string, std::size_t> index;
+  std::vector<ex> e;
+  std::vector<std::string> basis;
+  for (const auto& b : gd.basis) {
+    if (names.count(b.name) || b.name == "pi" || b.name == gd.name.name)
+      throw src.error(b.loc, "the basis element '" + b.name +
+                                 "' clashes with a parameter, a momentum, q or the group's name");
+    if (!index.emplace(b.name, e.size()).second)
+      throw src.error(b.loc, "basis element '" + b.name + "' is given twice");
+    e.push_back(GiNaC::realsymbol(b.name));
+    scope[b.name] = e.back();
+    basis.push_back(b.name);
+  }
+  std::vector<std::vector<std::vector<ex>>> c(
+      n, std::vector<std::vector<ex>>(n, std::vector<ex>(n, ex(0))));
+  std::map<std::pair<std::size_t, std::size_t>, SourceLoc> given;
+  for (const auto& br : gd.brackets) {
+    auto idx = [&](const Name& nm) {
+      const auto it = index.find(nm.name);
+      if (it == index.end())
+        throw src.error(nm.loc,
+                        "'" + nm.name + "' is not a basis element of group '" + gd.name.name + "'");
+      return it->second;
+    };
+    const std::size_t i = idx(br.left), j = idx(br.right);
+    const std::string what = "[" + br.left.name + ", " + br.right.name + "]";
+    const std::pair<std::size_t, std::size_t> key{std::min(i, j), std::max(i, j)};
+    if (const auto it = given.find(key); it != given.end())
+      throw src.error(
+          br.loc, "the bracket " + what + " is given twice (first at " + loc_str(it->second) + ")");
+    given.emplace(key, br.loc);
+    const ex v = detail::convert_expression(src, scope, "the bracket " + what, br.value).expand();
+    ex rest = v;
+    for (std::size_t k = 0; k < n; ++k) {
+      const ex coeff = v.diff(GiNaC::ex_to<GiNaC::symbol>(e[k]));
+      bool constant = true;
+      for (const auto& ek : e) constant = constant && !coeff.has(ek);
+      if (!constant)
+        throw src.error(br.value->loc, "the bracket " + what +
+                                           " must be a linear combination of the basis "
+                                           "elements with constant coefficients");
+      c[i][j][k] = coeff;
+      c[j][i][k] = -coeff;
+      rest -= coeff * e[k];
+    }
+    if (!rest.expand().is_zero())
+      throw src.error(br.value->loc, "the bracket " + what +
+                                         " must be a linear combination of the basis elements "
+                                         "(it has a constant term)");
+    if (i == j) {
+      bool zero_bracket = true;
+      for (std::size_t k = 0; k < n; ++k) zero_bracket = zero_bracket && c[i][i][k].is_zero();
+      if (!zero_bracket)
+        throw src.error(br.loc, "the bracket " + what + " of an element with itself must be 0");
+    }
+  }
+  return LieAlgebra::from_structure_constants(c, basis);
+}
+
 SourceLoc first_lie_loc(const LieDecl& lie) {
-  for (SourceLoc l :
-       {lie.group.loc, lie.momenta_loc, lie.hamiltonian_loc, lie.inertia_loc, lie.reduced_loc})
+  for (SourceLoc l : {lie.group.loc, lie.momenta_loc, lie.hamiltonian_loc, lie.inertia_loc,
+                      lie.metric_loc, lie.reduced_loc})
     if (l.line != 0) return l;
   return {1, 1};
 }
@@ -107,19 +181,25 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
   if (constrained && lie.velocities.empty())
     throw src.error(lie.constraints.front().loc,
                     "constraints need the body velocities: write 'velocities v1, ..., vN'");
-  if (constrained && !lie.inertia)
+  if (constrained && !lie.inertia && !lie.metric)
     throw src.error(lie.velocities_loc,
                     "a constrained model gives its kinetic energy by 'inertia [[...]]' (the "
-                    "metric at the identity)");
-  if (!lie.hamiltonian && !lie.inertia)
+                    "metric at the identity) or 'metric [[...]]' (in the coordinates)");
+  if (!lie.hamiltonian && !lie.inertia && !lie.metric)
     throw src.error(lie.group.loc,
-                    "a Lie-group model needs a Hamiltonian h(zeta) ('hamiltonian EXPR') or "
-                    "an inertia at the identity ('inertia [[...]]')");
+                    "a Lie-group model needs a Hamiltonian h(zeta) ('hamiltonian EXPR'), "
+                    "an inertia at the identity ('inertia [[...]]') or a metric in the "
+                    "coordinates ('metric [[...]]')");
   if (lie.hamiltonian && lie.inertia)
     throw src.error(lie.inertia_loc,
                     "give either 'hamiltonian' or 'inertia', not both (the "
                     "Hamiltonian is at " +
                         loc_str(lie.hamiltonian_loc) + ")");
+  if (lie.metric && (lie.hamiltonian || lie.inertia))
+    throw src.error(lie.metric_loc,
+                    "give one of 'hamiltonian', 'inertia' and 'metric', not two (the " +
+                        std::string(lie.hamiltonian ? "Hamiltonian" : "inertia") + " is at " +
+                        loc_str(lie.hamiltonian ? lie.hamiltonian_loc : lie.inertia_loc) + ")");
   if (!lie.reduced)
     throw src.error(lie.group.loc,
                     "a Lie-group model needs its reduced coordinate: write 'reduced q = "
@@ -196,9 +276,11 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
                                "group's name");
     coord_names.push_back(name);
   };
-  std::optional<MatrixGroup> group;
+  std::optional<LieGroup> group;
   try {
-    if (!gd.shortcut.empty()) {
+    if (gd.shortcut == "algebra") {
+      group.emplace(algebra_of_brackets(gd, params, names, src));
+    } else if (!gd.shortcut.empty()) {
       if (gd.shortcut_n > 6) throw src.error(gd.loc, "gl(N) is limited to N <= 6");
       std::string prefix(1, static_cast<char>(std::tolower(static_cast<unsigned char>(gname[0]))));
       group.emplace(MatrixGroup::gl(static_cast<unsigned>(gd.shortcut_n), prefix));
@@ -243,7 +325,7 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
         c0.push_back(detail::convert_expression(src, params, "the identity point", v));
       std::vector<std::string> basis;
       for (const auto& c : gd.coordinates) basis.push_back("E_" + c.name);
-      group.emplace(g, coords, c0, basis);
+      group.emplace(MatrixGroup(g, coords, c0, basis));
     }
   } catch (const LieError& e) {
     throw hypothesis_error(src, gd.loc, e);
@@ -258,7 +340,8 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
   // Scope with coordinates and det(G).
   std::map<std::string, ex> all = names;
   for (std::size_t i = 0; i < coord_names.size(); ++i) all[coord_names[i]] = group->coords()[i];
-  all[det_name(gname)] = GiNaC::determinant(group->g());
+  if (group->has_coordinates())
+    all[det_name(gname)] = GiNaC::determinant(group->matrix_group().g());
 
   // h(ζ): the Hamiltonian restricted to 𝔤* (left-invariant by construction);
   // a coordinate in it means H was not given at the identity.
@@ -270,21 +353,54 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
     h = detail::convert_expression(src, all, "the Hamiltonian h(zeta)",
                                    rewrite_det(lie.hamiltonian, gname));
   } else {
-    hloc = lie.inertia_loc;
-    const auto& rows = lie.inertia->rows;
-    if (rows.size() != n)
-      throw src.error(lie.inertia->loc, "the inertia must be " + std::to_string(n) + "x" +
-                                            std::to_string(n) + " (one row per momentum)");
-    inertia = GiNaC::matrix(static_cast<unsigned>(n), static_cast<unsigned>(n));
-    for (std::size_t row = 0; row < n; ++row) {
-      if (rows[row].size() != n)
-        throw src.error(rows[row].front()->loc, "row " + std::to_string(row + 1) +
-                                                    " of the inertia has " +
-                                                    std::to_string(rows[row].size()) +
-                                                    " entries, expected " + std::to_string(n));
-      for (std::size_t c = 0; c < n; ++c)
-        inertia(static_cast<unsigned>(row), static_cast<unsigned>(c)) =
-            detail::convert_expression(src, params, "the inertia", rows[row][c]);
+    // An n×n matrix literal with the names of `scope` visible.
+    auto square = [&](const MatrixLiteral& lit, const std::map<std::string, ex>& scope,
+                      const std::string& what, const std::string& rows_are) {
+      const auto& rows = lit.rows;
+      if (rows.size() != n)
+        throw src.error(lit.loc, "the " + what + " must be " + std::to_string(n) + "x" +
+                                     std::to_string(n) + " (one row per " + rows_are + ")");
+      GiNaC::matrix m(static_cast<unsigned>(n), static_cast<unsigned>(n));
+      for (std::size_t row = 0; row < n; ++row) {
+        if (rows[row].size() != n)
+          throw src.error(rows[row].front()->loc, "row " + std::to_string(row + 1) + " of the " +
+                                                      what + " has " +
+                                                      std::to_string(rows[row].size()) +
+                                                      " entries, expected " + std::to_string(n));
+        for (std::size_t c = 0; c < n; ++c)
+          m(static_cast<unsigned>(row), static_cast<unsigned>(c)) =
+              detail::convert_expression(src, scope, "the " + what, rows[row][c]);
+      }
+      return m;
+    };
+    if (lie.inertia) {
+      hloc = lie.inertia_loc;
+      inertia = square(*lie.inertia, params, "inertia", "momentum");
+    } else {
+      // A metric M(c) in the coordinates: left-invariant iff I = Lᵀ M L is
+      // constant; then it is the inertia I(c0).
+      hloc = lie.metric_loc;
+      if (!group->has_coordinates())
+        throw src.error(lie.metric_loc,
+                        "a metric in coordinates needs a group with coordinates; group '" + gname +
+                            "' is given by structure constants (give 'inertia [[...]]', the "
+                            "metric at the identity)");
+      std::map<std::string, ex> cscope = params;
+      for (std::size_t i = 0; i < coord_names.size(); ++i)
+        cscope[coord_names[i]] = group->coords()[i];
+      const GiNaC::matrix metric = square(*lie.metric, cscope, "metric", "coordinate");
+      for (unsigned i = 0; i < n; ++i)
+        for (unsigned j = i + 1; j < n; ++j)
+          if (!is_identically_zero((metric(i, j) - metric(j, i)).expand(), {}))
+            throw src.error(lie.metric->rows[i][j]->loc,
+                            "the metric must be symmetric: entry (" + std::to_string(i + 1) + ", " +
+                                std::to_string(j + 1) + ") differs from entry (" +
+                                std::to_string(j + 1) + ", " + std::to_string(i + 1) + ")");
+      try {
+        inertia = left_invariant_inertia(group->matrix_group(), metric);
+      } catch (const LieError& e) {
+        throw hypothesis_error(src, hloc, e);
+      }
     }
     if (!constrained) {
       try {
@@ -338,6 +454,34 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
     throw src.error(hloc, "the Hamiltonian h(zeta) cannot depend on the reduced coordinate " +
                               lie.reduced->name);
 
+  if (!group->has_coordinates()) {
+    // q = φ(g) or φ(g) − 1 with φ given by dφ_e: `additive(...)`, `multiplicative(...)`.
+    const ExprPtr& r = lie.reduced_expr;
+    const bool form =
+        r->kind == Expr::Kind::Call && (r->text == "additive" || r->text == "multiplicative");
+    if (!form)
+      throw src.error(r->loc,
+                      "group '" + gname +
+                          "' has no coordinates (it is given by structure constants): write "
+                          "'reduced " +
+                          lie.reduced->name + " = additive(l1, ..., l" + std::to_string(n) +
+                          ")' (phi: G -> R or S^1, q = phi(g)) or 'multiplicative(...)' (phi: "
+                          "G -> R*, q = phi(g) - 1), the components of dphi_e in the dual basis");
+    if (r->args.size() != n)
+      throw src.error(r->loc, "'" + r->text + "' needs the " + std::to_string(n) +
+                                  " components of dphi_e (one per basis element), not " +
+                                  std::to_string(r->args.size()));
+    Components dphi;
+    for (const auto& a : r->args)
+      dphi.push_back(detail::convert_expression(src, params, "a component of dphi_e", a));
+    const HomomorphismKind kind =
+        r->text == "additive" ? HomomorphismKind::Additive : HomomorphismKind::Multiplicative;
+    return LieModel{
+        std::move(base),    gname,   std::move(*group), coord_names, h,    ex(0),
+        std::move(impacts), xi_of_w, inertia,           gd.loc,      hloc, lie.reduced_loc,
+        std::move(dphi),    kind};
+  }
+
   // q = φ(g) − c in the coordinates.
   const ex q_expr = detail::convert_expression(src, all, "the reduced coordinate",
                                                rewrite_det(lie.reduced_expr, gname));
@@ -355,8 +499,20 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
                       "depend on '" +
                           z.first + "'");
 
-  LieModel lm{std::move(base),    gname,   std::move(*group), coord_names, h,    q_expr,
-              std::move(impacts), xi_of_w, inertia,           gd.loc,      hloc, lie.reduced_loc};
+  LieModel lm{std::move(base),
+              gname,
+              std::move(*group),
+              coord_names,
+              h,
+              q_expr,
+              std::move(impacts),
+              xi_of_w,
+              inertia,
+              gd.loc,
+              hloc,
+              lie.reduced_loc,
+              {},
+              HomomorphismKind::Additive};
   return lm;
 }
 

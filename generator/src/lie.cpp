@@ -425,6 +425,51 @@ ex MatrixGroup::at_identity(const ex& e) const {
   return e.subs(at);
 }
 
+LieGroup::LieGroup(MatrixGroup group) : matrix_(std::move(group)) {}
+
+LieGroup::LieGroup(LieAlgebra algebra) : algebra_(std::move(algebra)) {}
+
+const LieAlgebra& LieGroup::algebra() const {
+  return matrix_ ? matrix_->algebra() : *algebra_;
+}
+
+const MatrixGroup& LieGroup::matrix_group() const {
+  if (!matrix_) throw InternalError("a group given by structure constants has no coordinates");
+  return *matrix_;
+}
+
+const std::vector<ex>& LieGroup::coords() const {
+  static const std::vector<ex> none;
+  return matrix_ ? matrix_->coords() : none;
+}
+
+const matrix& LieGroup::left_trivialization() const {
+  return matrix_group().left_trivialization();
+}
+
+matrix left_invariant_inertia(const MatrixGroup& group, const matrix& metric) {
+  const auto n = static_cast<unsigned>(group.coords().size());
+  if (metric.rows() != n || metric.cols() != n)
+    throw InternalError("left_invariant_inertia: the metric must be n×n");
+  const matrix& L = group.left_trivialization();
+  const matrix body = L.transpose().mul(metric).mul(L);
+  matrix out(n, n);
+  for (unsigned i = 0; i < n; ++i)
+    for (unsigned j = 0; j < n; ++j) {
+      const ex e = body(i, j);
+      for (unsigned k = 0; k < n; ++k)
+        if (!zero(e.diff(as_symbol(group.coords()[k]))))
+          throw LieError("left_invariant",
+                         "the metric is not left-invariant: the body inertia I = L^T M L has "
+                         "I_" +
+                             std::to_string(i + 1) + std::to_string(j + 1) + " = " +
+                             str(simplify(e)) + ", which depends on the coordinate " +
+                             str(group.coords()[k]) + " (I must be constant)");
+      out(i, j) = simplify(group.at_identity(e));
+    }
+  return out;
+}
+
 // -------------------------------------------------------------- Lie–Poisson
 
 std::vector<ex> make_symbols(unsigned n, const std::string& prefix) {
@@ -608,6 +653,19 @@ QEquation q_equation(const MatrixGroup& group, const ex& phi, const ex& level, c
                      std::string(" and not only on (ζ, q): the level sets of φ = ") + str(phi) +
                      " are not cosets of a normal subgroup (φ is not a homomorphism "
                      "to ℝ, ℝ* or S¹)");
+}
+
+QEquation q_equation_of_form(HomomorphismKind kind, const Components& dphi_e, const Components& xi,
+                             const ex& q) {
+  if (xi.size() != dphi_e.size())
+    throw LieError("lie_algebra", "ζ^♯ has the wrong number of components");
+  QEquation out;
+  out.kind = kind;
+  out.dphi_e = dphi_e;
+  ex rate = 0;
+  for (std::size_t i = 0; i < xi.size(); ++i) rate += dphi_e[i] * xi[i];
+  out.q_dot = simplify(kind == HomomorphismKind::Multiplicative ? (q + 1) * rate : rate);
+  return out;
 }
 
 // ----------------------------------------------------------- momentum jump

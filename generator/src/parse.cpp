@@ -31,7 +31,7 @@ constexpr long kMaxGridCount = 100000000;
 /// The statement keywords (used to explain a missing '}').
 constexpr std::string_view kStatementKeywords[] = {
     "model",   "parameter", "state",   "mode",        "guard",      "simulation", "group",
-    "momenta", "inertia",   "reduced", "hamiltonian", "velocities", "constraint"};
+    "momenta", "inertia",   "reduced", "hamiltonian", "velocities", "constraint", "metric"};
 
 bool is_digit(char c) {
   return c >= '0' && c <= '9';
@@ -379,18 +379,19 @@ class Parser {
     if (t.text == "guard") return parse_guard_statement(ast);
     if (t.text == "simulation") return parse_simulation_statement(ast);
     if (t.text == "group" || t.text == "momenta" || t.text == "hamiltonian" ||
-        t.text == "inertia" || t.text == "reduced" || t.text == "velocities" ||
-        t.text == "constraint")
+        t.text == "inertia" || t.text == "metric" || t.text == "reduced" ||
+        t.text == "velocities" || t.text == "constraint")
       return parse_lie_statement(ast);
     fail(t.loc, "unknown statement '" + shorten(t.text) +
                     "' (expected model, parameter, state, mode, guard or simulation), or in a "
-                    "Lie-group model group, momenta, hamiltonian, inertia or reduced");
+                    "Lie-group model group, momenta, hamiltonian, inertia, metric or reduced");
   }
 
   // lie_statement := 'group' IDENT group_def
   //                | 'momenta' IDENT { ',' IDENT }
   //                | 'hamiltonian' expr
   //                | 'inertia' matrix
+  //                | 'metric' matrix
   //                | 'reduced' IDENT '=' expr
   //                | 'velocities' IDENT { ',' IDENT }
   //                | 'constraint' IDENT '=' expr
@@ -428,6 +429,10 @@ class Parser {
       if (lie.inertia) twice(lie.inertia_loc);
       lie.inertia_loc = kw.loc;
       lie.inertia = parse_matrix("after 'inertia'");
+    } else if (kw.text == "metric") {
+      if (lie.metric) twice(lie.metric_loc);
+      lie.metric_loc = kw.loc;
+      lie.metric = parse_matrix("after 'metric'");
     } else {
       if (lie.reduced) twice(lie.reduced_loc);
       lie.reduced_loc = kw.loc;
@@ -438,7 +443,13 @@ class Parser {
   }
 
   // group_def := '=' IDENT '(' NUMBER ')'                          (gl(N))
+  //            | '=' 'algebra' '(' IDENT { ',' IDENT } ')'
+  //                  '{' { '[' IDENT ',' IDENT ']' '=' expr [ ',' | ';' ] } '}'
   //            | '(' IDENT { ',' IDENT } ')' '=' matrix 'at' '(' expr { ',' expr } ')'
+  //
+  // The `algebra` form names the basis E_1..E_n and lists brackets
+  // [E_i, E_j] = Σ_k C_ij^k E_k; unlisted brackets are 0 and [E_j, E_i] is
+  // implied (checked by check_lie: antisymmetry, Jacobi).
   void parse_group_def(GroupDecl& group) {
     if (at_punct("(")) {
       const SourceLoc open = take().loc;
@@ -472,7 +483,10 @@ class Parser {
     expect_punct("=", "after 'group " + group.name.name + "' (write 'group " + group.name.name +
                           " = gl(2)' or 'group " + group.name.name +
                           "(x, y) = [[...]] at (0, 0)')");
-    if (!at_word("gl")) unexpected("'gl(N)' or coordinates '(c1, ..., cn)' before '='");
+    if (at_word("algebra")) return parse_algebra_def(group);
+    if (!at_word("gl"))
+      unexpected(
+          "'gl(N)', 'algebra(E1, ..., En) { ... }' or coordinates '(c1, ..., cn)' before '='");
     group.shortcut = take().text;
     expect_punct("(", "after 'gl'");
     const Token& t = tok();
@@ -482,6 +496,38 @@ class Parser {
     group.shortcut_n = std::stol(take().text);
     if (group.shortcut_n < 1) fail(t.loc, "gl(N) needs N >= 1");
     expect_punct(")", "after 'gl(N'");
+  }
+
+  // 'algebra' '(' IDENT { ',' IDENT } ')' '{' { bracket [ ',' | ';' ] } '}'
+  // bracket := '[' IDENT ',' IDENT ']' '=' expr
+  void parse_algebra_def(GroupDecl& group) {
+    group.shortcut = take().text;
+    const SourceLoc popen = expect_punct("(", "after 'algebra' (the basis names)").loc;
+    for (;;) {
+      group.basis.push_back(expect_name("a basis name"));
+      if (at_punct(")")) break;
+      if (!at_punct(","))
+        unexpected("',' or ')' in the basis of group '" + group.name.name + "' (opened at " +
+                   loc_str(popen) + ")");
+      take();
+    }
+    take();
+    const SourceLoc open =
+        expect_punct("{", "after the basis (the brackets, e.g. '{ [E1, E2] = E3 }')").loc;
+    while (!at_punct("}")) {
+      if (tok().kind == Tok::End) fail(tok().loc, unterminated(open));
+      BracketDecl b;
+      b.loc = expect_punct("[", "to open a bracket '[Ei, Ej] = ...' (or '}')").loc;
+      b.left = expect_name("a basis name in the bracket");
+      expect_punct(",", "between the two elements of the bracket");
+      b.right = expect_name("a basis name in the bracket");
+      expect_punct("]", "to close the bracket opened at " + loc_str(b.loc));
+      expect_punct("=", "after the bracket '[" + b.left.name + ", " + b.right.name + "]'");
+      b.value = parse_expr().node;
+      group.brackets.push_back(std::move(b));
+      if (at_punct(",") || at_punct(";")) take();
+    }
+    take();
   }
 
   // matrix := '[' row { ',' row } ']'      row := '[' expr { ',' expr } ']'

@@ -31,6 +31,82 @@ ex factored_q_dot(const Reduction& red, const std::vector<ex>& sharp, const ex& 
   return q_dot;
 }
 
+/// The name of the symbol φ of a group without coordinates (in reports): not
+/// an identifier, so it cannot clash with a name of the model.
+const char* const kPhiName = "phi(g)";
+
+/// (φ, level) with q = φ − level. Matrix group: φ = q_expr − q(e) + 1, so
+/// φ(e) = 1 until q_equation decides whether φ is additive (then q_equation_of
+/// shifts φ and the level by 1) or multiplicative. Without coordinates φ is
+/// known by dφ_e only: the symbol φ, level 0 (additive) or 1 (multiplicative).
+/// Sets red.dphi_e and checks that ker dφ_e is an ideal (hypothesis normal).
+std::pair<ex, ex> phi_and_level(const LieModel& lm, Reduction& red, const SourceText& src) {
+  std::pair<ex, ex> out;
+  if (lm.group.has_coordinates()) {
+    const MatrixGroup& group = lm.group.matrix_group();
+    const ex q0 = simplify(group.at_identity(lm.q_expr));
+    out = {lm.q_expr - q0 + 1, 1 - q0};
+    red.dphi_e = group.differential_at_identity(out.first);
+  } else {
+    out = {GiNaC::realsymbol(kPhiName),
+           lm.phi_kind == HomomorphismKind::Multiplicative ? ex(1) : ex(0)};
+    red.dphi_e = lm.dphi_e;
+  }
+  try {
+    require_normal_kernel(lm.group.algebra(), red.dphi_e);
+  } catch (const LieError& e) {
+    throw hypothesis_error(src, lm.reduced_loc, e);
+  }
+  return out;
+}
+
+/// q' along g' = g ξ (the theorem): q_equation for a matrix group (hypothesis
+/// coset), q_equation_of_form without coordinates; sets red.multiplicative,
+/// red.phi, red.level and red.q_dot.
+void q_equation_of(const LieModel& lm, const ex& phi, const ex& level, const std::vector<ex>& xi,
+                   const ex& q, Reduction& red, const SourceText& src) {
+  QEquation qe;
+  if (lm.group.has_coordinates()) {
+    try {
+      qe = q_equation(lm.group.matrix_group(), phi, level, Components(xi.begin(), xi.end()), q);
+    } catch (const LieError& e) {
+      throw hypothesis_error(src, lm.reduced_loc, e);
+    }
+    red.multiplicative = qe.kind == HomomorphismKind::Multiplicative;
+    red.phi = (red.multiplicative ? phi : phi - 1).expand();
+    red.level = (red.multiplicative ? level : level - 1).expand();
+  } else {
+    qe = q_equation_of_form(lm.phi_kind, red.dphi_e, Components(xi.begin(), xi.end()), q);
+    red.multiplicative = qe.kind == HomomorphismKind::Multiplicative;
+    red.phi = phi;
+    red.level = level;
+  }
+  red.q_dot = factored_q_dot(red, xi, q, qe);
+}
+
+/// Hypothesis transversal (DESIGN.md "guard transversal"): on the surface
+/// s(q) = 0 of guard g, the rate s'(q) q' must not vanish identically (in the
+/// momenta and the parameters), or the flow is tangent to the whole surface and
+/// never crosses it — e.g. `when q = -1` for q = det − 1, where q' = (q + 1) tr ζ
+/// vanishes (φ = 0 lies outside the group). Decided when s is affine in q
+/// (s = a q + b, a ≢ 0, the form `when q = c`): q' is restricted to q = −b/a.
+/// Other surfaces are left to derive's global check (∇s·X ≢ 0).
+void require_transversal(const GuardSpec& g, const ex& q, const std::string& q_name,
+                         const ex& q_dot, const SourceText& src) {
+  const ex s = g.surface.expand();
+  const ex a = s.diff(GiNaC::ex_to<GiNaC::symbol>(q));
+  if (a.has(q) || is_identically_zero(a, {})) return;
+  const ex level = simplify(-(s - a * q).expand() / a);
+  const ex rate = simplify(q_dot.subs(GiNaC::exmap{{q, level}}, GiNaC::subs_options::no_pattern));
+  if (is_identically_zero(rate, {}))
+    throw hypothesis_error(
+        src, g.surface_loc,
+        LieError("transversal", "on the surface " + q_name + " = " + str(level) + " of guard '" +
+                                    g.name + "' the rate " + q_name + "' = " + str(q_dot) +
+                                    " vanishes identically: the flow is tangent to the surface "
+                                    "and never crosses it"));
+}
+
 Model reduced(const LieModel& lm, const SourceText& src) {
   const LieAlgebra& alg = lm.group.algebra();
   const unsigned n = alg.dim();
@@ -48,26 +124,10 @@ Model reduced(const LieModel& lm, const SourceText& src) {
                                "one and the impact system cannot be reduced"));
 
   // φ with φ(e) = 0 (additive) or 1 (multiplicative): q = φ − level.
-  const ex q0 = simplify(lm.group.at_identity(lm.q_expr));
-  const ex phi = lm.q_expr - q0 + 1, level = 1 - q0;
   Reduction red;
-  red.dphi_e = lm.group.differential_at_identity(phi);
-  try {
-    require_normal_kernel(alg, red.dphi_e);
-  } catch (const LieError& e) {
-    throw hypothesis_error(src, lm.reduced_loc, e);
-  }
+  const auto [phi, level] = phi_and_level(lm, red, src);
   const LiePoisson lp = lie_poisson(alg, zeta, lm.h);
-  QEquation qe;
-  try {
-    qe = q_equation(lm.group, phi, level, lp.dh, q);
-  } catch (const LieError& e) {
-    throw hypothesis_error(src, lm.reduced_loc, e);
-  }
-  red.multiplicative = qe.kind == HomomorphismKind::Multiplicative;
-  red.phi = (red.multiplicative ? phi : phi - 1).expand();
-  red.level = (red.multiplicative ? level : level - 1).expand();
-  red.q_dot = factored_q_dot(red, lp.dh, q, qe);
+  q_equation_of(lm, phi, level, lp.dh, q, red, src);
   const std::vector<Components> kernel = kernel_of_form(red.dphi_e);
 
   // Every derived expression is handed on EXPANDED: GiNaC's automatic
@@ -86,6 +146,7 @@ Model reduced(const LieModel& lm, const SourceText& src) {
     GuardSpec& g = out.guards[k];
     const LieImpact& imp = lm.impacts[k];
     require_level_set(lm, g, src);
+    require_transversal(g, q, b.state.back(), red.q_dot, src);
     std::vector<ex> reset;
     if (imp.kind == ResetDecl::Kind::Elastic || imp.kind == ResetDecl::Kind::Restitution) {
       Components dz;
@@ -124,6 +185,7 @@ Model reduced(const LieModel& lm, const SourceText& src) {
   }
 
   for (const auto& cn : lm.coordinate_names) out.tex[cn] = tex_of(cn);
+  if (!lm.group.has_coordinates()) out.tex[kPhiName] = "\\phi(g)";
   red.group = lm.group_name;
   red.coordinates = lm.coordinate_names;
   red.basis = alg.names();
@@ -167,15 +229,8 @@ Model reduced_constrained(const LieModel& lm, const SourceText& src) {
                            LieError("codim1", "the Lie algebra of group '" + lm.group_name +
                                                   "' is perfect ([g, g] = g): no normal subgroup "
                                                   "of codimension 1"));
-  const ex q0 = simplify(lm.group.at_identity(lm.q_expr));
-  const ex phi = lm.q_expr - q0 + 1, level = 1 - q0;
   Reduction red;
-  red.dphi_e = lm.group.differential_at_identity(phi);
-  try {
-    require_normal_kernel(alg, red.dphi_e);
-  } catch (const LieError& e) {
-    throw hypothesis_error(src, lm.reduced_loc, e);
-  }
+  const auto [phi, level] = phi_and_level(lm, red, src);
   const std::vector<ex>& xi = lm.xi_of_w;
   matrix B(n, r), I = lm.inertia;
   for (unsigned i = 0; i < n; ++i)
@@ -203,16 +258,7 @@ Model reduced_constrained(const LieModel& lm, const SourceText& src) {
     for (unsigned j = 0; j < r; ++j) wdot[j] += Minv(j, k) * rhs_k;
   }
   for (auto& e : wdot) e = e.expand();
-  QEquation qe;
-  try {
-    qe = q_equation(lm.group, phi, level, Components(xi.begin(), xi.end()), q);
-  } catch (const LieError& e) {
-    throw hypothesis_error(src, lm.reduced_loc, e);
-  }
-  red.multiplicative = qe.kind == HomomorphismKind::Multiplicative;
-  red.phi = (red.multiplicative ? phi : phi - 1).expand();
-  red.level = (red.multiplicative ? level : level - 1).expand();
-  red.q_dot = factored_q_dot(red, xi, q, qe);
+  q_equation_of(lm, phi, level, xi, q, red, src);
   // s = Bᵀσ: the normal velocity σ(ξ) = sᵀw.
   Components s(r, ex(0));
   for (unsigned k = 0; k < r; ++k)
@@ -231,6 +277,7 @@ Model reduced_constrained(const LieModel& lm, const SourceText& src) {
     GuardSpec& g = out.guards[k];
     const LieImpact& imp = lm.impacts[k];
     require_level_set(lm, g, src);
+    require_transversal(g, q, b.state.back(), red.q_dot, src);
     std::vector<ex> reset;
     Components dw(r, ex(0));
     if (imp.kind == ResetDecl::Kind::Elastic || imp.kind == ResetDecl::Kind::Restitution) {
@@ -291,6 +338,7 @@ Model reduced_constrained(const LieModel& lm, const SourceText& src) {
   for (unsigned i = 0; i < n; ++i)
     for (unsigned j = 0; j < n; ++j) red.coadjoint(i, j) = red.coadjoint(i, j).expand();
   for (const auto& cn : lm.coordinate_names) out.tex[cn] = tex_of(cn);
+  if (!lm.group.has_coordinates()) out.tex[kPhiName] = "\\phi(g)";
   out.reduction = std::move(red);
   return out;
 }
@@ -298,7 +346,15 @@ Model reduced_constrained(const LieModel& lm, const SourceText& src) {
 }  // namespace
 
 Model reduce(const LieModel& lie, const SourceText& src, ReduceTarget target) {
-  if (target == ReduceTarget::Unreduced) return unreduced(lie, src);
+  if (target == ReduceTarget::Unreduced) {
+    if (!lie.group.has_coordinates())
+      throw src.error(lie.group_loc,
+                      "the unreduced twin needs the group's coordinates, but group '" +
+                          lie.group_name +
+                          "' is given by structure constants (give it as 'group NAME(c1, ..., "
+                          "cn) = [[...]] at (...)' to compare with the unreduced system)");
+    return unreduced(lie, src);
+  }
   return lie.xi_of_w.empty() ? reduced(lie, src) : reduced_constrained(lie, src);
 }
 

@@ -37,7 +37,8 @@ Result hybgen(const std::string& args, bool merge = true) {
 }
 
 TEST(LieCli, CheckShippedLieModels) {
-  for (const char* m : {"gl2", "gl3", "matrix_groups_impacts", "heisenberg", "chaplygin"}) {
+  for (const char* m :
+       {"gl2", "gl3", "matrix_groups_impacts", "heisenberg", "heisenberg_algebra", "chaplygin"}) {
     const Result r = hybgen(std::string("check models/") + m + ".model");
     EXPECT_EQ(r.code, 0) << m << "\n" << r.out;
     EXPECT_NE(r.out.find(": ok: model '" + std::string(m) + "'"), std::string::npos) << r.out;
@@ -137,6 +138,16 @@ TEST(LieCli, UnreducedTwin) {
   EXPECT_EQ(j["state"].size(), 8u);
   EXPECT_EQ(j["guards"][0]["surface"], "a11*a22-a12*a21-1");
   EXPECT_EQ(hybgen("check models/gl2.model --unreduced").code, 0);
+  // The constrained (nonholonomic) twin: the Chaplygin sleigh on TG, state
+  // (c, ċ), its resets explicit (impulsive Lagrange–d'Alembert).
+  const Result c = hybgen("derive --unreduced models/chaplygin.model --format json", false);
+  ASSERT_EQ(c.code, 0) << c.out;
+  const json jc = json::parse(c.out);
+  EXPECT_EQ(jc["model"], "chaplygin_unreduced");
+  EXPECT_EQ(jc["state"].size(), 6u);
+  EXPECT_EQ(jc["guards"].size(), 2u);
+  EXPECT_EQ(jc["guards"][0]["surface"], "th-theta0");
+  EXPECT_EQ(hybgen("check models/chaplygin.model --unreduced").code, 0);
   // --unreduced on a general model is a usage error.
   const Result bad = hybgen("check models/bouncing_ball.model --unreduced");
   EXPECT_EQ(bad.code, 2) << bad.out;

@@ -659,5 +659,60 @@ TEST(LieReducedGl2, DivergenceAndHybridJacobian) {
   EXPECT_EQ(J, ex(1));  // the paper prints J = −1
 }
 
+TEST(LieMetricTest, Se2LeftInvariantInertia) {
+  realsymbol x("x"), y("y"), th("theta"), m("m"), a("a"), I("I");
+  const matrix g{{cos(th), -sin(th), x}, {sin(th), cos(th), y}, {0, 0, 1}};
+  const MatrixGroup se2(g, {x, y, th}, {0, 0, 0});
+  // The sleigh's metric in (x, y, θ) (paper §4.2): ½ m |ṗ|² + ½ I θ̇² for the
+  // centre of mass p = (x, y) + a (cos θ, sin θ), ṗ = (ẋ − a θ̇ sin θ, ẏ + a θ̇ cos θ).
+  // Independently, in the body velocity (ẋ, ẏ) = R(θ)(v, w), θ̇ = ω (so
+  // −ẋ sin θ + ẏ cos θ = w) it is ½ (m v² + m (w + a ω)² + I ω²), i.e.
+  // I = [[m, 0, 0], [0, m, m a], [0, m a, I + m a²]].
+  const matrix M{{m, 0, -m * a * sin(th)},
+                 {0, m, m * a * cos(th)},
+                 {-m * a * sin(th), m * a * cos(th), I + m * a * a}};
+  const matrix body = left_invariant_inertia(se2, M);
+  const matrix expect{{m, 0, 0}, {0, m, m * a}, {0, m * a, I + m * a * a}};
+  for (unsigned r = 0; r < 3; ++r)
+    for (unsigned c = 0; c < 3; ++c) EXPECT_TRUE(same(body(r, c), expect(r, c))) << r << c;
+  // Not left-invariant: the body inertia used as a metric in (x, y, θ) (the
+  // offset frozen along the fixed y axis): I_13 = (cos θ, sin θ, 0)·(0, m a, ·)
+  // = m a sin θ depends on θ.
+  const matrix bad{{m, 0, 0}, {0, m, m * a}, {0, m * a, I + m * a * a}};
+  try {
+    (void)left_invariant_inertia(se2, bad);
+    ADD_FAILURE() << "accepted a metric that is not left-invariant";
+  } catch (const LieError& e) {
+    EXPECT_EQ(e.hypothesis(), "left_invariant");
+    EXPECT_NE(std::string(e.what()).find("coordinate theta"), std::string::npos) << e.what();
+  }
+}
+
+TEST(LieMetricTest, LieGroupWithoutCoordinates) {
+  // H3 by structure constants: [E1, E2] = E3.
+  std::vector<std::vector<std::vector<ex>>> c(
+      3, std::vector<std::vector<ex>>(3, std::vector<ex>(3, ex(0))));
+  c[0][1][2] = 1;
+  c[1][0][2] = -1;
+  const LieGroup h3(LieAlgebra::from_structure_constants(c));
+  EXPECT_FALSE(h3.has_coordinates());
+  EXPECT_EQ(h3.algebra().dim(), 3u);
+  EXPECT_TRUE(h3.coords().empty());
+  EXPECT_THROW((void)h3.left_trivialization(), InternalError);
+  EXPECT_THROW((void)h3.matrix_group(), InternalError);
+  const LieGroup gl2(MatrixGroup::gl(2));
+  EXPECT_TRUE(gl2.has_coordinates());
+  EXPECT_EQ(gl2.coords().size(), 4u);
+  EXPECT_EQ(&gl2.algebra(), &gl2.matrix_group().algebra());
+  // q' = λ(ξ) or (q + 1) λ(ξ).
+  realsymbol q("q"), a("a"), b("b"), d("d");
+  const QEquation add = q_equation_of_form(HomomorphismKind::Additive, {1, 0, 2}, {a, b, d}, q);
+  EXPECT_TRUE(same(add.q_dot, a + 2 * d));
+  const QEquation mul =
+      q_equation_of_form(HomomorphismKind::Multiplicative, {1, 0, 2}, {a, b, d}, q);
+  EXPECT_TRUE(same(mul.q_dot, (q + 1) * (a + 2 * d)));
+  EXPECT_EQ(mul.kind, HomomorphismKind::Multiplicative);
+}
+
 }  // namespace
 }  // namespace hybgen::gen

@@ -885,6 +885,48 @@ TEST(ParseLie, GeneralModelsHaveNoLieDecl) {
   EXPECT_FALSE(parse_text(kBouncingBall).lie);
 }
 
+TEST(ParseLie, GroupByStructureConstantsAndMetric) {
+  const ModelAst ast = parse_text(
+      "group H = algebra(E1, E2, E3) {\n"           // 1
+      "  [E1, E2] = E3, [E1, E3] = -k*E2\n"         // 2
+      "  [E2, E3] = 0; }\n"                         // 3
+      "metric [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n"  // 4
+      "reduced q = additive(1, 0, 0)\n");           // 5
+  ASSERT_TRUE(ast.lie);
+  const GroupDecl& g = ast.lie->group;
+  EXPECT_EQ(g.shortcut, "algebra");
+  ASSERT_EQ(g.basis.size(), 3U);
+  EXPECT_EQ(g.basis[1].name, "E2");
+  EXPECT_EQ(at(g.basis[1].loc), "1:23");
+  ASSERT_EQ(g.brackets.size(), 3U);
+  EXPECT_EQ(g.brackets[1].left.name, "E1");
+  EXPECT_EQ(g.brackets[1].right.name, "E3");
+  EXPECT_EQ(at(g.brackets[1].loc), "2:18");
+  EXPECT_EQ(dump(g.brackets[1].value), "(* (u- k) E2)");
+  EXPECT_EQ(dump(g.brackets[2].value), "0");
+  EXPECT_TRUE(g.coordinates.empty());
+  ASSERT_TRUE(ast.lie->metric);
+  EXPECT_EQ(at(ast.lie->metric_loc), "4:1");
+  EXPECT_EQ(ast.lie->metric->rows.size(), 3U);
+  EXPECT_FALSE(ast.lie->inertia);
+  EXPECT_EQ(dump(ast.lie->reduced_expr), "additive[1, 0, 0]");
+  // Empty braces: an abelian algebra.
+  EXPECT_TRUE(parse_text("group R = algebra(E) {}\n").lie->group.brackets.empty());
+}
+
+TEST(ParseLieErrors, StructureConstantsAndMetric) {
+  expect_error("group H = algebra E1\n", 1, 19, "'(' after 'algebra'");
+  expect_error("group H = algebra(E1 E2) {}\n", 1, 22, "',' or ')' in the basis");
+  expect_error("group H = algebra(E1, E2)\n", 2, 1, "'{' after the basis");
+  expect_error("group H = algebra(E1, E2) { E1 }\n", 1, 29, "'[' to open a bracket");
+  expect_error("group H = algebra(E1, E2) { [E1 E2] = 0 }\n", 1, 33, "',' between");
+  expect_error("group H = algebra(E1, E2) { [E1, E2 = 0 }\n", 1, 37, "']' to close the bracket");
+  expect_error("group H = algebra(E1, E2) { [E1, E2] E1 }\n", 1, 38, "'=' after the bracket");
+  expect_error("group H = algebra(E1, E2) { [E1, E2] = E1\n", 2, 1, "unterminated block");
+  expect_error("metric [[1]]\nmetric [[1]]\n", 2, 1, "a second 'metric'");
+  expect_error("metric 1\n", 1, 8, "after 'metric'");
+}
+
 TEST(ParseLieErrors, Statements) {
   expect_error("group A = gl(x)\n", 1, 14, "a matrix size N");
   expect_error("group A = sl(2)\n", 1, 11, "'gl(N)'");

@@ -156,23 +156,36 @@ struct MatrixLiteral {
   SourceLoc loc;                           ///< Position of the opening '['.
 };
 
-/// `group NAME = gl(N)` or `group NAME(c1, ..., cn) = MATRIX at (v1, ..., vn)`:
-/// a matrix Lie group by a shortcut or by a parametrisation g(c) with g(c0) = 1.
+/// One bracket `[Ei, Ej] = EXPR` of a group given by structure constants; EXPR
+/// is a linear combination of the basis names with parameter coefficients.
+struct BracketDecl {
+  Name left;      ///< E_i.
+  Name right;     ///< E_j.
+  ExprPtr value;  ///< Σ_k C_ij^k E_k.
+  SourceLoc loc;  ///< Position of the opening '['.
+};
+
+/// `group NAME = gl(N)`, `group NAME(c1, ..., cn) = MATRIX at (v1, ..., vn)` or
+/// `group NAME = algebra(E1, ..., En) { [Ei, Ej] = EXPR, ... }`: a matrix Lie
+/// group by a shortcut or by a parametrisation g(c) with g(c0) = 1, or a group
+/// known only by the structure constants of its Lie algebra (no coordinates).
 struct GroupDecl {
-  Name name;                      ///< The group's name (used as `det(NAME)`).
-  SourceLoc loc;                  ///< Position of the `group` keyword.
-  std::string shortcut;           ///< "gl" for `gl(N)`, else "".
-  long shortcut_n = 0;            ///< N of `gl(N)`.
-  std::vector<Name> coordinates;  ///< c1..cn (parametrised form).
-  MatrixLiteral matrix;           ///< g(c) (parametrised form).
-  std::vector<ExprPtr> identity;  ///< c0 with g(c0) = identity (parametrised form).
-  SourceLoc identity_loc;         ///< Position of the `at` keyword.
+  Name name;                          ///< The group's name (used as `det(NAME)`).
+  SourceLoc loc;                      ///< Position of the `group` keyword.
+  std::string shortcut;               ///< "gl" for `gl(N)`, "algebra" for `algebra(...)`, else "".
+  long shortcut_n = 0;                ///< N of `gl(N)`.
+  std::vector<Name> basis;            ///< E_1..E_n of `algebra(E1, ..., En)`.
+  std::vector<BracketDecl> brackets;  ///< The brackets listed (the others are 0).
+  std::vector<Name> coordinates;      ///< c1..cn (parametrised form).
+  MatrixLiteral matrix;               ///< g(c) (parametrised form).
+  std::vector<ExprPtr> identity;      ///< c0 with g(c0) = identity (parametrised form).
+  SourceLoc identity_loc;             ///< Position of the `at` keyword.
 };
 
 /// The statements of a Lie-group model (docs/model-language.md, "Lie-group
 /// models"): present iff the file has one of the statements `group`,
-/// `momenta`, `hamiltonian`, `inertia`, `velocities`, `constraint` or
-/// `reduced` at the top level.
+/// `momenta`, `hamiltonian`, `inertia`, `metric`, `velocities`, `constraint`
+/// or `reduced` at the top level.
 struct LieDecl {
   GroupDecl group;            ///< The group.
   std::vector<Name> momenta;  ///< ζ_1..ζ_n, one per basis element E_i = ∂g/∂c_i(c0).
@@ -181,13 +194,19 @@ struct LieDecl {
   SourceLoc hamiltonian_loc;  ///< Position of the `hamiltonian` keyword.
   std::optional<MatrixLiteral> inertia;  ///< `inertia MATRIX`: h = ½ ζᵀ I⁻¹ ζ.
   SourceLoc inertia_loc;                 ///< Position of the `inertia` keyword.
+  /// `metric MATRIX`: the kinetic energy ½ ċᵀ M(c) ċ in the group coordinates
+  /// (checked to be left-invariant; then as `inertia` with I = Lᵀ M L).
+  std::optional<MatrixLiteral> metric;
+  SourceLoc metric_loc;  ///< Position of the `metric` keyword.
   std::vector<Name>
       velocities;            ///< `velocities v1, ...`: body velocities ξ_i (constrained models).
   SourceLoc velocities_loc;  ///< Position of the `velocities` keyword.
   std::vector<Relation> constraints;  ///< `constraint NAME = EXPR`: ξ_NAME, linear in the others.
   std::optional<Name> reduced;        ///< `reduced q = EXPR`: the name of q.
-  ExprPtr reduced_expr;               ///< φ(g) − c as an expression in the coordinates.
-  SourceLoc reduced_loc;              ///< Position of the `reduced` keyword.
+  /// φ(g) − c as an expression in the coordinates, or (groups given by
+  /// structure constants) `additive(λ1, ..., λn)` / `multiplicative(...)`.
+  ExprPtr reduced_expr;
+  SourceLoc reduced_loc;  ///< Position of the `reduced` keyword.
 };
 
 /// A whole `.model` file.

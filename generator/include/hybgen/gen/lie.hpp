@@ -21,6 +21,7 @@
 
 #include <ginac/ginac.h>
 
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -38,7 +39,7 @@ class LieError : public Error {
   LieError(std::string hypothesis, const std::string& reason)
       : Error(reason, ExitCode::ModelError), hypothesis_(std::move(hypothesis)) {}
   /// The failed hypothesis: "lie_algebra", "normal", "codim1", "coset",
-  /// "left_invariant", "quadratic".
+  /// "left_invariant", "quadratic", "reset", "transversal".
   [[nodiscard]] const std::string& hypothesis() const { return hypothesis_; }
 
  private:
@@ -157,6 +158,43 @@ class MatrixGroup {
   GiNaC::matrix left_;
 };
 
+/// A Lie group as a Lie-group model knows it: a MatrixGroup (coordinates c,
+/// left trivialisation L(c)) or, when given by structure constants, only its
+/// Lie algebra (no coordinates: functions on G such as φ are then given by
+/// their differential at the identity). Invariant: algebra() is the matrix
+/// group's algebra whenever there is a matrix group.
+class LieGroup {
+ public:
+  /// A matrix group (the `group g(c) = [[...]] at (...)` and `gl(N)` forms).
+  explicit LieGroup(MatrixGroup group);
+  /// A group known by its Lie algebra only (the `algebra(...) { ... }` form).
+  explicit LieGroup(LieAlgebra algebra);
+
+  /// Whether the group has coordinates (it is a MatrixGroup).
+  [[nodiscard]] bool has_coordinates() const { return matrix_.has_value(); }
+  /// The Lie algebra.
+  [[nodiscard]] const LieAlgebra& algebra() const;
+  /// The matrix group; throws InternalError for a group without coordinates.
+  [[nodiscard]] const MatrixGroup& matrix_group() const;
+  /// The coordinate symbols c_i (empty without coordinates).
+  [[nodiscard]] const std::vector<GiNaC::ex>& coords() const;
+  /// L(c) of MatrixGroup::left_trivialization; throws InternalError without
+  /// coordinates.
+  [[nodiscard]] const GiNaC::matrix& left_trivialization() const;
+
+ private:
+  std::optional<MatrixGroup> matrix_;  ///< The matrix group, if given by one.
+  std::optional<LieAlgebra> algebra_;  ///< Set iff matrix_ is not.
+};
+
+/// The body inertia of a kinetic energy ½ ċᵀ M(c) ċ given in the coordinates
+/// of a matrix group: with ċ = L(c) ξ it is ½ ξᵀ I(c) ξ, I(c) = L(c)ᵀ M(c) L(c).
+/// The metric is left-invariant iff I(c) is constant (⟨gE_i, gE_j⟩_g does not
+/// depend on g); returns I = I(c0) then (entries simplified), and otherwise
+/// throws LieError("left_invariant") naming an entry I_ij and a coordinate
+/// c_k with ∂I_ij/∂c_k ≢ 0. `metric` must be n×n (n = dim).
+GiNaC::matrix left_invariant_inertia(const MatrixGroup& group, const GiNaC::matrix& metric);
+
 /// Realsymbols `prefix`1 … `prefix`n (the momenta ζ1..ζn).
 std::vector<GiNaC::ex> make_symbols(unsigned n, const std::string& prefix);
 
@@ -226,6 +264,14 @@ struct QEquation {
 /// LieError("coset") naming a coordinate that q' still depends on.
 QEquation q_equation(const MatrixGroup& group, const GiNaC::ex& phi, const GiNaC::ex& level,
                      const Components& xi, const GiNaC::ex& q);
+
+/// The q equation of a group known by its algebra only, for φ given by its
+/// differential λ = dφ_e (λ([𝔤, 𝔤]) = 0, checked by require_normal_kernel, so
+/// λ is a Lie algebra homomorphism 𝔤 → ℝ and integrates to φ on the simply
+/// connected group): along g' = g ξ, φ' = λ(ξ) (additive, q = φ) or
+/// φ' = φ λ(ξ) (multiplicative, q = φ − 1), so q' = λ(ξ) or (q + 1) λ(ξ).
+QEquation q_equation_of_form(HomomorphismKind kind, const Components& dphi_e, const Components& xi,
+                             const GiNaC::ex& q);
 
 /// The momentum jump of the corollary that follows the theorem, with
 /// restitution e (e = 1 elastic): for σ = (ℓ_{g0})^* ds_{g0} ∈ Ann(𝔨),

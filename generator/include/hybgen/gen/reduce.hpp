@@ -15,14 +15,17 @@
 /// plus a Reduction record. The hypotheses are checked there, each failure a
 /// located ModelError naming it: codim1 (𝔤 has a codimension-1 ideal: not so(3)),
 /// normal (𝔨 = ker dφ_e is an ideal), coset (q' depends on (ζ, q) alone),
-/// quadratic (the corollary's reset needs h = ½ ζᵀHζ), reset (Δζ ∈ Ann(𝔨), q ↦ q).
+/// quadratic (the corollary's reset needs h = ½ ζᵀHζ), reset (Δζ ∈ Ann(𝔨), q ↦ q),
+/// transversal (q' does not vanish identically on a surface q = c).
 /// derive then computes div, DΔ, Δ⁻¹ and J as for every general model.
 ///
 /// The other target, ReduceTarget::Unreduced, gives the 2n-dimensional impact
 /// system on T*G in the group coordinates: H(c, p) = h(ζ) at ζ_i = Σ_j p_j L_ji(c)
 /// (ζ = (ℓ_g)^* p), the guards φ(c) − c = c_k and the corner-condition reset of
-/// derive (elastic / restitution). It is the reference the reduction is tested
-/// against.
+/// derive (elastic / restitution); for a constrained model, the system on TG in
+/// (c, ċ) by Lagrange–d'Alembert in the coordinates with the impulsive
+/// constrained impact law (unreduced.cpp). It is the reference the reduction is
+/// tested against.
 
 #include <optional>
 #include <string>
@@ -51,11 +54,13 @@ struct LieImpact {
 struct LieModel {
   Model base;              ///< Name, parameters, reduced state, guards, simulation.
   std::string group_name;  ///< The group's name.
-  MatrixGroup group;       ///< g(c), its algebra and left trivialisation.
-  std::vector<std::string> coordinate_names;  ///< Names of the coordinates c_i.
+  /// The group: g(c), its algebra and left trivialisation (matrix groups), or
+  /// only its algebra (groups given by structure constants; no coordinates).
+  LieGroup group;
+  std::vector<std::string> coordinate_names;  ///< Names of the coordinates c_i (may be empty).
   GiNaC::ex h;                                ///< h(ζ).
-  GiNaC::ex q_expr;                           ///< q = φ(g) − c in the coordinates.
-  std::vector<LieImpact> impacts;             ///< One per guard.
+  GiNaC::ex q_expr;                ///< q = φ(g) − c in the coordinates (0 without coordinates).
+  std::vector<LieImpact> impacts;  ///< One per guard.
   /// Constrained models (`velocities`, `constraint`): ξ_i(w), the body
   /// velocity in terms of the unconstrained velocities w (base's first states);
   /// empty for unconstrained models, whose state starts with the momenta ζ.
@@ -64,6 +69,11 @@ struct LieModel {
   SourceLoc group_loc;        ///< Where the group was declared.
   SourceLoc hamiltonian_loc;  ///< Where h (or the inertia) was given.
   SourceLoc reduced_loc;      ///< Where q was defined.
+  /// Groups without coordinates: dφ_e (components in the basis), with
+  /// q = φ(g) (Additive) or φ(g) − 1 (Multiplicative); empty for matrix groups,
+  /// whose φ is q_expr.
+  Components dphi_e;
+  HomomorphismKind phi_kind = HomomorphismKind::Additive;  ///< How that φ transforms.
 };
 
 /// Whether the AST is a Lie-group model (it has a `group`, `momenta`,
