@@ -325,8 +325,12 @@ void reduction_text(std::ostream& os, const Model& m, Printer& pr) {
   const Reduction& r = *m.reduction;
   const unsigned n = r.algebra_dim;
   os << "\nLie-group reduction (paper §3.2, Impact Lie-Poisson Reduction theorem)\n";
-  os << "  group        " << r.group << ", coordinates " << name_tuple(r.coordinates)
-     << ", basis E_i = dg/dc_i at the identity " << name_tuple(r.basis) << "\n";
+  if (r.coordinates.empty())
+    os << "  group        " << r.group << ", given by structure constants on the basis "
+       << name_tuple(r.basis) << "\n";
+  else
+    os << "  group        " << r.group << ", coordinates " << name_tuple(r.coordinates)
+       << ", basis E_i = dg/dc_i at the identity " << name_tuple(r.basis) << "\n";
   os << "  brackets     ";
   bool any = false;
   for (unsigned i = 0; i < n; ++i)
@@ -357,8 +361,9 @@ void reduction_text(std::ostream& os, const Model& m, Printer& pr) {
   os << "  q            = phi(g)"
      << minus_level(
             r.level, [&](const ex& e) { return pr.ginac(e); }, "(", ")")
-     << ",  phi = " << pr.ginac(r.phi) << "  ("
-     << (r.multiplicative ? "a homomorphism to R*" : "a homomorphism to R or S^1") << ")\n";
+     << (r.coordinates.empty() ? std::string() : ",  phi = " + pr.ginac(r.phi)) << "  ("
+     << (r.multiplicative ? "a homomorphism to R*" : "a homomorphism to R or S^1")
+     << (r.coordinates.empty() ? ", given by dphi_e" : "") << ")\n";
   os << "  K            = ker phi,  k = ker dphi_e,  dphi_e = " << tuple_text(pr, r.dphi_e) << "\n";
   os << "  q'           = " << pr.ginac(r.q_dot) << "   (depends on (zeta, q) only)\n";
   for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
@@ -367,7 +372,8 @@ void reduction_text(std::ostream& os, const Model& m, Printer& pr) {
        << (r.constrained ? "; I B Delta w in Ann(k) + constraint forms)\n" : "; in Ann(k))\n");
   os << "  hypotheses   normal: " << (r.normal ? "yes" : "no")
      << ", codim1: " << (r.codim1 ? "yes" : "no")
-     << ", left_invariant: " << (r.left_invariant ? "yes" : "no") << "\n";
+     << ", left_invariant: " << (r.left_invariant ? "yes" : "no")
+     << ", transversal: " << (r.transversal ? "yes" : "no") << "\n";
 }
 
 /// The reduction objects in LaTeX (derive --format latex and report.md).
@@ -446,8 +452,10 @@ nlohmann::ordered_json reduction_json(const Model& m, Printer& pr) {
     jumps.push_back({{"guard", m.guards[k].name}, {"delta_zeta", strings(r.momentum_jumps[k])}});
   j["momentum_jumps"] = jumps;
   j["constrained"] = r.constrained;
-  j["hypotheses"] = {
-      {"normal", r.normal}, {"codim1", r.codim1}, {"left_invariant", r.left_invariant}};
+  j["hypotheses"] = {{"normal", r.normal},
+                     {"codim1", r.codim1},
+                     {"left_invariant", r.left_invariant},
+                     {"transversal", r.transversal}};
   return j;
 }
 

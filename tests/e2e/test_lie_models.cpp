@@ -80,8 +80,9 @@ TEST(LieCli, DeriveJsonHasTheReductionBlock) {
   // Row 1 of ad*_{∂h/∂ζ} (column-vector convention): (0, −ζ2, ζ3, 0), the
   // transpose of the paper's row-vector matrix (erratum E2 of test_lie.cpp).
   EXPECT_EQ(red["coadjoint"][0], json({"0", "-zeta2", "zeta3", "0"}));
-  EXPECT_EQ(red["hypotheses"],
-            json({{"normal", true}, {"codim1", true}, {"left_invariant", true}}));
+  EXPECT_EQ(
+      red["hypotheses"],
+      json({{"normal", true}, {"codim1", true}, {"left_invariant", true}, {"transversal", true}}));
   EXPECT_EQ(red["q_equation"], "(q+1)*(zeta1+zeta4)");  // factored; = (q + 1) tr ζ
   EXPECT_EQ(red["homomorphism"], "multiplicative");
   ASSERT_EQ(j["modes"].size(), 1u);
@@ -99,10 +100,11 @@ TEST(LieCli, DeriveJsonHasTheReductionBlock) {
 TEST(LieCli, DeriveTextAndLatexShowTheReduction) {
   const Result t = hybgen("derive models/gl2.model");
   ASSERT_EQ(t.code, 0) << t.out;
-  for (const char* part : {"Lie-group reduction", "ad*_{dh}", "[0, -zeta2, zeta3, 0]",
-                           "q'           = (q+1)*(zeta1+zeta4)", "Delta zeta",
-                           "hypotheses   normal: yes, codim1: yes, left_invariant: yes",
-                           "hybrid Frobenius-Perron PDE"})
+  for (const char* part :
+       {"Lie-group reduction", "ad*_{dh}", "[0, -zeta2, zeta3, 0]",
+        "q'           = (q+1)*(zeta1+zeta4)", "Delta zeta",
+        "hypotheses   normal: yes, codim1: yes, left_invariant: yes, transversal: yes",
+        "hybrid Frobenius-Perron PDE"})
     EXPECT_NE(t.out.find(part), std::string::npos) << part << "\n" << t.out;
   const Result l = hybgen("derive models/gl2.model --format latex");
   ASSERT_EQ(l.code, 0) << l.out;
@@ -110,6 +112,15 @@ TEST(LieCli, DeriveTextAndLatexShowTheReduction) {
             std::string::npos)
       << l.out;
   EXPECT_NE(l.out.find("\\Delta\\zeta_{"), std::string::npos) << l.out;
+  // A group given by structure constants has no coordinates and no formula for φ.
+  const Result a = hybgen("derive models/heisenberg_algebra.model");
+  ASSERT_EQ(a.code, 0) << a.out;
+  for (const char* part :
+       {"H3, given by structure constants on the basis (E_x, E_y, E_z)", "[E_x, E_y] = E_z",
+        "q            = phi(g)  (a homomorphism to R or "
+        "S^1, given by dphi_e)",
+        "dphi_e = (1, 0, 0)", "q'           = zeta_x"})
+    EXPECT_NE(a.out.find(part), std::string::npos) << part << "\n" << a.out;
 }
 
 TEST(LieCli, Gl3DerivesWithinFiveSeconds) {

@@ -107,6 +107,7 @@ struct Reduction {
   bool normal = true;                                  ///< 𝔨 is an ideal (K normal).
   bool codim1 = true;                                  ///< 𝔨 has codimension 1.
   bool left_invariant = true;                          ///< H is left-invariant (h given on 𝔤*).
+  bool transversal = true;  ///< On every guard q = c, q' restricted to the surface is not ≡ 0.
   /// Nonholonomic (`velocities`/`constraint`): the state holds body velocities
   /// w (ξ = ξ(w), `dh` = ξ) and `momentum_jumps` are jumps Δw, not Δζ.
   bool constrained = false;
