@@ -1,8 +1,12 @@
 #pragma once
 /// \file frontend_pipeline.hpp
 /// The front end as the fuzzer (fuzz/fuzz_frontend.cpp) and the regression
-/// tests (tests/gen/test_fuzz_regressions.cpp) drive it: SourceText (validate)
-/// -> parse -> check -> derive, with the fuzzing resource caps.
+/// tests (tests/gen/test_fuzz_regressions.cpp) drive it, with the fuzzing
+/// resource caps:
+///   general models:   SourceText (validate) -> parse -> check -> derive;
+///   Lie-group models: SourceText (validate) -> parse -> check_lie -> reduce
+///                     -> derive (ReduceTarget::Reduced), then the unreduced
+///                     twin: reduce (ReduceTarget::Unreduced) -> derive.
 ///
 /// Size caps, so that the fuzzer does not spend its time on input that is
 /// legitimately expensive to differentiate, expand and simplify:
@@ -13,7 +17,18 @@
 ///    coefficient, initial density, support) has more than kMaxExprNodes (200)
 ///    nodes (hybgen::gen::expr_size), or a subexpression whose expansion has
 ///    more than kMaxExpandedTerms (10^4) terms by the estimate of
-///    expanded_terms(): (x+y+z+w)^4096 is 9 nodes, but 10^10 terms expanded.
+///    expanded_terms(): (x+y+z+w)^4096 is 9 nodes, but 10^10 terms expanded;
+///  - Lie-group models: check_lie and reduce are skipped (Stage::Parsed) when
+///    the group has more than kMaxLieDim (9, gl(3)) dimensions or a matrix
+///    larger than kMaxGroupMatrix (4×4), or when an expression of the Lie
+///    statements (group matrix, identity point, brackets, Hamiltonian,
+///    inertia, metric, reduced coordinate, constraints) has more than
+///    kMaxExprNodes AST nodes. check_lie and reduce invert and normalise
+///    symbolic n×n matrices (the left trivialisation, the inertia, the
+///    Hessian of h) with no limits of their own (hybgen/gen/limits.hpp
+///    covers derive only), so these caps are what bounds their time here.
+///    The unreduced twin (2n states) is derived under the same caps as any
+///    model: for n ≤ 3 only.
 /// derive's own limits (hybgen/gen/limits.hpp) end such derivations with a
 /// located model error; these caps only keep the fuzzer fast.
 /// Parse and check always run (they must be cheap on any input of ≤ 4 KiB).
@@ -24,10 +39,12 @@
 #include <string>
 #include <string_view>
 
+#include "hybgen/gen/ast.hpp"
 #include "hybgen/gen/check.hpp"
 #include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/limits.hpp"
 #include "hybgen/gen/parse.hpp"
+#include "hybgen/gen/reduce.hpp"
 
 namespace hybgen::fuzz {
 
@@ -35,14 +52,20 @@ inline constexpr std::size_t kMaxInputBytes = 4096;
 inline constexpr std::size_t kMaxStates = 6;
 inline constexpr std::size_t kMaxExprNodes = 200;
 inline constexpr double kMaxExpandedTerms = 1e4;
+/// Largest group dimension (gl(3)) for which check_lie and reduce run.
+inline constexpr std::size_t kMaxLieDim = 9;
+/// Largest matrix g(c) (N×N) of a parametrised group for which they run.
+inline constexpr std::size_t kMaxGroupMatrix = 4;
 
 /// Which caps to apply. Both are the size caps today; `All` would also hold
 /// guards for open findings (inputs whose fix is not in yet), so that the
 /// fuzzer skips them while the regression tests (SizeOnly) run them unguarded.
 enum class Guards { All, SizeOnly };
 
-/// How far the pipeline got.
-enum class Stage { Skipped, Checked, Derived };
+/// How far the pipeline got: Skipped (too long), Parsed (a Lie-group model
+/// beyond the Lie caps), Checked (checked, and for Lie-group models reduced,
+/// but beyond the derive caps), Derived.
+enum class Stage { Skipped, Parsed, Checked, Derived };
 
 /// Call f on every expression of the checked model.
 template <class F>
@@ -89,6 +112,100 @@ inline bool within_derive_caps(const gen::Model& m) {
   return ok;
 }
 
+/// Number of nodes of an AST expression (0 for null).
+inline std::size_t ast_size(const gen::ExprPtr& e) {
+  if (!e) return 0;
+  std::size_t n = 1;
+  for (const auto& a : e->args) n += ast_size(a);
+  return n;
+}
+
+namespace detail {
+
+// The Lie statements grow (structure constants, `metric`): the members that
+// not every version of ast.hpp has are reached through requires-expressions,
+// so that this header compiles with and without them.
+
+/// Basis size of `group G = algebra(E1, ..., En) { ... }` (0 otherwise).
+template <class G>
+std::size_t algebra_basis_size(const G& g) {
+  if constexpr (requires { g.basis.size(); })
+    return g.basis.size();
+  else
+    return 0;
+}
+
+/// Call f on every bracket value of an `algebra` group.
+template <class G, class F>
+void for_each_bracket(const G& g, F&& f) {
+  if constexpr (requires { g.brackets; })
+    for (const auto& b : g.brackets) f(b.value);
+}
+
+/// Call f on every entry of the `metric` matrix, if the model has one.
+template <class L, class F>
+void for_each_metric_entry(const L& lie, F&& f) {
+  if constexpr (requires { lie.metric; })
+    if (lie.metric)
+      for (const auto& row : lie.metric->rows)
+        for (const auto& e : row) f(e);
+}
+
+}  // namespace detail
+
+/// Whether the Lie statements are within the caps for check_lie and reduce.
+inline bool within_lie_caps(const gen::LieDecl& lie) {
+  const gen::GroupDecl& g = lie.group;
+  const auto n = static_cast<std::size_t>(std::clamp(g.shortcut_n, 0L, 64L));
+  const std::size_t dim =
+      g.shortcut == "gl" ? n * n : std::max(g.coordinates.size(), detail::algebra_basis_size(g));
+  if (dim > kMaxLieDim || g.matrix.rows.size() > kMaxGroupMatrix) return false;
+  if (lie.momenta.size() > kMaxLieDim || lie.velocities.size() > kMaxLieDim) return false;
+  bool ok = true;
+  auto small = [&ok](const gen::ExprPtr& e) { ok = ok && ast_size(e) <= kMaxExprNodes; };
+  for (const auto& row : g.matrix.rows) {
+    ok = ok && row.size() <= kMaxGroupMatrix;
+    for (const auto& e : row) small(e);
+  }
+  for (const auto& e : g.identity) small(e);
+  detail::for_each_bracket(g, small);
+  small(lie.hamiltonian);
+  if (lie.inertia) {
+    ok = ok && lie.inertia->rows.size() <= kMaxLieDim;
+    for (const auto& row : lie.inertia->rows) {
+      ok = ok && row.size() <= kMaxLieDim;
+      for (const auto& e : row) small(e);
+    }
+  }
+  detail::for_each_metric_entry(lie, small);
+  small(lie.reduced_expr);
+  for (const auto& c : lie.constraints) small(c.rhs);
+  return ok;
+}
+
+/// derive `model` if it is within the derive caps, with derive_seconds below
+/// the fuzzer's -timeout=10 (a hang is a finding).
+inline Stage derive_within_caps(gen::Model& model, const gen::SourceText& src) {
+  if (!within_derive_caps(model)) return Stage::Checked;
+  model.limits.derive_seconds = 5;
+  gen::HybridSystem sys = gen::derive(model, src);
+  sys.model = &model;
+  return Stage::Derived;
+}
+
+/// The Lie-group path: check_lie -> reduce -> derive, then the unreduced twin
+/// (reduce, and derive under the caps). Returns the stage of the reduced model.
+inline Stage run_lie(const gen::ModelAst& ast, const gen::SourceText& src) {
+  if (!within_lie_caps(*ast.lie)) return Stage::Parsed;
+  gen::LieModel lie = gen::check_lie(ast, src);
+  lie.base.limits.derive_seconds = 5;  // for reduce too, once it runs under the limits
+  gen::Model reduced = gen::reduce(lie, src, gen::ReduceTarget::Reduced);
+  const Stage stage = derive_within_caps(reduced, src);
+  gen::Model twin = gen::reduce(lie, src, gen::ReduceTarget::Unreduced);
+  (void)derive_within_caps(twin, src);
+  return stage;
+}
+
 /// Run the front end on `text` (as file "fuzz.model"). Throws what the stages
 /// throw: hybgen::gen::Error (other than InternalError) is the expected
 /// outcome for bad input; anything else is a bug.
@@ -97,12 +214,9 @@ inline Stage run_frontend(std::string_view text, [[maybe_unused]] Guards guards 
   gen::SourceText src("fuzz.model", std::string(text));
   src.validate();
   gen::ModelAst ast = gen::parse(src);
+  if (gen::is_lie_model(ast)) return run_lie(ast, src);
   gen::Model model = gen::check(ast, src);
-  if (!within_derive_caps(model)) return Stage::Checked;
-  model.limits.derive_seconds = 5;  // below the fuzzer's -timeout=10: a hang is a finding
-  gen::HybridSystem sys = gen::derive(model, src);
-  sys.model = &model;
-  return Stage::Derived;
+  return derive_within_caps(model, src);
 }
 
 }  // namespace hybgen::fuzz

@@ -1,5 +1,7 @@
 // libFuzzer harness over the whole front end: SourceText (validate) -> parse
-// -> check -> derive, with the resource caps of frontend_pipeline.hpp.
+// -> check -> derive, and for Lie-group models parse -> check_lie -> reduce
+// (reduced and unreduced) -> derive, with the resource caps of
+// frontend_pipeline.hpp.
 //
 // Expected: success, or a hybgen::gen::Error that is not an InternalError
 // (a model error, exit 1, or a usage error). A finding is anything else: an

@@ -161,6 +161,25 @@ TEST(NumericalFailure, Grazing) {
                              "the orbit crosses the surface there"});
 }
 
+TEST(NumericalFailure, GrazingMetMidTraceOutsideTheGridBox) {
+  // The pre-flight scan passes (the box [1/2, 3/2] × [−1/2, 3/2] meets the guard y = 0 only
+  // at transversal crossings); the characteristic of the node (1, 1) reaches the tangency
+  // (0, 0), outside the box, at τ = 1 (after the reversed reset at its start, at
+  // Δ⁻¹(1, 1) = (1, 0)). x = 1 − τ exactly along it, and
+  // the tangency criterion 3x²/√(1 + 9x⁴) ≤ 1e-8 bounds |x| < 1.1e-4 (rt test_failures.cpp).
+  const std::string msg = expect_failure(
+      "grazing_midtrace",
+      {"characteristic from (x = 1, y = 1) in mode 'm' failed: grazing: the flow is tangent to "
+       "the guard at a crossing at guard 'g' at backward time tau = ",
+       "mode 'm', after 1 resets: |grad s . X| / (|grad s| |X|) = ",
+       "there, and the orbit crosses the surface"});
+  EXPECT_EQ(msg.find("pre-flight"), std::string::npos) << msg;
+  const double tau = number_after(msg, "tau = "), x = number_after(msg, "state (x = ");
+  EXPECT_NEAR(tau, 1.0, 1.1e-4) << msg;
+  EXPECT_NEAR(x, 0.0, 1.1e-4) << msg;
+  EXPECT_LE(number_after(msg, "|grad s . X| / (|grad s| |X|) = "), 1e-8) << msg;
+}
+
 TEST(NumericalFailure, NewtonInverseDoesNotConverge) {
   expect_failure("newton", {"pre-flight scan of guard 'ground' at t = 0: Newton iteration for the "
                             "inverse reset did not converge at the point (x = 0, p = -2) of its "

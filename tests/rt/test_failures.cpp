@@ -15,6 +15,7 @@
 
 #include "bouncing_ball_model.hpp"
 #include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/forward.hpp"
 #include "hybgen/rt/preflight.hpp"
 
 namespace {
@@ -161,6 +162,60 @@ struct Oscillator : Ball {
   /// Everywhere.
   static bool in_support(const double*, const double*) { return true; }
 };
+
+/// Grazing reached only mid-trace: x' = 1, y' = 3x², guard s = y increasing, Δ = (x, y + 1).
+/// Orbits y = x³ + c; the one with c = 0 crosses y = 0 at the inflection (0, 0), where the
+/// flow (1, 0) is tangent to the guard. The box [1/2, 3/2] × [−1/2, 3/2] meets the guard only
+/// where it is crossed transversally (x ≥ 1/2: |∇s·X|/(|∇s||X|) ≥ 0.6), so the pre-flight scan
+/// passes; but its node (1, 1) lies on that orbit: its backward characteristic x = 1 − τ,
+/// y = (1 − τ)³ meets the guard at the tangency at τ = 1, outside the box. DΔ = I, so
+/// J = ∇s·X(Δx)/∇s·X(x) = 1 (X does not depend on y); div X = 0.
+struct Inflection : Ball {
+  /// (x, y).
+  static constexpr std::array<const char*, 2> state_names{"x", "y"};
+  /// One mode `m`.
+  static constexpr std::array<const char*, 1> mode_names{"m"};
+  /// One guard `g`.
+  static constexpr std::array<const char*, 1> guard_names{"g"};
+  /// Increasing, closed-form inverse.
+  static constexpr std::array<rt::GuardInfo, 1> guards{rt::GuardInfo{0, 0, +1, true}};
+  /// X = (1, 3x²).
+  static void flow(int, const double* x, const double*, double* out) {
+    out[0] = 1.0;
+    out[1] = 3.0 * x[0] * x[0];
+  }
+  /// s = y.
+  static double guard_surface(int, const double* x, const double*) { return x[1]; }
+  /// ∇s = (0, 1).
+  static void guard_gradient(int, const double*, const double*, double* out) {
+    out[0] = 0.0;
+    out[1] = 1.0;
+  }
+  /// Δ = (x, y + 1).
+  static void reset(int, const double* x, const double*, double* out) {
+    out[0] = x[0];
+    out[1] = x[1] + 1.0;
+  }
+  /// Δ⁻¹ = (x, y − 1).
+  static void reset_inverse(int, const double* x, const double*, double* out) {
+    out[0] = x[0];
+    out[1] = x[1] - 1.0;
+  }
+  /// DΔ = I.
+  static void reset_jacobian(int, const double*, const double*, double* out) {
+    out[0] = out[3] = 1.0;
+    out[1] = out[2] = 0.0;
+  }
+  /// J = 1.
+  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
+  /// u0 = exp(−x² − y²).
+  static double initial_density(int, const double* x, const double*) {
+    return std::exp(-x[0] * x[0] - x[1] * x[1]);
+  }
+  /// Everywhere.
+  static bool in_support(const double*, const double*) { return true; }
+};
+static_assert(rt::HybridModel<Inflection>);
 
 rt::TensorGrid<2> cubic_box(int n) {
   rt::TensorGrid<2> g;
@@ -369,6 +424,124 @@ TEST(TraceFailure, EventCapNamesTheState) {
             std::string::npos)
       << msg;
   EXPECT_NE(msg.find("after 4 resets"), std::string::npos) << msg;
+}
+
+// ---------------------------------------------------------------------------------------
+// Grazing met mid-trace, where the pre-flight scan cannot see it (outside the grid box).
+
+/// The tangency criterion bounds the distance to the inflection: along y = x³ + c the ratio
+/// |∇s·X|/(|∇s||X|) = 3x²/√(1 + 9x⁴) ≥ 3x²/√10 for |x| ≤ 1, so ratio ≤ kGrazeTol forces
+/// |x| ≤ √(√10·1e-8/3) < 1.1e-4 (the locator itself gets |x| ~ (ε)^{1/3} ~ 1e-5 on x³).
+constexpr double kNearInflection = 1.1e-4;
+
+/// [1/2, 3/2] × [−1/2, 3/2], 5 × 5 nodes: y = 0 and (1, 1) are nodes.
+rt::TensorGrid<2> inflection_box() {
+  rt::TensorGrid<2> g;
+  g.axes = {rt::GridAxis{0.5, 1.5, 5}, rt::GridAxis{-0.5, 1.5, 5}};
+  return g;
+}
+
+TEST(MidTraceGrazing, PreflightCannotSeeIt) {
+  // The scan meets the guard on the nodes (x, 0), x ≥ 1/2, all transversal, Δ(x, 0) = (x, 1)
+  // in the box: it passes and the run would start.
+  const auto g = inflection_box();
+  ASSERT_EQ(rt::axis_node(g.axes[1], 1), 0.0);
+  ASSERT_EQ(g.node(13), (P2{1.0, 1.0}));
+  const auto f = rt::preflight<Inflection>(g, kElastic.data());
+  EXPECT_TRUE(f.ok()) << rt::describe_preflight<Inflection>(f);
+}
+
+TEST(MidTraceGrazing, OutgoingGuardOnTheBackwardCharacteristic) {
+  const std::vector<double> times{0.0, 0.75, 1.5};
+  std::vector<double> out(times.size());
+  const auto st = rt::trace<Inflection>(P2{1.0, 1.0}, 0, times, kElastic.data(), options(), out);
+  ASSERT_EQ(st.error, rt::TraceError::grazing);
+  EXPECT_EQ(st.guard, 0);
+  EXPECT_EQ(st.mode, 0);
+  // x = 1 − τ along the characteristic (x' = −1 is integrated exactly): τ = 1 − x.
+  EXPECT_NEAR(st.state[0], 0.0, kNearInflection);
+  EXPECT_NEAR(st.tau, 1.0, kNearInflection);
+  EXPECT_NEAR(st.tau + st.state[0], 1.0, 1e-12);
+  EXPECT_NEAR(st.state[1], 0.0, 1e-12);  // on the guard: |y| ≤ |x|³ + rounding
+  EXPECT_GE(st.value, 0.0);
+  EXPECT_LE(st.value, rt::kGrazeTol);
+  const std::string msg = rt::describe<Inflection>(rt::TraceFailure<2>{st, 0, 13, P2{1.0, 1.0}});
+  EXPECT_NE(msg.find("characteristic from (x = 1, y = 1) in mode 'm' failed: grazing: the flow is "
+                     "tangent to the guard at a crossing at guard 'g' at backward time tau = "),
+            std::string::npos)
+      << msg;
+  EXPECT_NE(msg.find("and the orbit crosses the surface"), std::string::npos) << msg;
+  // The same node before it gets there (t_end = 1/2 < 1) is fine, and so is a neighbour
+  // whose orbit y = x³ − 1/4 crosses transversally (at x = 4^(−1/3), ratio ≈ 0.76).
+  const std::vector<double> early{0.0, 0.5};
+  std::vector<double> out2(early.size());
+  EXPECT_TRUE(rt::trace<Inflection>(P2{1.0, 1.0}, 0, early, kElastic.data(), options(), out2).ok());
+  EXPECT_TRUE(rt::trace<Inflection>(P2{1.0, 0.75}, 0, times, kElastic.data(), options(), out).ok());
+}
+
+TEST(MidTraceGrazing, TheGridSolveNamesTheNode) {
+  // Of the 25 nodes only (1, 1) is on y = x³ (and no node is on y = x³ + 1, whose reversed
+  // reset would start at the tangency): the solve reports it (flat index 2·5 + 3).
+  const std::vector<double> times{0.0, 0.5, 1.0, 1.5};
+  const auto sol = rt::solve_grid<Inflection>(inflection_box(), times, kElastic.data(), options());
+  ASSERT_FALSE(sol.ok());
+  EXPECT_EQ(sol.failure.status.error, rt::TraceError::grazing);
+  EXPECT_EQ(sol.failure.start_index, 13u);
+  EXPECT_EQ(sol.failure.start, (P2{1.0, 1.0}));
+}
+
+TEST(MidTraceGrazing, IncomingGuardPreImageAtTheTangency) {
+  // From (1/2, 9/8) on y = x³ + 1 the backward path meets Δ(S) = {y = 1} at (0, 1), whose
+  // pre-image Δ⁻¹ = (0, 0) is the tangency: the reversed-reset branch would fire there.
+  const std::vector<double> times{0.0, 1.0};
+  std::vector<double> out(times.size());
+  const auto st = rt::trace<Inflection>(P2{0.5, 1.125}, 0, times, kElastic.data(), options(), out);
+  ASSERT_EQ(st.error, rt::TraceError::grazing);
+  EXPECT_EQ(st.guard, 0);
+  EXPECT_NEAR(st.tau, 0.5, kNearInflection);
+  EXPECT_NEAR(st.state[0], 0.0, kNearInflection);
+  EXPECT_EQ(st.state[1], 0.0);  // the pre-image, projected onto S: y = 0 exactly
+}
+
+rt::ForwardOptions forward_options() {
+  rt::ForwardOptions o;
+  o.ode.rtol = 1e-10;
+  o.ode.atol = 1e-12;
+  return o;
+}
+
+TEST(MidTraceGrazing, ForwardFlowThroughTheTangency) {
+  // Forward from (−1/2, −1/8) on y = x³: the guard fires at the tangency at t = 1/2.
+  const auto r =
+      rt::forward_flow<Inflection>(0, P2{-0.5, -0.125}, 1.5, kElastic.data(), forward_options());
+  ASSERT_EQ(r.status, rt::ForwardStatus::failed);
+  EXPECT_EQ(r.error, rt::TraceError::grazing);
+  EXPECT_EQ(r.guard, 0);
+  EXPECT_NEAR(r.t_stop, 0.5, kNearInflection);
+  EXPECT_NEAR(r.x[0], 0.0, kNearInflection);
+  EXPECT_LE(r.value, rt::kGrazeTol);
+  const std::string msg = rt::describe<Inflection>(r, 0, P2{-0.5, -0.125});
+  EXPECT_NE(msg.find("numerical failure (grazing: the flow is tangent to the guard at a crossing) "
+                     "at guard 'g' at time t = "),
+            std::string::npos)
+      << msg;
+  // A transversal crossing (y = x³ − 3/8 crosses at x = 0.72) resets and goes on.
+  const auto ok =
+      rt::forward_flow<Inflection>(0, P2{-0.5, -0.5}, 1.5, kElastic.data(), forward_options());
+  EXPECT_TRUE(ok.ok()) << rt::describe<Inflection>(ok, 0, P2{-0.5, -0.5});
+  EXPECT_EQ(ok.events, 1);
+}
+
+TEST(MidTraceGrazing, TheBallsZenoBouncesAreNoGrazing) {
+  // e = 1/2 from (10⁻⁴, 0), t_end = 1/10: impact speeds |p_k| = √(2·10⁻⁴)·2^{−k}; from k = 21
+  // on |p| < 1e-8, so the flow is tangent to x = 0 to graze_tol there (ratio |p|/√(p² + 1))
+  // before Zeno is declared (last gap 2|p⁺| ≤ zeno_time·t_end = 1e-8, i.e. |p| ≤ 1e-8). The
+  // orbit x = p t − t²/2 does not cross x = 0 over ±δ = ±1e-4 (it would need δ < 2|p|): the
+  // flow ends at the Zeno point, not in a grazing failure.
+  const std::array<double, 3> par{1.0, 1.0, 0.5};
+  const auto r = rt::forward_flow<Ball>(0, P2{1e-4, 0.0}, 0.1, par.data(), forward_options());
+  EXPECT_EQ(r.status, rt::ForwardStatus::zeno) << rt::describe<Ball>(r, 0, P2{1e-4, 0.0});
+  EXPECT_GE(r.events, 22);
 }
 
 }  // namespace

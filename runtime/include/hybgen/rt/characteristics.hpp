@@ -31,8 +31,19 @@
 /// on the far side of the event surface (b_g has its post-crossing sign), so a point on such a
 /// discontinuity gets one of its two one-sided values, never their sum or zero.
 ///
+/// Grazing mid-trace: at every guard crossing the tracer meets — a root of an outgoing guard
+/// h (forward, h fires at x) or the pre-image z = Δ_g⁻¹(y*) of an incoming root — the flow of
+/// the firing mode is tested for tangency by the pre-flight scan's criterion (`grazing`, one
+/// function for both): |∇s·X| ≤ graze_tol·|∇s||X| and the orbit crosses S in the firing
+/// direction over ±δ, δ = 1e-3·(last output time). Such a crossing is a `grazing` failure
+/// (named with the state, τ and the guard): its event location is ill-conditioned and J's
+/// denominator ∇s·X vanishes. The pre-flight only sees crossings on the grid edges at t = 0;
+/// this catches those reached later, e.g. outside the grid box. A tangency the orbit does not
+/// cross at that scale (the ball's Zeno point) passes, as in the pre-flight.
+///
 /// Failures (NaN/Inf anywhere, |J| = 0, Newton not converging, more than `max_events` resets
-/// per characteristic, ODE step limit/underflow) are returned as a `TraceStatus`, never hidden.
+/// per characteristic, ODE step limit/underflow, grazing) are returned as a `TraceStatus`,
+/// never hidden.
 
 #include <algorithm>
 #include <array>
@@ -98,12 +109,19 @@ struct TensorGrid {
   }
 };
 
+/// Default tolerance of the grazing test |∇s·X| ≤ graze_tol·|∇s||X| (the pre-flight scan, the
+/// backward tracer and the forward flow share it). Near a fold of S crossings met on grid
+/// edges have a ratio of order (grid spacing)/(scale), far above 1e-8 for every grid hybgen
+/// allows (≤ 2²⁸ nodes); only a tangency met to ~8 digits trips it.
+inline constexpr double kGrazeTol = 1e-8;
+
 /// Options of the characteristics method.
 struct CharacteristicsOptions {
   OdeOptions ode{};              ///< Tolerances and step control of the backward integration.
   int max_events = 100000;       ///< Cap on resets crossed by one characteristic (all branches).
   int newton_max_iter = 50;      ///< Newton iterations for a numeric Δ⁻¹.
   double newton_tol = 1e-14;     ///< Newton stop: ‖δz‖∞ ≤ tol·(1 + ‖z‖∞).
+  double graze_tol = kGrazeTol;  ///< Grazing test at crossings (see `detail::grazing`).
   Progress* progress = nullptr;  ///< Advanced once per traced (mode, point) when set.
 };
 
@@ -119,6 +137,7 @@ enum class TraceError {
   step_limit,          ///< ODE `max_steps` exceeded.
   step_underflow,      ///< ODE step size underflow (singular or stiff flow).
   non_finite_density,  ///< u0 · weight · exp(−∫div) not finite at a foot point.
+  grazing,             ///< The flow is tangent to the guard where the orbit crosses it.
 };
 
 /// Human-readable name of a `TraceError`.
@@ -144,6 +163,8 @@ inline const char* trace_error_name(TraceError e) {
       return "ODE step size underflow";
     case TraceError::non_finite_density:
       return "non-finite density value";
+    case TraceError::grazing:
+      return "grazing: the flow is tangent to the guard at a crossing";
   }
   return "?";
 }
@@ -157,6 +178,7 @@ struct TraceStatus {
   double tau = 0.0;                     ///< Backward time τ of the failure.
   std::array<double, N> state{};        ///< State at the failure.
   int events = 0;                       ///< Resets crossed so far.
+  double value = 0.0;                   ///< grazing: |∇s·X|/(|∇s||X|) at `state`; else 0.
   /// Whether nothing failed.
   bool ok() const { return error == TraceError::none; }
 };
@@ -265,6 +287,80 @@ bool newton_reset_inverse(int g, const double* y, const double* par, int max_ite
   return false;
 }
 
+/// One RK4 step of mode m's flow (sign +1 forward, −1 backward) of size h.
+template <HybridModel M>
+void rk4_step(int m, std::array<double, state_dim_v<M>>& x, double h, double sign,
+              const double* par) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> k1{}, k2{}, k3{}, k4{}, t{};
+  auto f = [&](const std::array<double, N>& y, std::array<double, N>& out) {
+    M::flow(m, y.data(), par, out.data());
+    for (double& v : out) v *= sign;
+  };
+  f(x, k1);
+  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + 0.5 * h * k1[i];
+  f(t, k2);
+  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + 0.5 * h * k2[i];
+  f(t, k3);
+  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + h * k3[i];
+  f(t, k4);
+  for (std::size_t i = 0; i < N; ++i) x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+}
+
+/// Whether the orbit of mode m through x (on S_g) passes from the pre-firing side of S_g to
+/// the firing side over [−δ, δ]: s_g(φ_{−δ}x)·dir < −floor, floor < s_g(φ_δ x)·dir (20 RK4
+/// steps each way; the callers take δ so that the displacement is far above the steps' error).
+template <HybridModel M>
+bool orbit_crosses(int g, int m, const std::array<double, state_dim_v<M>>& x, double delta,
+                   const double* par, double floor = 0.0) {
+  const int dir = guard_info<M>(static_cast<std::size_t>(g)).direction;
+  constexpr int steps = 20;
+  std::array<double, state_dim_v<M>> fwd = x, bwd = x;
+  for (int k = 0; k < steps; ++k) {
+    rk4_step<M>(m, fwd, delta / steps, 1.0, par);
+    rk4_step<M>(m, bwd, delta / steps, -1.0, par);
+  }
+  const double after = M::guard_surface(g, fwd.data(), par) * dir;
+  const double before = M::guard_surface(g, bwd.data(), par) * dir;
+  return after > floor && before < -floor;
+}
+
+/// THE grazing criterion — the one function the pre-flight scan (preflight.hpp), the backward
+/// tracer and the forward flow (forward.hpp) use. At a point x of S_g in mode m (the mode g
+/// fires from): the flow is tangent to S_g,
+///   |∇s_g·X_m| ≤ tol·|∇s_g||X_m|   (∇s_g ≠ 0, X_m ≠ 0, all finite),
+/// and the orbit through x crosses S_g from the pre-firing to the firing side over [−δ, δ],
+/// δ = delta(|X_m|) (`orbit_crosses`): the guard fires at a tangency — the event location is
+/// ill-conditioned and J's denominator ∇s·X vanishes. A tangency the orbit does not cross
+/// at that scale (the bouncing ball's Zeno point (0, 0): x = −g t²/2 ≤ 0 both ways) is no
+/// grazing. Returns the ratio |∇s·X|/(|∇s||X|) (≥ 0) if x grazes, else −1. Cost: one flow and
+/// one gradient evaluation, plus 160 flow evaluations only when the flow is tangent.
+template <HybridModel M, class Delta>
+double grazing(int g, int m, const std::array<double, state_dim_v<M>>& x, const double* par,
+               double tol, Delta&& delta) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> X{}, grad{};
+  M::flow(m, x.data(), par, X.data());
+  M::guard_gradient(g, x.data(), par, grad.data());
+  const double rate = dot<N>(grad.data(), X.data());
+  const double gn = std::sqrt(dot<N>(grad.data(), grad.data()));
+  const double xn = std::sqrt(dot<N>(X.data(), X.data()));
+  if (!(xn > 0.0 && gn > 0.0 && std::isfinite(rate) && std::isfinite(gn * xn))) return -1.0;
+  if (!(std::fabs(rate) <= tol * gn * xn)) return -1.0;
+  // An orbit inside S_g (GL₂'s tr ζ = 0 on q = 0: s stays at rounding level, ~1e-22, of
+  // either sign) does not cross it: the crossing must clear a floor far above rounding and
+  // far below a real tangential crossing (cubic: |s| ~ δ³ ≫ 1e-12·|∇s||X|δ for δ ≥ 1e-5).
+  const double d = delta(xn);
+  if (!orbit_crosses<M>(g, m, x, d, par, 1e-12 * gn * xn * d)) return -1.0;
+  return std::fabs(rate) / (gn * xn);
+}
+
+/// δ of the grazing test along a trace over [0, horizon] (backward tracer, forward flow): the
+/// orbit is followed 1e-3 of the horizon each way, the time resolution of the solution.
+inline double graze_delta(double horizon) {
+  return 1e-3 * std::fabs(horizon);
+}
+
 /// Throws std::invalid_argument unless the output times are finite, ≥ 0 and sorted.
 inline void validate_times(std::span<const double> times) {
   for (std::size_t k = 0; k < times.size(); ++k) {
@@ -342,9 +438,11 @@ class Tracer {
     std::size_t k_begin = 0;  // first output index this branch serves
   };
 
-  void fail(TraceError err, const double* state, int mode, int guard, double tau) {
+  void fail(TraceError err, const double* state, int mode, int guard, double tau,
+            double value = 0.0) {
     if (!status_.ok()) return;
     status_.error = err;
+    status_.value = value;
     for (std::size_t i = 0; i < N; ++i) status_.state[i] = state[i];
     status_.mode = mode;
     status_.guard = guard;
@@ -457,6 +555,13 @@ class Tracer {
       if (!(gg > 0.0) || !std::isfinite(gg) || !std::isfinite(s) || s == 0.0) break;
       for (std::size_t i = 0; i < N; ++i) z[i] -= s * grad[i] / gg;
     }
+    // A pre-image where the flow of `from` grazes S_g: the forward guard fires at a tangency.
+    const double ratio = grazing<M>(g, gi.from, z, par_, opt_.graze_tol,
+                                    [this](double) { return graze_delta(times_.back()); });
+    if (ratio >= 0.0) {
+      fail(TraceError::grazing, z.data(), gi.from, g, tau, ratio);
+      return;
+    }
     // z is a pre-image only if the guard fires there: sign(∇s_g·X_from)(z) = direction.
     M::guard_gradient(g, z.data(), par_, grad.data());
     M::flow(gi.from, z.data(), par_, X.data());
@@ -498,7 +603,7 @@ class Tracer {
         crossed = times_[kb] > tau;
       } else {
         Vec xc;
-        ode_.dense(std::clamp(times_[kb], ode_.t_prev(), ode_.t()), xc);
+        dense_at(kb, xc);
         crossed = sign_of(event_value(e, xc)) == dir;
       }
       if (crossed) break;
@@ -513,6 +618,25 @@ class Tracer {
     nb.h = ode_.h_next();
     nb.via = g;
     nb.k_begin = kb;
+  }
+
+  /// The state at output time k from the current step's interpolant (clamped to the step),
+  /// evaluated once per step: a tie (an event at an output time) is decided in try_spawn and
+  /// the straight history's value taken in process from the very same numbers, so the two
+  /// sides cannot both claim the output, or both refuse it, whatever the compiler's
+  /// rounding (FMA contraction may round two inlined copies of one expression differently;
+  /// tests/rt/test_ties.cpp).
+  void dense_at(std::size_t k, Vec& x) {
+    for (std::size_t i = 0; i < n_dense_; ++i)
+      if (dense_k_[i] == k) {
+        x = dense_x_[i];
+        return;
+      }
+    ode_.dense(std::clamp(times_[k], ode_.t_prev(), ode_.t()), x);
+    if (n_dense_ < dense_k_.size()) {
+      dense_k_[n_dense_] = k;
+      dense_x_[n_dense_++] = x;
+    }
   }
 
   void process(const Branch& b, const FaceContext<N>* face) {
@@ -548,7 +672,15 @@ class Tracer {
         try_spawn(r.event, r.t, x, nullptr, false, r.direction);
         return !status_.ok();
       }
-      killed = true;  // the forward flow would have left mode m through this guard
+      // The forward flow would have left mode m through guard h at x: no history continues
+      // in mode m beyond it. If X_m grazes S_h there, h fires at a tangency: a failure.
+      const int h = guard_[static_cast<std::size_t>(r.event)];
+      State xs;
+      for (std::size_t i = 0; i < N; ++i) xs[i] = x[i];
+      const double ratio = grazing<M>(h, m, xs, par_, opt_.graze_tol,
+                                      [t_end](double) { return graze_delta(t_end); });
+      if (ratio >= 0.0) fail(TraceError::grazing, xs.data(), m, h, r.t, ratio);
+      killed = true;
       return true;
     };
     for (;;) {
@@ -581,11 +713,12 @@ class Tracer {
         }
       }
       double t_stop = ode_.t();
+      n_dense_ = 0;  // a new step: a new interpolant
       loc_.scan(ode_, gfun, on_root, t_stop);
       if (!status_.ok()) return;
       while (k < K && times_[k] <= t_stop) {
         Vec x;
-        ode_.dense(times_[k], x);
+        dense_at(k, x);
         out_[k] += contribution(x, mode_, weight_, times_[k]);
         if (!status_.ok()) return;
         ++k;
@@ -611,6 +744,9 @@ class Tracer {
   std::array<int, kMaxEv> guard_{};
   std::array<bool, kMaxEv> incoming_{};
   std::array<Branch, kMaxPending> pend_{};
+  std::array<std::size_t, 8> dense_k_{};  // output indices evaluated in the current step
+  std::array<Vec, 8> dense_x_{};          // their states (dense_at)
+  std::size_t n_dense_ = 0;
   std::size_t npend_ = 0;
   void (*foot_fn_)(void*, int, const State&, double) = nullptr;  // trace_feet's sink, or null
   void* foot_ctx_ = nullptr;                                     // its context
@@ -760,6 +896,9 @@ std::string describe(const TraceFailure<state_dim_v<M>>& f) {
   os << " at backward time tau = " << s.tau << ", state ";
   point(s.state);
   os << ", mode '" << mode_name(s.mode) << "', after " << s.events << " resets";
+  if (s.error == TraceError::grazing)
+    os << ": |grad s . X| / (|grad s| |X|) = " << s.value
+       << " there, and the orbit crosses the surface";
   return os.str();
 }
 

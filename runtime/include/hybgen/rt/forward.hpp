@@ -21,6 +21,11 @@
 ///    ball's Zeno point (0, 0), e.g. when a flow is restarted from a Zeno state.
 ///  * `in_support` is checked at step ends (as in the tracer): the first step end outside it
 ///    stops the flow with `left_support` at that time; outputs inside that step are delivered.
+///  * Grazing: a crossing where the flow is tangent to the guard and the orbit crosses it (the
+///    pre-flight's criterion, `detail::grazing` of characteristics.hpp, with δ = 1e-3·t_end)
+///    ends the flow `failed` with TraceError::grazing at the crossing (state, time, guard).
+///    The ball's Zeno bounces pass: at |p| ≤ graze_tol·g the orbit does not cross x = 0 over
+///    ±δ (it would need δ < 2|p|/g).
 ///
 /// Zeno versus chattering. Let t_1 < t_2 < … be the event times and x_j the (projected)
 /// pre-reset event states, d_j = t_j − t_{j−1} the gaps and r_j = d_j/d_{j−1} their ratios.
@@ -63,10 +68,11 @@ namespace hybgen::rt {
 
 /// Options of the forward hybrid flow.
 struct ForwardOptions {
-  OdeOptions ode{};           ///< Tolerances, step control and event sampling of the ODE.
-  int max_events = 1000;      ///< Cap on guard crossings per call (see the file doc).
-  double zeno_time = 1e-7;    ///< Zeno: declared once the last gap is ≤ zeno_time·t_end.
-  double zeno_ratio = 0.999;  ///< Zeno: largest admissible ratio of consecutive gaps.
+  OdeOptions ode{};              ///< Tolerances, step control and event sampling of the ODE.
+  int max_events = 1000;         ///< Cap on guard crossings per call (see the file doc).
+  double zeno_time = 1e-7;       ///< Zeno: declared once the last gap is ≤ zeno_time·t_end.
+  double zeno_ratio = 0.999;     ///< Zeno: largest admissible ratio of consecutive gaps.
+  double graze_tol = kGrazeTol;  ///< Grazing test at crossings (`detail::grazing`).
 };
 
 /// How a forward flow ended.
@@ -108,6 +114,7 @@ struct ForwardResult {
   int events = 0;                       ///< Guard crossings located.
   TraceError error = TraceError::none;  ///< For event_cap and failed: what.
   int guard = -1;                       ///< Guard of the last crossing (or of the failure), −1.
+  double value = 0.0;  ///< For a grazing failure: |∇s·X|/(|∇s||X|) at x; else 0.
   /// Whether the flow reached the final time.
   bool ok() const { return status == ForwardStatus::ok; }
 };
@@ -237,6 +244,17 @@ class ForwardFlow {
       ++events_;
       res.events = events_;
       res.guard = g;
+      // The guard fires at a tangency (the pre-flight's criterion, `detail::grazing`).
+      const double ratio = detail::grazing<M>(
+          g, m, xe, par_, opt_.graze_tol, [t_end](double) { return detail::graze_delta(t_end); });
+      if (ratio >= 0.0) {
+        res.status = ForwardStatus::failed;
+        res.error = TraceError::grazing;
+        res.x = xe;
+        res.t_stop = root.t;
+        res.value = ratio;
+        return res;
+      }
       push_history(root.t, xe);
       const bool capped = events_ > opt_.max_events;
       double tz = 0.0;
@@ -450,6 +468,9 @@ std::string describe(const ForwardResult<state_dim_v<M>>& r, int start_mode,
   os << " at time t = " << r.t_stop << ", state ";
   point(r.x);
   os << ", mode '" << mode_name(r.mode) << "', after " << r.events << " guard crossings";
+  if (r.error == TraceError::grazing)
+    os << ": |grad s . X| / (|grad s| |X|) = " << r.value
+       << " there, and the orbit crosses the surface";
   return os.str();
 }
 

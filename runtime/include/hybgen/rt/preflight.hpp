@@ -21,11 +21,13 @@
 ///         characteristics do — converges.
 ///     Grazing: at any point x* of S_g found in the support (firing or not) where the flow is
 ///     tangent to the guard, |∇s·X| ≤ graze_tol·|∇s||X|, the orbit through x* is followed a
-///     short time δ both ways (RK4); if it passes from the pre-firing side of S_g to the firing
-///     side, the guard fires at a tangency — the event location is ill-conditioned and J's
-///     denominator ∇s·X vanishes — and that is reported. A tangency the orbit does not cross
-///     (the bouncing ball's Zeno point (0, 0): x(t) = −g t²/2 ≤ 0 on both sides) is no crossing
-///     and passes.
+///     short time δ both ways (RK4, δ|X| = 1e-3·diam); if it passes from the pre-firing side of
+///     S_g to the firing side, the guard fires at a tangency — the event location is
+///     ill-conditioned and J's denominator ∇s·X vanishes — and that is reported. A tangency the
+///     orbit does not cross (the bouncing ball's Zeno point (0, 0): x(t) = −g t²/2 ≤ 0 on both
+///     sides) is no crossing and passes. The criterion is `detail::grazing`
+///     (characteristics.hpp), which the backward tracer and the forward flow apply at every
+///     crossing they meet later, anywhere — this scan sees only the grid edges at t = 0.
 ///
 /// Cost: O(grid nodes · (N + guards)) model evaluations plus a bisection per crossing edge;
 /// OpenMP over the nodes from 2¹⁸ nodes on (one thread below). The failure reported is the one with
@@ -95,10 +97,9 @@ inline const char* preflight_error_name(PreflightError e) {
 
 /// Tolerances of the pre-flight scan.
 struct PreflightOptions {
-  /// Grazing when |∇s·X| ≤ graze_tol·|∇s||X| at a crossing. Near a fold of S (where ∇s·X
-  /// changes sign) edge crossings have a ratio of order (grid spacing)/(scale), far above 1e-8
-  /// for every grid hybgen allows (≤ 2²⁸ nodes); only a tangency met to ~8 digits trips it.
-  double graze_tol = 1e-8;
+  /// Grazing when |∇s·X| ≤ graze_tol·|∇s||X| at a crossing (`kGrazeTol`, characteristics.hpp,
+  /// shared with the tracers).
+  double graze_tol = kGrazeTol;
   /// Δ(x*) is on S_h when |s_h| ≤ surface_tol·|∇s_h|·diam(box): bisection leaves s_g(x*) at
   /// rounding level, which Δ maps to O(ε·|DΔ|·scale), far below 1e-9.
   double surface_tol = 1e-9;
@@ -146,45 +147,6 @@ struct FirstFailure {
   }
 };
 
-/// One RK4 step of mode m's flow (sign +1 forward, −1 backward) of size h.
-template <HybridModel M>
-void rk4_step(int m, std::array<double, state_dim_v<M>>& x, double h, double sign,
-              const double* par) {
-  constexpr std::size_t N = state_dim_v<M>;
-  std::array<double, N> k1{}, k2{}, k3{}, k4{}, t{};
-  auto f = [&](const std::array<double, N>& y, std::array<double, N>& out) {
-    M::flow(m, y.data(), par, out.data());
-    for (double& v : out) v *= sign;
-  };
-  f(x, k1);
-  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + 0.5 * h * k1[i];
-  f(t, k2);
-  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + 0.5 * h * k2[i];
-  f(t, k3);
-  for (std::size_t i = 0; i < N; ++i) t[i] = x[i] + h * k3[i];
-  f(t, k4);
-  for (std::size_t i = 0; i < N; ++i) x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-}
-
-/// Whether the orbit of mode m through x (on S_g) passes from the pre-firing side of S_g to
-/// the firing side: s_g(φ_{−δ}x)·dir < 0 < s_g(φ_δ x)·dir, with δ|X| = 1e-3·diam (20 RK4
-/// steps each way; the sign of s at displacement 1e-3·diam is far above the steps' error).
-template <HybridModel M>
-bool orbit_crosses(int g, int m, const std::array<double, state_dim_v<M>>& x, double speed,
-                   double diam, const double* par) {
-  const int dir = guard_info<M>(static_cast<std::size_t>(g)).direction;
-  const double delta = 1e-3 * diam / speed;
-  constexpr int steps = 20;
-  std::array<double, state_dim_v<M>> fwd = x, bwd = x;
-  for (int k = 0; k < steps; ++k) {
-    rk4_step<M>(m, fwd, delta / steps, 1.0, par);
-    rk4_step<M>(m, bwd, delta / steps, -1.0, par);
-  }
-  const double after = M::guard_surface(g, fwd.data(), par) * dir;
-  const double before = M::guard_surface(g, bwd.data(), par) * dir;
-  return after > 0.0 && before < 0.0;
-}
-
 /// Whether Newton for Δ_g(z) = y from z = y converges (the characteristics' Tracer's).
 template <HybridModel M>
 bool newton_converges(int g, const std::array<double, state_dim_v<M>>& y, const double* par,
@@ -217,13 +179,12 @@ PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, 
   if (!all_finite(X) || !std::isfinite(div)) return fail(PreflightError::non_finite_flow, div);
   M::guard_gradient(g, x.data(), par, grad.data());
   const double rate = dot<N>(grad.data(), X.data());
-  const double gn = std::sqrt(dot<N>(grad.data(), grad.data()));
-  const double xn = std::sqrt(dot<N>(X.data(), X.data()));
   if (!std::isfinite(rate)) return fail(PreflightError::non_finite_flow, rate);
-  // Grazing: tangent here, and the orbit crosses S_g in the firing direction.
-  if (xn > 0.0 && gn > 0.0 && std::fabs(rate) <= opt.graze_tol * gn * xn &&
-      orbit_crosses<M>(g, gi.from, x, xn, diam, par))
-    return fail(PreflightError::grazing, std::fabs(rate) / (gn * xn));
+  // Grazing: tangent here, and the orbit crosses S_g in the firing direction (the criterion
+  // the tracers share, characteristics.hpp), followed until it has moved 1e-3·diam each way.
+  const double ratio = grazing<M>(g, gi.from, x, par, opt.graze_tol,
+                                  [diam](double speed) { return 1e-3 * diam / speed; });
+  if (ratio >= 0.0) return fail(PreflightError::grazing, ratio);
   if (!(rate * gi.direction > 0.0)) return f;  // the guard does not fire here
   std::array<double, N> y{};
   M::reset(g, x.data(), par, y.data());
