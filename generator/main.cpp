@@ -53,7 +53,10 @@ struct Frontend {
     const auto t0 = Clock::now();
     ModelAst ast = parse(src);  // stage 1: text -> AST
     if (is_lie_model(ast)) {
-      LieModel lie = check_lie(ast, src);  // stage 2: AST -> LieModel
+      LieModel lie = [&] {
+        const Watchdog watchdog(src.path(), DeriveLimits{}.derive_seconds * 1.5 + 5);
+        return check_lie(ast, src);  // stage 2: AST -> LieModel
+      }();
       const Watchdog watchdog(src.path(), lie.base.limits.derive_seconds * 1.5 + 5);
       model = reduce(lie, src, req.target);  // reduce: LieModel -> Model (general kind)
     } else {

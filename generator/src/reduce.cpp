@@ -3,10 +3,12 @@
 #include "hybgen/gen/reduce.hpp"
 
 #include <cctype>
+#include <new>
 #include <set>
 #include <sstream>
 
 #include "hybgen/gen/derive.hpp"
+#include "hybgen/gen/limits.hpp"
 #include "reduce_internal.hpp"
 
 namespace hybgen::gen {
@@ -355,7 +357,18 @@ Model reduce(const LieModel& lie, const SourceText& src, ReduceTarget target) {
                           "cn) = [[...]] at (...)' to compare with the unreduced system)");
     return unreduced(lie, src);
   }
-  return lie.xi_of_w.empty() ? reduced(lie, src) : reduced_constrained(lie, src);
+  // The reduction runs under the model's derivation limits, like derive: a
+  // blow-up ends with a located error naming the limit, not a hang.
+  LimitScope scope(lie.base.limits);
+  scope.object("the reduction of group '" + lie.group_name + "'", lie.group_loc);
+  try {
+    return lie.xi_of_w.empty() ? reduced(lie, src) : reduced_constrained(lie, src);
+  } catch (const LimitExceeded& e) {
+    throw src.error(scope.loc(), "deriving " + scope.what() + ": " + e.what());
+  } catch (const std::bad_alloc&) {
+    throw src.error(scope.loc(), "deriving " + scope.what() +
+                                     ": out of memory (the symbolic expressions grew too large)");
+  }
 }
 
 }  // namespace hybgen::gen

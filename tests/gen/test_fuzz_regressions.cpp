@@ -8,8 +8,9 @@
 // finding is adding a file):
 //   frontend/       whole front end, fuzz/frontend_pipeline.hpp, size caps only;
 //   overrides/      --set values, fuzz/overrides_pipeline.hpp;
-//   frontend-open/  findings whose fix is not in yet (none today): the
-//                   fuzzer guards them (Guards::All), DISABLED_ tests run them.
+//   frontend-open/  findings whose fix is not in yet: the fuzzer guards
+//                   them (Guards::All; today the Lie caps do), DISABLED_
+//                   tests run them.
 
 #include <gtest/gtest.h>
 
@@ -23,6 +24,8 @@
 #include "../../fuzz/overrides_pipeline.hpp"
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/fs.hpp"
+#include "hybgen/gen/parse.hpp"
+#include "hybgen/gen/reduce.hpp"
 
 namespace hybgen::gen {
 namespace {
@@ -155,6 +158,98 @@ TEST(FuzzRegressions, SizeCapsSkipExpensiveDerivations) {
   EXPECT_EQ(fuzz::run_frontend("state x, y\nmode m { x' = (x+y)^64; y' = 1 }\n", Guards::SizeOnly),
             Stage::Derived);
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 30.0);
+}
+
+/// The Lie-group model `name` of models/, through the fuzzing pipeline.
+Stage run_lie_model(const std::string& name) {
+  const std::string text =
+      read_file((fs::path(HYBGEN_SOURCE_DIR) / "models" / (name + ".model")).string());
+  return fuzz::run_frontend(text, Guards::SizeOnly);
+}
+
+/// Expect a located ModelError naming `hypothesis` from the pipeline on models/`name`.
+void expect_hypothesis_error(const std::string& name, const std::string& hypothesis) {
+  try {
+    (void)run_lie_model(name);
+    ADD_FAILURE() << name << " accepted";
+  } catch (const ModelError& e) {
+    EXPECT_NE(std::string(e.what()).find("hypothesis '" + hypothesis + "' fails"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+// The harness drives Lie-group models through check_lie -> reduce -> derive (and the
+// unreduced twin): gl2 reduces to 5 states and is derived; gl3 reduces to 10 states,
+// beyond kMaxStates, so it stops after reduce (Checked); the heisenberg particle is derived
+// (and so is its 6-state twin); aff1 and so3 fail the hypotheses they are shipped to show
+// (`normal`, `codim1`) — errors only check_lie/reduce raise, so the Lie path was taken.
+TEST(FuzzPipeline, LieModelsTakeTheLiePath) {
+  EXPECT_EQ(run_lie_model("gl2"), Stage::Derived);
+  EXPECT_EQ(run_lie_model("gl3"), Stage::Checked);
+  EXPECT_EQ(run_lie_model("heisenberg"), Stage::Derived);
+  EXPECT_EQ(outcome([] { (void)run_lie_model("chaplygin"); }), "");
+  expect_hypothesis_error("aff1", "normal");
+  expect_hypothesis_error("so3_rigid_body", "codim1");
+}
+
+// The Lie caps skip check_lie and reduce (Stage::Parsed) for groups they cannot bound.
+TEST(FuzzPipeline, LieCapsSkipLargeGroups) {
+  const std::string rest =
+      "momenta z1\nhamiltonian z1^2/2\nreduced q = det(A) - 1\nguard g { when q = 0 decreasing "
+      "reset elastic }\n";
+  EXPECT_EQ(fuzz::run_frontend("group A = gl(4)\n" + rest, Guards::SizeOnly), Stage::Parsed);
+  EXPECT_EQ(fuzz::run_frontend("group A(a, b, c, d, e, f, g, h, i, j) = [[1]] at (0)\n" + rest,
+                               Guards::SizeOnly),
+            Stage::Parsed);
+  // gl(3) is within them: check_lie runs and finds 1 momentum for a 9-dimensional group.
+  EXPECT_THROW(fuzz::run_frontend("group A = gl(3)\n" + rest, Guards::SizeOnly), ModelError);
+}
+
+// Finding F4 (review of the Lie caps, 2026-11-21;
+// fuzz/regressions/frontend/timeout-gl5-reduce-q-equation.model): check_lie
+// accepted gl(N) up to N = 6, but for gl(5) with h = (z1^2 + z7^2)/2 reduce
+// spent minutes (> 120 s measured) in q_equation (lie.cpp: simplify of r/φ
+// with φ = det of a symbolic 5×5 matrix, 120 terms), outside any LimitScope.
+// Fixed: gl(N) is limited to N <= 4 (a located error at once), and reduce runs
+// under the model's derivation limits like derive (the CLI's watchdog also
+// covers check_lie). The fuzzer never met it: its Lie caps skip dimension 25.
+TEST(FuzzRegressions, Gl5IsRefusedAtOnce) {
+  const fs::path f = fs::path(HYBGEN_SOURCE_DIR) / "fuzz" / "regressions" / "frontend" /
+                     "timeout-gl5-reduce-q-equation.model";
+  const SourceText src(f.string(), read_file(f.string()));
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    (void)check_lie(parse(src), src);
+    ADD_FAILURE() << "gl(5) passed check_lie";
+  } catch (const ModelError& e) {
+    EXPECT_EQ(e.exit_code(), ExitCode::ModelError);
+    EXPECT_NE(std::string(e.what()).find(":1:1: error: gl(N) is limited to N <= 4"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+}
+
+// The reduction itself runs under derive_seconds: gl(4) (about 1.5 s of symbolic
+// work) with a budget of 1 ms ends with a located error naming the reduction and
+// the limit, checked between symbolic operations.
+TEST(FuzzRegressions, ReductionRunsUnderTheDerivationLimits) {
+  std::string text = "group A = gl(4)\nmomenta ";
+  for (int i = 1; i <= 16; ++i) text += (i > 1 ? ", z" : "z") + std::to_string(i);
+  text += "\nhamiltonian (z1^2 + z6^2)/2\nreduced q = det(A) - 1\n";
+  const SourceText src("gl4.model", text);
+  LieModel lie = check_lie(parse(src), src);
+  lie.base.limits.derive_seconds = 1e-3;
+  try {
+    (void)reduce(lie, src, ReduceTarget::Reduced);
+    ADD_FAILURE() << "reduced gl(4) within 1 ms";
+  } catch (const ModelError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(what.rfind("gl4.model:1:1: error: deriving the reduction of group 'A': ", 0), 0u)
+        << what;
+    EXPECT_NE(what.find("derive_seconds"), std::string::npos) << what;
+  }
 }
 
 // Finding F3 (review of inputs fuzz_overrides accepts): parse_grid and
