@@ -355,6 +355,13 @@ double grazing(int g, int m, const std::array<double, state_dim_v<M>>& x, const 
   return std::fabs(rate) / (gn * xn);
 }
 
+/// The details of a grazing failure met along a trace (backward tracer, forward flow):
+/// the tangency ratio `ratio` at the reported state.
+inline void describe_grazing(std::ostream& os, double ratio) {
+  os << ": |grad s . X| / (|grad s| |X|) = " << ratio
+     << " there, and the orbit crosses the surface";
+}
+
 /// δ of the grazing test along a trace over [0, horizon] (backward tracer, forward flow): the
 /// orbit is followed 1e-3 of the horizon each way, the time resolution of the solution.
 inline double graze_delta(double horizon) {
@@ -896,9 +903,7 @@ std::string describe(const TraceFailure<state_dim_v<M>>& f) {
   os << " at backward time tau = " << s.tau << ", state ";
   point(s.state);
   os << ", mode '" << mode_name(s.mode) << "', after " << s.events << " resets";
-  if (s.error == TraceError::grazing)
-    os << ": |grad s . X| / (|grad s| |X|) = " << s.value
-       << " there, and the orbit crosses the surface";
+  if (s.error == TraceError::grazing) detail::describe_grazing(os, s.value);
   return os.str();
 }
 

@@ -468,9 +468,7 @@ std::string describe(const ForwardResult<state_dim_v<M>>& r, int start_mode,
   os << " at time t = " << r.t_stop << ", state ";
   point(r.x);
   os << ", mode '" << mode_name(r.mode) << "', after " << r.events << " guard crossings";
-  if (r.error == TraceError::grazing)
-    os << ": |grad s . X| / (|grad s| |X|) = " << r.value
-       << " there, and the orbit crosses the surface";
+  if (r.error == TraceError::grazing) detail::describe_grazing(os, r.value);
   return os.str();
 }
 
