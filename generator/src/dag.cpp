@@ -69,8 +69,12 @@ void fnv_str(std::uint64_t& h, const std::string& s) {
   for (char c : s) fnv_byte(h, static_cast<unsigned char>(c));
 }
 
-/// Decimal text of an integer numeric (sign included).
+/// Decimal text of an integer numeric (sign included). Integers of at most 18 digits, by
+/// far the most common, take std::to_string: printing through cln's ostream costs a
+/// stream and a locale per call, and the dag prints every rational it interns.
 std::string int_text(const GiNaC::numeric& i) {
+  static const GiNaC::numeric kSmall("1000000000000000000");  // 10^18 < 2^63
+  if (i.is_integer() && GiNaC::abs(i) < kSmall) return std::to_string(i.to_long());
   std::ostringstream os;
   os << i;
   return os.str();
