@@ -10,6 +10,8 @@
 #                                   fuzz_frontend) for SECONDS with JOBS parallel
 #                                   workers (default: nproc); the corpus grows in
 #                                   build-fuzz/corpus/HARNESS across campaigns
+#                                   (FUZZ_CORPUS_DIR=DIR: grow DIR instead; an
+#                                   empty DIR starts again from the seeds)
 #   fuzz/run.sh repro FILE... [HARNESS]
 #                                   run inputs once (default fuzz_frontend)
 #
@@ -77,11 +79,12 @@ case "${1:-}" in
     h=${3:-fuzz_frontend}
     build
     jobs=${JOBS:-$(nproc)}
+    corpus=${FUZZ_CORPUS_DIR:-$BUILD/corpus/$h}
     if ((jobs > 1)); then
-      fuzz "$h" "$secs" "$BUILD/corpus/$h" -fork="$jobs" -ignore_crashes=1 -ignore_timeouts=1 \
+      fuzz "$h" "$secs" "$corpus" -fork="$jobs" -ignore_crashes=1 -ignore_timeouts=1 \
         -ignore_ooms=1
     else
-      fuzz "$h" "$secs" "$BUILD/corpus/$h"
+      fuzz "$h" "$secs" "$corpus"
     fi
     echo "findings (if any): $BUILD/findings/$h/" >&2
     ls -l "$BUILD/findings/$h/" >&2
