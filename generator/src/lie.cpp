@@ -302,6 +302,35 @@ std::string LieAlgebra::format(const Components& x) const {
 
 namespace {
 
+/// e(c0) = e.subs(at), at: c -> c0 the identity point. A pole there (GiNaC
+/// throws from inside subs, e.g. "power::eval(): division by zero") is the
+/// model's error: e is not defined at the identity, where every object of
+/// the reduction is evaluated.
+ex at_point(const ex& e, const std::vector<ex>& coords, const std::vector<ex>& c0,
+            const std::string& what = "") {
+  if (GiNaC::is_a<matrix>(e)) {  // entry by entry, so that the error names the entry
+    matrix m = GiNaC::ex_to<matrix>(e);
+    for (unsigned r = 0; r < m.rows(); ++r)
+      for (unsigned c = 0; c < m.cols(); ++c)
+        m(r, c) = at_point(m(r, c), coords, c0,
+                           "entry (" + std::to_string(r + 1) + "," + std::to_string(c + 1) + ") ");
+    return m;
+  }
+  GiNaC::exmap at;
+  for (std::size_t i = 0; i < coords.size(); ++i) at[coords[i]] = c0[i];
+  try {
+    return e.subs(at);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::exception& err) {
+    std::string point;  // in the order of the coordinates (an exmap's order is GiNaC's)
+    for (std::size_t i = 0; i < coords.size(); ++i)
+      point += (i ? ", " : "") + str(coords[i]) + " = " + str(c0[i]);
+    throw LieError("lie_algebra", what + str(e) + " is not defined at the identity point (" +
+                                      point + "): " + err.what());
+  }
+}
+
 LieAlgebra algebra_of(const matrix& g, const std::vector<ex>& coords, const std::vector<ex>& c0,
                       std::vector<std::string> names) {
   if (g.rows() != g.cols()) throw LieError("lie_algebra", "g(c) must be a square matrix");
@@ -310,9 +339,7 @@ LieAlgebra algebra_of(const matrix& g, const std::vector<ex>& coords, const std:
   for (const auto& c : coords)
     if (!GiNaC::is_a<GiNaC::symbol>(c))
       throw LieError("lie_algebra", std::string("coordinates must be symbols, got ") + str(c));
-  GiNaC::exmap at;
-  for (std::size_t i = 0; i < coords.size(); ++i) at[coords[i]] = c0[i];
-  const ex g0 = g.subs(at);
+  const ex g0 = at_point(g, coords, c0);
   const matrix& g0m = GiNaC::ex_to<matrix>(g0);
   for (unsigned r = 0; r < g.rows(); ++r)
     for (unsigned c = 0; c < g.cols(); ++c)
@@ -322,7 +349,7 @@ LieAlgebra algebra_of(const matrix& g, const std::vector<ex>& coords, const std:
                                           std::to_string(c + 1) + ") is " + str(g0m(r, c)));
   std::vector<matrix> basis;
   for (const auto& c : coords) {
-    matrix e = GiNaC::ex_to<matrix>(g.diff(as_symbol(c)).subs(at));
+    matrix e = GiNaC::ex_to<matrix>(at_point(g.diff(as_symbol(c)), coords, c0));
     for (unsigned r = 0; r < e.rows(); ++r)
       for (unsigned k = 0; k < e.cols(); ++k) e(r, k) = GiNaC::normal(e(r, k));
     basis.push_back(e);
@@ -420,9 +447,7 @@ Components MatrixGroup::differential_at_identity(const ex& f) const {
 }
 
 ex MatrixGroup::at_identity(const ex& e) const {
-  GiNaC::exmap at;
-  for (std::size_t i = 0; i < coords_.size(); ++i) at[coords_[i]] = c0_[i];
-  return e.subs(at);
+  return at_point(e, coords_, c0_);
 }
 
 LieGroup::LieGroup(MatrixGroup group) : matrix_(std::move(group)) {}

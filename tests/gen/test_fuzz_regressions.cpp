@@ -252,6 +252,54 @@ TEST(FuzzRegressions, Gl5IsRefusedAtOnce) {
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
 }
 
+// Finding F6 (campaign of 2026-11-22; fuzz/regressions/frontend/
+// crash-pole-of-the-group-matrix-at-identity.model): a mutated so3_rigid_body
+// whose matrix entry (1,3) reads `... cos(phi)/ + sin(psi)*sin(phi)`, i.e. a
+// division by sin(psi)*sin(phi), which is 0 at the identity point (0, 0, 0).
+// check_lie substituted the identity point into g(c), GiNaC threw
+// "power::eval(): division by zero" from inside subs, and the CLI reported an
+// internal error (exit 70). Fixed: every evaluation at the identity point
+// (lie.cpp at_point) turns such a pole into hypothesis 'lie_algebra', located
+// at the group and naming the entry.
+TEST(FuzzRegressions, GroupMatrixWithAPoleAtTheIdentityIsAModelError) {
+  const fs::path f = fs::path(HYBGEN_SOURCE_DIR) / "fuzz" / "regressions" / "frontend" /
+                     "crash-pole-of-the-group-matrix-at-identity.model";
+  const SourceText src(f.string(), read_file(f.string()));
+  try {
+    (void)check_lie(parse(src), src);
+    ADD_FAILURE() << "a group matrix with a pole at the identity passed check_lie";
+  } catch (const ModelError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find(".model:12:1: error: hypothesis 'lie_algebra' fails: entry (1,3) "),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find("is not defined at the identity point (psi = 0, theta = 0, phi = 0)"),
+              std::string::npos)
+        << what;
+  }
+}
+
+// F6, second path (found while fixing it; fuzz/regressions/frontend/
+// crash-pole-of-a-constraint-at-zero-velocity.model): chaplygin.model with
+// `constraint w = 1/omega`. check_lie evaluated the constraint at zero
+// velocity for its linearity test, and GiNaC threw from inside subs. Now the
+// pole makes the constraint non-linear: the located error of any non-linear
+// constraint.
+TEST(FuzzRegressions, ConstraintWithAPoleAtZeroVelocityIsAModelError) {
+  const fs::path f = fs::path(HYBGEN_SOURCE_DIR) / "fuzz" / "regressions" / "frontend" /
+                     "crash-pole-of-a-constraint-at-zero-velocity.model";
+  const SourceText src(f.string(), read_file(f.string()));
+  try {
+    (void)check_lie(parse(src), src);
+    ADD_FAILURE() << "constraint w = 1/omega passed check_lie";
+  } catch (const ModelError& e) {
+    EXPECT_NE(std::string(e.what()).find(
+                  ".model:21:16: error: a constraint must be linear in the other velocities"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // The reduction itself runs under derive_seconds: gl(4) (about 1.5 s of symbolic
 // work) with a budget of 1 ms ends with a located error naming the reduction and
 // the limit, checked between symbolic operations.
