@@ -320,8 +320,6 @@ ex at_point(const ex& e, const std::vector<ex>& coords, const std::vector<ex>& c
   for (std::size_t i = 0; i < coords.size(); ++i) at[coords[i]] = c0[i];
   try {
     return e.subs(at);
-  } catch (const Error&) {
-    throw;
   } catch (const std::exception& err) {
     std::string point;  // in the order of the coordinates (an exmap's order is GiNaC's)
     for (std::size_t i = 0; i < coords.size(); ++i)

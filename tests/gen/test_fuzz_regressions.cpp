@@ -97,6 +97,19 @@ TEST(FuzzRegressions, PoleAtTheParameterDefaultsDoesNotLeak) {
   EXPECT_EQ(outcome([&] { fuzz::run_frontend(text, Guards::SizeOnly); }), "");
 }
 
+/// Expect a located ModelError (exit 1) within a few seconds.
+void expect_prompt_model_error(const std::string& text, const std::string& fragment) {
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    fuzz::run_frontend(text, Guards::SizeOnly);
+    ADD_FAILURE() << "accepted:\n" << text;
+  } catch (const ModelError& e) {
+    EXPECT_EQ(e.exit_code(), ExitCode::ModelError);
+    EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
+  }
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+}
+
 // fuzz/regressions/frontend/leak-ginac-pole-in-power-subs.model, minimised:
 // the identity reset of a guard x*y = 0 is checked for beating (H.5) by
 // evaluating the flow at sample points on the surface, where x = 0 or y = 0;
@@ -110,25 +123,7 @@ TEST(FuzzRegressions, PoleOfAPowerOnTheGuardDoesNotLeak) {
       "state x, y\nmode A { x' = y - x\n y' = -x^y }\n"
       "guard g { when x*y = 0 decreasing  reset identity }\n"
       "simulation { domain x in [-2, 2]  domain y in [-2, 2]  initial 1 }\n";
-  try {
-    fuzz::run_frontend(text, Guards::SizeOnly);
-    ADD_FAILURE() << "accepted: the identity reset lands on its own guard";
-  } catch (const ModelError& e) {
-    EXPECT_NE(std::string(e.what()).find("H.5"), std::string::npos) << e.what();
-  }
-}
-
-/// Expect a located ModelError (exit 1) within a few seconds.
-void expect_prompt_model_error(const std::string& text, const std::string& fragment) {
-  const auto t0 = std::chrono::steady_clock::now();
-  try {
-    fuzz::run_frontend(text, Guards::SizeOnly);
-    ADD_FAILURE() << "accepted:\n" << text;
-  } catch (const ModelError& e) {
-    EXPECT_EQ(e.exit_code(), ExitCode::ModelError);
-    EXPECT_NE(std::string(e.what()).find(fragment), std::string::npos) << e.what();
-  }
-  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+  expect_prompt_model_error(text, "H.5");
 }
 
 // Finding F1 (fuzz/regressions/frontend/timeout-huge-symbolic-exponent.model):
@@ -227,40 +222,6 @@ TEST(FuzzPipeline, LieCapsSkipLargeGroups) {
   EXPECT_THROW(fuzz::run_frontend("group A = gl(3)\n" + rest, Guards::SizeOnly), ModelError);
 }
 
-// Finding F4 (review of the Lie caps, 2026-11-21;
-// fuzz/regressions/frontend/timeout-gl5-reduce-q-equation.model): check_lie
-// accepted gl(N) up to N = 6, but for gl(5) with h = (z1^2 + z7^2)/2 reduce
-// spent minutes (> 120 s measured) in q_equation (lie.cpp: simplify of r/φ
-// with φ = det of a symbolic 5×5 matrix, 120 terms), outside any LimitScope.
-// Fixed: gl(N) is limited to N <= 4 (a located error at once), and reduce runs
-// under the model's derivation limits like derive (the CLI's watchdog also
-// covers check_lie). The fuzzer never met it: its Lie caps skip dimension 25.
-TEST(FuzzRegressions, Gl5IsRefusedAtOnce) {
-  const fs::path f = fs::path(HYBGEN_SOURCE_DIR) / "fuzz" / "regressions" / "frontend" /
-                     "timeout-gl5-reduce-q-equation.model";
-  const SourceText src(f.string(), read_file(f.string()));
-  const auto t0 = std::chrono::steady_clock::now();
-  try {
-    (void)check_lie(parse(src), src);
-    ADD_FAILURE() << "gl(5) passed check_lie";
-  } catch (const ModelError& e) {
-    EXPECT_EQ(e.exit_code(), ExitCode::ModelError);
-    EXPECT_NE(std::string(e.what()).find(":1:1: error: gl(N) is limited to N <= 4"),
-              std::string::npos)
-        << e.what();
-  }
-  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
-}
-
-// Finding F6 (campaign of 2026-11-22; fuzz/regressions/frontend/
-// crash-pole-of-the-group-matrix-at-identity.model): a mutated so3_rigid_body
-// whose matrix entry (1,3) reads `... cos(phi)/ + sin(psi)*sin(phi)`, i.e. a
-// division by sin(psi)*sin(phi), which is 0 at the identity point (0, 0, 0).
-// check_lie substituted the identity point into g(c), GiNaC threw
-// "power::eval(): division by zero" from inside subs, and the CLI reported an
-// internal error (exit 70). Fixed: every evaluation at the identity point
-// (lie.cpp at_point) turns such a pole into hypothesis 'lie_algebra', located
-// at the group and naming the entry.
 /// check_lie on fuzz/regressions/frontend/`name` throws a ModelError (exit 1)
 /// whose message holds every one of `fragments`.
 void expect_check_lie_refuses(const std::string& name, const std::vector<std::string>& fragments) {
@@ -276,6 +237,30 @@ void expect_check_lie_refuses(const std::string& name, const std::vector<std::st
   }
 }
 
+// Finding F4 (review of the Lie caps, 2026-11-21;
+// fuzz/regressions/frontend/timeout-gl5-reduce-q-equation.model): check_lie
+// accepted gl(N) up to N = 6, but for gl(5) with h = (z1^2 + z7^2)/2 reduce
+// spent minutes (> 120 s measured) in q_equation (lie.cpp: simplify of r/φ
+// with φ = det of a symbolic 5×5 matrix, 120 terms), outside any LimitScope.
+// Fixed: gl(N) is limited to N <= 4 (a located error at once), and reduce runs
+// under the model's derivation limits like derive (the CLI's watchdog also
+// covers check_lie). The fuzzer never met it: its Lie caps skip dimension 25.
+TEST(FuzzRegressions, Gl5IsRefusedAtOnce) {
+  const auto t0 = std::chrono::steady_clock::now();
+  expect_check_lie_refuses("timeout-gl5-reduce-q-equation.model",
+                           {":1:1: error: gl(N) is limited to N <= 4"});
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+}
+
+// Finding F6 (campaign of 2026-11-22; fuzz/regressions/frontend/
+// crash-pole-of-the-group-matrix-at-identity.model): a mutated so3_rigid_body
+// whose matrix entry (1,3) reads `... cos(phi)/ + sin(psi)*sin(phi)`, i.e. a
+// division by sin(psi)*sin(phi), which is 0 at the identity point (0, 0, 0).
+// check_lie substituted the identity point into g(c), GiNaC threw
+// "power::eval(): division by zero" from inside subs, and the CLI reported an
+// internal error (exit 70). Fixed: every evaluation at the identity point
+// (lie.cpp at_point) turns such a pole into hypothesis 'lie_algebra', located
+// at the group and naming the entry.
 TEST(FuzzRegressions, GroupMatrixWithAPoleAtTheIdentityIsAModelError) {
   expect_check_lie_refuses("crash-pole-of-the-group-matrix-at-identity.model",
                            {".model:12:1: error: hypothesis 'lie_algebra' fails: entry (1,3) ",
