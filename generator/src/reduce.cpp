@@ -348,20 +348,21 @@ Model reduced_constrained(const LieModel& lm, const SourceText& src) {
 }  // namespace
 
 Model reduce(const LieModel& lie, const SourceText& src, ReduceTarget target) {
-  if (target == ReduceTarget::Unreduced) {
-    if (!lie.group.has_coordinates())
-      throw src.error(lie.group_loc,
-                      "the unreduced twin needs the group's coordinates, but group '" +
-                          lie.group_name +
-                          "' is given by structure constants (give it as 'group NAME(c1, ..., "
-                          "cn) = [[...]] at (...)' to compare with the unreduced system)");
-    return unreduced(lie, src);
-  }
-  // The reduction runs under the model's derivation limits, like derive: a
+  const bool twin = target == ReduceTarget::Unreduced;
+  if (twin && !lie.group.has_coordinates())
+    throw src.error(lie.group_loc,
+                    "the unreduced twin needs the group's coordinates, but group '" +
+                        lie.group_name +
+                        "' is given by structure constants (give it as 'group NAME(c1, ..., "
+                        "cn) = [[...]] at (...)' to compare with the unreduced system)");
+  // Both targets run under the model's derivation limits, like derive: a
   // blow-up ends with a located error naming the limit, not a hang.
   LimitScope scope(lie.base.limits);
-  scope.object("the reduction of group '" + lie.group_name + "'", lie.group_loc);
+  scope.object(
+      (twin ? "the unreduced twin of group '" : "the reduction of group '") + lie.group_name + "'",
+      lie.group_loc);
   try {
+    if (twin) return unreduced(lie, src);
     return lie.xi_of_w.empty() ? reduced(lie, src) : reduced_constrained(lie, src);
   } catch (const LimitExceeded& e) {
     throw src.error(scope.loc(), "deriving " + scope.what() + ": " + e.what());

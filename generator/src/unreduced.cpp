@@ -123,7 +123,12 @@ Model unreduced_free(const LieModel& lm, const SourceText& src) {
   ModeSpec mode;
   mode.name = "flow";
   mode.loc = lm.group_loc;
-  mode.hamiltonian = lm.h.subs(zeta_of, GiNaC::subs_options::no_pattern).expand();
+  // H(c, p) is expanded only when its expansion is within the term limit:
+  // ζ_i is a sum of n terms p_j L_ji(c), so on gl(3) (n = 9) ζ_2^2250 would
+  // expand to C(2258, 8) ≈ 1.7·10^22 monomials (fuzz finding F7). Unexpanded
+  // it is the same function, and derive differentiates it as it is.
+  const ex h = lm.h.subs(zeta_of, GiNaC::subs_options::no_pattern);
+  mode.hamiltonian = LimitScope::may_expand(h) ? h.expand() : h;
   for (unsigned i = 0; i < n; ++i) {
     mode.coordinates.push_back(static_cast<int>(i));
     mode.momenta.push_back(static_cast<int>(n + i));

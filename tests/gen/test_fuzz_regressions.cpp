@@ -300,6 +300,90 @@ TEST(FuzzRegressions, ReductionRunsUnderTheDerivationLimits) {
   }
 }
 
+/// gl(3) with h = (z1^2 + z2^k + z3^2 + ... + z9^2)/2 and the impact surface det A = 1.
+std::string gl3_with_power(int k) {
+  std::string text = "group A = gl(3)\nmomenta ";
+  for (int i = 1; i <= 9; ++i) text += (i > 1 ? ", z" : "z") + std::to_string(i);
+  text += "\nhamiltonian (z1^2 + z2^" + std::to_string(k);
+  for (int i = 3; i <= 9; ++i) text += " + z" + std::to_string(i) + "^2";
+  return text + ")/2\nreduced q = det(A) - 1\n";
+}
+
+// Finding F7 (fuzz/regressions/frontend/timeout-twin-hamiltonian-expansion.model):
+// a gl(3) model whose Hamiltonian has zeta2^2250 (the fuzzer had turned `^2`
+// into `^22.5E+2`). The reduced system derives in milliseconds, but the
+// unreduced twin expanded H(c, p) = h(ζ(c, p)), where ζ_2 is a sum of 9 terms
+// p_j L_j2(c): C(2258, 8) ≈ 1.7·10^22 monomials in one GiNaC call, and the
+// twin was not built under the derivation limits at all. `hybgen derive
+// --unreduced` was still running after 100 s (the CLI's watchdog would end it
+// at 1.5 · derive_seconds + 5 = 185 s), the fuzzer timed out. Fixed: the twin is
+// built under the limits, and H is expanded only within max_expand_terms.
+// Hamilton's flow on T*G in canonical coordinates keeps volume (Liouville),
+// so the twin's divergence must come out 0 from the unexpanded H as well.
+TEST(FuzzRegressions, TwinOfAHighPowerHamiltonianIsNotExpanded) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const SourceText src("gl3.model", gl3_with_power(2250));
+  const LieModel lie = check_lie(parse(src), src);
+  Model twin = reduce(lie, src, ReduceTarget::Unreduced);
+  ASSERT_EQ(twin.modes.size(), 1u);
+  ASSERT_TRUE(twin.modes[0].hamiltonian.has_value());
+  EXPECT_TRUE(twin.modes[0].hamiltonian->has(GiNaC::pow(GiNaC::wild(), 2250)))
+      << "the twin's Hamiltonian was expanded";
+  const HybridSystem sys = derive(twin, src);
+  ASSERT_EQ(sys.modes.size(), 1u);
+  EXPECT_TRUE(sys.modes[0].divergence.is_zero()) << sys.modes[0].divergence;
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+}
+
+// The unexpanded twin is the same system: with z2^3 (165 monomials, within the
+// default limit) H is expanded; with max_expand_terms = 1 it is not. The two
+// Hamiltonians and the two derived flows agree identically (their differences
+// expand to 0, once the second twin's momenta, which are fresh symbols, are
+// renamed to the first's).
+TEST(FuzzRegressions, UnexpandedTwinIsTheSameSystem) {
+  const SourceText src("gl3.model", gl3_with_power(3));
+  LieModel lie = check_lie(parse(src), src);
+  Model expanded = reduce(lie, src, ReduceTarget::Unreduced);
+  lie.base.limits.max_expand_terms = 1;
+  Model kept = reduce(lie, src, ReduceTarget::Unreduced);
+  ASSERT_EQ(expanded.state_symbols.size(), 18u);
+  ASSERT_EQ(kept.state_symbols.size(), 18u);
+  GiNaC::exmap rename;
+  for (std::size_t i = 0; i < 18; ++i) rename[kept.state_symbols[i]] = expanded.state_symbols[i];
+  ASSERT_TRUE(expanded.modes[0].hamiltonian && kept.modes[0].hamiltonian);
+  const GiNaC::ex h_expanded = *expanded.modes[0].hamiltonian;
+  const GiNaC::ex h_kept = kept.modes[0].hamiltonian->subs(rename);
+  EXPECT_TRUE(h_expanded.is_equal(h_expanded.expand()));
+  EXPECT_FALSE(h_kept.is_equal(h_kept.expand())) << "expanded anyway: " << h_kept;
+  EXPECT_TRUE((h_expanded - h_kept).expand().is_zero());
+  const HybridSystem a = derive(expanded, src), b = derive(kept, src);
+  ASSERT_EQ(a.modes[0].flow.size(), 18u);
+  ASSERT_EQ(b.modes[0].flow.size(), 18u);
+  for (std::size_t i = 0; i < 18; ++i)
+    EXPECT_TRUE((a.modes[0].flow[i] - b.modes[0].flow[i].subs(rename)).expand().is_zero())
+        << "component " << i << ": " << a.modes[0].flow[i] << " vs " << b.modes[0].flow[i];
+}
+
+// With F7's fix the twin is built under the derivation limits too: the
+// constrained twin of chaplygin.model (Lagrange–d'Alembert, simplified entry by
+// entry) with a budget of 1 ns ends with a located error naming the twin.
+TEST(FuzzRegressions, TwinRunsUnderTheDerivationLimits) {
+  const fs::path path = fs::path(HYBGEN_SOURCE_DIR) / "models" / "chaplygin.model";
+  const SourceText src("chaplygin.model", read_file(path.string()));
+  LieModel lie = check_lie(parse(src), src);
+  lie.base.limits.derive_seconds = 1e-9;
+  try {
+    (void)reduce(lie, src, ReduceTarget::Unreduced);
+    ADD_FAILURE() << "built the constrained twin within 1 ns";
+  } catch (const ModelError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("chaplygin.model:"), std::string::npos) << what;
+    EXPECT_NE(what.find(": error: deriving the unreduced twin of group '"), std::string::npos)
+        << what;
+    EXPECT_NE(what.find("derive_seconds"), std::string::npos) << what;
+  }
+}
+
 // Finding F3 (review of inputs fuzz_overrides accepts): parse_grid and
 // apply_overrides (check.cpp, `grid`) accepted any axis up to 999999999 nodes
 // and any product, so `--set grid=999999999x999999999` (10^18 nodes) passed
