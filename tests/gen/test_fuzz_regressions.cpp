@@ -279,34 +279,44 @@ TEST(FuzzRegressions, ConstraintWithAPoleAtZeroVelocityIsAModelError) {
       {".model:21:16: error: a constraint must be linear in the other velocities"});
 }
 
+/// gl(n) with momenta z1, ..., z(n²), Hamiltonian `hamiltonian` and the
+/// impact surface det A = 1.
+std::string gl_model(int n, const std::string& hamiltonian) {
+  std::string text = "group A = gl(" + std::to_string(n) + ")\nmomenta ";
+  for (int i = 1; i <= n * n; ++i) text += (i > 1 ? ", z" : "z") + std::to_string(i);
+  return text + "\nhamiltonian " + hamiltonian + "\nreduced q = det(A) - 1\n";
+}
+
+/// The message of the ModelError that reduce(target) of `src` ends with under a
+/// budget of `seconds`; "" (and a test failure) if it finishes within it.
+std::string reduce_error_within(const SourceText& src, ReduceTarget target, double seconds) {
+  LieModel lie = check_lie(parse(src), src);
+  lie.base.limits.derive_seconds = seconds;
+  try {
+    (void)reduce(lie, src, target);
+    ADD_FAILURE() << src.path() << ": reduce finished within " << seconds << " s";
+  } catch (const ModelError& e) {
+    return e.what();
+  }
+  return "";
+}
+
 // The reduction itself runs under derive_seconds: gl(4) (about 1.5 s of symbolic
 // work) with a budget of 1 ms ends with a located error naming the reduction and
 // the limit, checked between symbolic operations.
 TEST(FuzzRegressions, ReductionRunsUnderTheDerivationLimits) {
-  std::string text = "group A = gl(4)\nmomenta ";
-  for (int i = 1; i <= 16; ++i) text += (i > 1 ? ", z" : "z") + std::to_string(i);
-  text += "\nhamiltonian (z1^2 + z6^2)/2\nreduced q = det(A) - 1\n";
-  const SourceText src("gl4.model", text);
-  LieModel lie = check_lie(parse(src), src);
-  lie.base.limits.derive_seconds = 1e-3;
-  try {
-    (void)reduce(lie, src, ReduceTarget::Reduced);
-    ADD_FAILURE() << "reduced gl(4) within 1 ms";
-  } catch (const ModelError& e) {
-    const std::string what = e.what();
-    EXPECT_EQ(what.rfind("gl4.model:1:1: error: deriving the reduction of group 'A': ", 0), 0u)
-        << what;
-    EXPECT_NE(what.find("derive_seconds"), std::string::npos) << what;
-  }
+  const SourceText src("gl4.model", gl_model(4, "(z1^2 + z6^2)/2"));
+  const std::string what = reduce_error_within(src, ReduceTarget::Reduced, 1e-3);
+  EXPECT_EQ(what.rfind("gl4.model:1:1: error: deriving the reduction of group 'A': ", 0), 0u)
+      << what;
+  EXPECT_NE(what.find("derive_seconds"), std::string::npos) << what;
 }
 
 /// gl(3) with h = (z1^2 + z2^k + z3^2 + ... + z9^2)/2 and the impact surface det A = 1.
 std::string gl3_with_power(int k) {
-  std::string text = "group A = gl(3)\nmomenta ";
-  for (int i = 1; i <= 9; ++i) text += (i > 1 ? ", z" : "z") + std::to_string(i);
-  text += "\nhamiltonian (z1^2 + z2^" + std::to_string(k);
-  for (int i = 3; i <= 9; ++i) text += " + z" + std::to_string(i) + "^2";
-  return text + ")/2\nreduced q = det(A) - 1\n";
+  std::string h = "(z1^2 + z2^" + std::to_string(k);
+  for (int i = 3; i <= 9; ++i) h += " + z" + std::to_string(i) + "^2";
+  return gl_model(3, h + ")/2");
 }
 
 // Finding F7 (fuzz/regressions/frontend/timeout-twin-hamiltonian-expansion.model):
@@ -370,18 +380,11 @@ TEST(FuzzRegressions, UnexpandedTwinIsTheSameSystem) {
 TEST(FuzzRegressions, TwinRunsUnderTheDerivationLimits) {
   const fs::path path = fs::path(HYBGEN_SOURCE_DIR) / "models" / "chaplygin.model";
   const SourceText src("chaplygin.model", read_file(path.string()));
-  LieModel lie = check_lie(parse(src), src);
-  lie.base.limits.derive_seconds = 1e-9;
-  try {
-    (void)reduce(lie, src, ReduceTarget::Unreduced);
-    ADD_FAILURE() << "built the constrained twin within 1 ns";
-  } catch (const ModelError& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find("chaplygin.model:"), std::string::npos) << what;
-    EXPECT_NE(what.find(": error: deriving the unreduced twin of group '"), std::string::npos)
-        << what;
-    EXPECT_NE(what.find("derive_seconds"), std::string::npos) << what;
-  }
+  const std::string what = reduce_error_within(src, ReduceTarget::Unreduced, 1e-9);
+  EXPECT_NE(what.find("chaplygin.model:"), std::string::npos) << what;
+  EXPECT_NE(what.find(": error: deriving the unreduced twin of group '"), std::string::npos)
+      << what;
+  EXPECT_NE(what.find("derive_seconds"), std::string::npos) << what;
 }
 
 // Finding F3 (review of inputs fuzz_overrides accepts): parse_grid and
