@@ -12,9 +12,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <set>
 
 #include "hybgen/gen/hash.hpp"
+#include "hybgen/gen/limits.hpp"
 
 namespace hybgen::gen {
 
@@ -58,10 +60,6 @@ std::string suggestion(const std::string& name, const std::vector<std::string>& 
   return best.empty() ? std::string() : " (did you mean '" + best + "'?)";
 }
 
-/// Limits of exact arithmetic in the front end.
-constexpr int kMaxExponent = 4096;  ///< |numerator| and denominator of a numeric exponent.
-constexpr int kMaxBits = 1 << 16;   ///< Size of an exactly computed numeric power.
-
 /// Converts AST expressions to GiNaC with a scope of visible names.
 class Converter {
  public:
@@ -84,9 +82,22 @@ class Converter {
   /// so each written exponent can be in bounds while the folded one is not
   /// (fuzzer finding F1b: ((x^4096)^4096)^4096 is x^(2^36)). Only r's own
   /// power and the factors of its product are new; deeper terms were checked.
+  /// A symbolic exponent is bounded too, by its constant part: expand turns
+  /// a^(n + x) into a^n·a^x (finding F8: (2/5)^(10^17 + x) hung in expand).
   ex bounded(const ex& r, const Expr& e) const {
     auto check_power = [&](const ex& f) {
-      if (!GiNaC::is_a<GiNaC::power>(f) || !GiNaC::is_a<GiNaC::numeric>(f.op(1))) return;
+      if (!GiNaC::is_a<GiNaC::power>(f)) return;
+      if (!GiNaC::is_a<GiNaC::numeric>(f.op(1))) {
+        const double c = expanded_constant_bound(f.op(1));
+        if (c > kMaxExponent) {
+          char about[32];
+          std::snprintf(about, sizeof about, "%.3g", c);
+          throw src_.error(e.loc, std::string("exponent too large: its constant part is up to ") +
+                                      about + " (at most " + std::to_string(kMaxExponent) +
+                                      " in x^(a + y), which expands to x^a*x^y)");
+        }
+        return;
+      }
       const auto& n = GiNaC::ex_to<GiNaC::numeric>(f.op(1));
       if (!n.is_rational() || GiNaC::abs(n.numer()) > kMaxExponent || n.denom() > kMaxExponent)
         throw src_.error(e.loc, "exponent too large once powers are combined (at most " +
@@ -151,10 +162,11 @@ class Converter {
                 const double bits =
                     static_cast<double>(na.numer().int_length() + na.denom().int_length()) *
                     GiNaC::abs(nb).to_double();
-                if (bits > kMaxBits)
-                  throw src_.error(e.loc, "number too large: this power has about " +
-                                              std::to_string(static_cast<long long>(bits)) +
-                                              " bits (at most " + std::to_string(kMaxBits) + ")");
+                if (bits > kMaxExactBits)
+                  throw src_.error(
+                      e.loc, "number too large: this power has about " +
+                                 std::to_string(static_cast<long long>(bits)) + " bits (at most " +
+                                 std::to_string(static_cast<long long>(kMaxExactBits)) + ")");
               }
             }
           }

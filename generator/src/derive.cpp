@@ -85,6 +85,52 @@ void collect_symbols(const ex& e, GiNaC::exset& out) {
   for (std::size_t i = 0; i < e.nops(); ++i) collect_symbols(e.op(i), out);
 }
 
+/// e at the exact point `at` (symbols to numbers), evaluated bottom-up like
+/// e.subs(at), except that a numeric power whose exact value would pass
+/// kMaxExactBits is computed in floating point (at the current Digits):
+/// subs would compute (2/5)^(10^56·37/41) exactly and never end (finding F8,
+/// a symbolic exponent scaled by a reset). The result is then inexact, and
+/// `approximated()` says so.
+class AtPoint : public GiNaC::map_function {
+ public:
+  explicit AtPoint(const GiNaC::exmap& at) : at_(at) {}
+  ex operator()(const ex& e) override {
+    if (GiNaC::is_a<GiNaC::symbol>(e)) {
+      const auto it = at_.find(e);
+      return it == at_.end() ? e : it->second;
+    }
+    if (e.nops() == 0) return e;
+    if (GiNaC::is_a<GiNaC::power>(e)) {
+      const ex b = (*this)(e.op(0)), x = (*this)(e.op(1));
+      if (GiNaC::is_a<GiNaC::numeric>(b) && GiNaC::is_a<GiNaC::numeric>(x) &&
+          exact_power_too_large(GiNaC::ex_to<GiNaC::numeric>(b), GiNaC::ex_to<GiNaC::numeric>(x))) {
+        approximated_ = true;
+        return GiNaC::pow(GiNaC::evalf(b), GiNaC::evalf(x));
+      }
+      return GiNaC::pow(b, x);
+    }
+    return e.map(*this);
+  }
+  /// Whether some power was computed in floating point.
+  [[nodiscard]] bool approximated() const { return approximated_; }
+
+ private:
+  const GiNaC::exmap& at_;
+  bool approximated_ = false;
+};
+
+/// Sets GiNaC::Digits for one scope and restores it, also when GiNaC throws.
+class DigitsScope {
+ public:
+  explicit DigitsScope(long digits) : saved_(GiNaC::Digits) { GiNaC::Digits = digits; }
+  ~DigitsScope() { GiNaC::Digits = saved_; }
+  DigitsScope(const DigitsScope&) = delete;
+  DigitsScope& operator=(const DigitsScope&) = delete;
+
+ private:
+  long saved_;
+};
+
 }  // namespace
 
 bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
@@ -93,6 +139,7 @@ bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
   collect_symbols(e, syms);
   std::mt19937_64 rng(0x5eed);
   std::uniform_int_distribution<int> num(-97, 97), den(1, 89);
+  int evaluated = 0;
   for (int trial = 0; trial < 4; ++trial) {
     LimitScope::check_time();
     GiNaC::exmap at;
@@ -102,25 +149,29 @@ bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
       at[s] = GiNaC::numeric(n, den(rng));
     }
     try {
-      ex v = e.subs(at);
-      if (!GiNaC::is_a<GiNaC::numeric>(v)) {
-        GiNaC::Digits = 40;
+      const DigitsScope digits(40);
+      AtPoint at_point(at);
+      ex v = at_point(e);
+      if (GiNaC::is_a<GiNaC::numeric>(v) && v.info(GiNaC::info_flags::crational)) {
+        if (!v.is_zero()) return false;  // exact: zero or not
+      } else {
         v = GiNaC::evalf(v);
-        GiNaC::Digits = 17;
         if (!GiNaC::is_a<GiNaC::numeric>(v)) return false;
         if (GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(v)) > GiNaC::numeric(1, 1000000000) *
                                                               GiNaC::numeric(1, 1000000000) *
                                                               GiNaC::numeric(1, 100000))
           return false;
-      } else if (!GiNaC::ex_to<GiNaC::numeric>(v).is_zero()) {
-        return false;
+        // Tiny, but (2/5)^(10^20) is tiny and not zero: with a power too large
+        // to compute exactly, a tiny value decides nothing.
+        if (at_point.approximated()) continue;
       }
+      ++evaluated;
     } catch (const std::exception&) {
-      GiNaC::Digits = 17;
-      continue;  // a pole at this point: try another
+      continue;  // a pole (or a floating-point overflow) at this point: try another
     }
   }
-  return true;
+  // Not one point could be evaluated: e is not shown to be zero.
+  return evaluated > 0;
 }
 
 namespace {

@@ -24,9 +24,16 @@ std::mutex g_object_mutex;
 std::string g_object = "the model";
 SourceLoc g_object_loc{1, 1};
 
+constexpr double kInf = 1e300;
+
+/// log C(n+k−1, k−1), the number of monomials of (k terms)^n, as a term count.
+double multinomial_terms(double n, double k) {
+  const double log_c = std::lgamma(n + k) - std::lgamma(k) - std::lgamma(n + 1);
+  return log_c > std::log(kInf) ? kInf : std::exp(log_c);
+}
+
 /// Estimate for e itself (not the maximum over its subexpressions).
 double own_terms(const GiNaC::ex& e) {
-  constexpr double kInf = 1e300;
   if (GiNaC::is_a<GiNaC::add>(e)) {
     double s = 0;
     for (std::size_t i = 0; i < e.nops(); ++i) s += own_terms(e.op(i));
@@ -39,18 +46,61 @@ double own_terms(const GiNaC::ex& e) {
   }
   if (GiNaC::is_a<GiNaC::power>(e)) {
     const double k = own_terms(e.op(0));
-    if (GiNaC::is_a<GiNaC::numeric>(e.op(1)) &&
-        GiNaC::ex_to<GiNaC::numeric>(e.op(1)).is_pos_integer() && k > 1) {
-      const double n = GiNaC::ex_to<GiNaC::numeric>(e.op(1)).to_double();
-      const double log_c = std::lgamma(n + k) - std::lgamma(k) - std::lgamma(n + 1);
-      return log_c > std::log(kInf) ? kInf : std::exp(log_c);
+    if (GiNaC::is_a<GiNaC::numeric>(e.op(1))) {
+      if (GiNaC::ex_to<GiNaC::numeric>(e.op(1)).is_pos_integer() && k > 1)
+        return multinomial_terms(GiNaC::ex_to<GiNaC::numeric>(e.op(1)).to_double(), k);
+      return k;
     }
-    return k;
+    // expand(a^(c + x)) = a^c · a^x: a^c is computed exactly when a is a
+    // number (finding F8), and expanded when a is a sum.
+    const double c = expanded_constant_bound(e.op(1));
+    if (c < 1) return k;
+    if (GiNaC::is_a<GiNaC::numeric>(e.op(0)))
+      return exact_bits(GiNaC::ex_to<GiNaC::numeric>(e.op(0))) * c > kMaxExactBits ? kInf : 1;
+    return k > 1 ? multinomial_terms(std::floor(c), k) : k;
   }
   return 1;  // symbols, numbers, functions (their arguments are estimated on their own)
 }
 
 }  // namespace
+
+double exact_bits(const GiNaC::numeric& a) {
+  if (!a.info(GiNaC::info_flags::crational)) return 0;
+  auto bits = [](const GiNaC::numeric& r) {
+    return r.is_zero() ? 0.0 : static_cast<double>(r.numer().int_length() + r.denom().int_length());
+  };
+  return bits(a.real()) + bits(a.imag());
+}
+
+bool exact_power_too_large(const GiNaC::numeric& a, const GiNaC::numeric& x) {
+  if (!x.is_rational() || !a.info(GiNaC::info_flags::crational) || a.is_zero() ||
+      GiNaC::abs(a).is_equal(1))
+    return false;
+  return exact_bits(a) * GiNaC::abs(x).to_double() > kMaxExactBits;
+}
+
+double expanded_constant_bound(const GiNaC::ex& e) {
+  if (GiNaC::is_a<GiNaC::numeric>(e))
+    return std::min(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)).to_double(), kInf);
+  if (GiNaC::is_a<GiNaC::add>(e)) {
+    double s = 0;
+    for (std::size_t i = 0; i < e.nops(); ++i) s += expanded_constant_bound(e.op(i));
+    return std::min(s, kInf);
+  }
+  if (GiNaC::is_a<GiNaC::mul>(e)) {
+    double p = 1;
+    for (std::size_t i = 0; i < e.nops() && p > 0; ++i)
+      p = std::min(p * expanded_constant_bound(e.op(i)), kInf);
+    return p;
+  }
+  if (GiNaC::is_a<GiNaC::power>(e) && GiNaC::is_a<GiNaC::numeric>(e.op(1)) &&
+      GiNaC::ex_to<GiNaC::numeric>(e.op(1)).is_pos_integer()) {
+    const double b = expanded_constant_bound(e.op(0));
+    return b == 0 ? 0
+                  : std::min(std::pow(b, GiNaC::ex_to<GiNaC::numeric>(e.op(1)).to_double()), kInf);
+  }
+  return 0;
+}
 
 double expanded_terms(const GiNaC::ex& e) {
   double worst = own_terms(e);

@@ -22,6 +22,8 @@
 
 #include "../../fuzz/frontend_pipeline.hpp"
 #include "../../fuzz/overrides_pipeline.hpp"
+#include "hybgen/gen/check.hpp"
+#include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/parse.hpp"
@@ -385,6 +387,81 @@ TEST(FuzzRegressions, TwinRunsUnderTheDerivationLimits) {
   EXPECT_NE(what.find(": error: deriving the unreduced twin of group '"), std::string::npos)
       << what;
   EXPECT_NE(what.find("derive_seconds"), std::string::npos) << what;
+}
+
+// Finding F8 (fuzz/regressions/frontend/timeout-exponent-scaled-by-the-reset.model,
+// a mutated SIR model with I' = … - (gamma+mu+delta)**I and a reset
+// I -> (888…880 - f)*I): the hybrid Jacobian holds X+(Delta(x)), hence
+// (2/5)^((8.9e56 - 3/10)*I), and is_identically_zero substituted exact
+// rationals with subs(), which computed (2/5)^(8.9e56·n/d) exactly: a hang
+// (release hybgen: still running after 60 s, 1.8 GB). Such a power is now
+// computed in floating point (is_identically_zero, derive.cpp); a tiny
+// approximated value decides nothing, so (2/5)^(10^20) is not called zero.
+std::string scaled_exponent_model(const std::string& reset) {
+  return "state x, y\nmode m { x' = (2/5)^y\n y' = -1 }\n"
+         "guard g { when x = 1 increasing  reset " +
+         reset +
+         " }\n"
+         "simulation { domain x in [0, 1]  domain y in [-1, 1]  initial 1 }\n";
+}
+
+TEST(FuzzRegressions, ExponentScaledByTheResetIsNotComputedExactly) {
+  const std::string text = scaled_exponent_model("(x - 1, 88888888888888888888*y)");
+  const auto t0 = std::chrono::steady_clock::now();
+  SourceText src("f8.model", text);
+  Model m = check(parse(src), src);
+  const HybridSystem sys = derive(m, src);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
+  ASSERT_EQ(sys.guards.size(), 1u);
+  // J = c·(2/5)^(c·y)·(2/5)^(−y) with c = 88888888888888888888: not zero, kept exact.
+  const GiNaC::realsymbol& y = GiNaC::ex_to<GiNaC::realsymbol>(m.state_symbols.at(1));
+  const GiNaC::numeric c("88888888888888888888"), two_fifths(2, 5);
+  EXPECT_TRUE((sys.guards[0].hybrid_jacobian -
+               c * GiNaC::pow(two_fifths, c * y) * GiNaC::pow(two_fifths, -y))
+                  .is_zero())
+      << sys.guards[0].hybrid_jacobian;
+}
+
+// The same power after a shift: J = (2/5)^c is about 10^(-3.5·10^19), exactly
+// positive. It must not be called "identically zero" (every sampled value is
+// approximated and tiny, so no point decides, and is_identically_zero now
+// answers false when no point decides; it used to answer true). In double
+// precision J is 0, which the sampled crossing points report.
+TEST(FuzzRegressions, TinyApproximatedValueIsNotIdenticallyZero) {
+  const GiNaC::realsymbol y("y");
+  const GiNaC::numeric c("88888888888888888888");
+  EXPECT_FALSE(is_identically_zero(
+      GiNaC::pow(GiNaC::numeric(2, 5), c + y) / GiNaC::pow(GiNaC::numeric(2, 5), y), {y}));
+  EXPECT_FALSE(is_identically_zero(c * GiNaC::pow(GiNaC::numeric(2, 5), c * y), {y}));
+  expect_prompt_model_error(scaled_exponent_model("(x - 1, y + 88888888888888888888)"),
+                            "is zero at every sampled crossing point");
+}
+
+// F8, where it is written: expand turns a^(n + y) into a^n·a^y, so check bounds
+// the constant part of a symbolic exponent like a numeric exponent (release
+// hybgen hung in simplify's expand on both models before).
+TEST(FuzzRegressions, ConstantPartOfASymbolicExponentIsBounded) {
+  for (const std::string base : {"(2/5)", "x"}) {
+    SourceText src("f8.model", "state x\nmode m { x' = " + base + "^(88888888888888888 + x) }\n");
+    try {
+      (void)check(parse(src), src);
+      ADD_FAILURE() << "accepted " << base;
+    } catch (const ModelError& e) {
+      EXPECT_NE(std::string(e.what()).find("exponent too large: its constant part"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  // At the bound it is accepted, and derives promptly.
+  const auto t0 = std::chrono::steady_clock::now();
+  Stage stage = Stage::Skipped;
+  EXPECT_EQ(outcome([&] {
+              stage =
+                  fuzz::run_frontend("state x\nmode m { x' = x^(4096 + x) }\n", Guards::SizeOnly);
+            }),
+            "");
+  EXPECT_EQ(stage, Stage::Derived);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
 }
 
 // Finding F3 (review of inputs fuzz_overrides accepts): parse_grid and

@@ -65,6 +65,31 @@ TEST(Limits, ExpandedTermsCountsMonomials) {
 // (x+y+z+w)^4096 used to make simplify() ask GiNaC for 183 GB; now the
 // expansion is skipped (the exact, unexpanded form is kept) and the model
 // derives at once.
+// Finding F8: expand(a^(c + x)) = a^c·a^x, so a symbolic exponent's constant
+// part counts. (x + y)^(4000 + z) expands its factor (x + y)^4000 (4001
+// monomials; the old estimate said 2), and (2/5)^(10^17 + z) makes GiNaC
+// compute (2/5)^(10^17) exactly (a hang; the old estimate said 1). A constant
+// part of 0 changes nothing: (2/5)^(10^17·z) has nothing to split off.
+TEST(Limits, ConstantPartOfASymbolicExponentCounts) {
+  const GiNaC::realsymbol x("x"), y("y"), z("z");
+  const GiNaC::numeric huge("100000000000000000");
+  EXPECT_NEAR(expanded_terms(GiNaC::pow(x + y, 4000 + z)), 4001, 1e-6);
+  EXPECT_NEAR(expanded_terms(GiNaC::pow(x + y, 3 + z)),
+              static_cast<double>(GiNaC::pow(x + y, 3).expand().nops()), 1e-9);
+  EXPECT_GE(expanded_terms(GiNaC::pow(GiNaC::numeric(2, 5), huge + z)), 1e300);
+  EXPECT_DOUBLE_EQ(expanded_terms(GiNaC::pow(GiNaC::numeric(2, 5), huge * z)), 1);
+  // expanded_constant_bound: |constant term of expand(e)| is at most this.
+  EXPECT_DOUBLE_EQ(expanded_constant_bound((x + 2) * (x - 3)), 6);  // x^2 - x - 6
+  EXPECT_DOUBLE_EQ(expanded_constant_bound(GiNaC::pow(x + 2, 3) + 5 * x), 8);
+  EXPECT_DOUBLE_EQ(expanded_constant_bound(huge * z), 0);
+  EXPECT_DOUBLE_EQ(expanded_constant_bound(GiNaC::sin(GiNaC::ex(x)) + GiNaC::pow(2, z)), 0);
+  // exact_power_too_large: (2/5)^n has 5·|n| bits.
+  EXPECT_FALSE(exact_power_too_large(GiNaC::numeric(2, 5), GiNaC::numeric(13107)));
+  EXPECT_TRUE(exact_power_too_large(GiNaC::numeric(2, 5), GiNaC::numeric(13108)));
+  EXPECT_FALSE(exact_power_too_large(GiNaC::numeric(-1), huge));
+  EXPECT_FALSE(exact_power_too_large(GiNaC::numeric(2, 5), GiNaC::numeric(huge.to_double())));
+}
+
 TEST(Limits, HugeExpansionIsSkippedNotAttempted) {
   const auto t0 = std::chrono::steady_clock::now();
   SourceText src("limits.model",
@@ -81,7 +106,9 @@ TEST(Limits, ExpressionSizeLimitNamesTheObject) {
   const std::string text =
       "state x, y\n"
       "mode flying {\n"
-      "  x' = " + big_polynomial("x", "y") + "\n"
+      "  x' = " +
+      big_polynomial("x", "y") +
+      "\n"
       "  y' = 1\n"
       "}\n";
   EXPECT_EQ(derive_error(text), "");
@@ -99,7 +126,9 @@ TEST(Limits, GuardObjectsAreNamed) {
       "mode m { x' = p; p' = -1 }\n"
       "guard hit {\n"
       "  when x = 0 decreasing\n"
-      "  reset (x, -p * (" + big_polynomial("x", "p") + "))\n"
+      "  reset (x, -p * (" +
+      big_polynomial("x", "p") +
+      "))\n"
       "}\n";
   EXPECT_EQ(derive_error(text), "");
   const std::string msg = derive_error(text, {"max_expr_nodes=200"});

@@ -35,7 +35,9 @@ HybridSystem derive(const Model& model, const SourceText& src);
 GiNaC::ex simplify(const GiNaC::ex& e);
 
 /// Whether e is identically zero: exact evaluation at random rational points
-/// (rational functions), plus high-precision evaluation for transcendental ones.
+/// (rational functions), plus high-precision evaluation for transcendental ones
+/// and for numeric powers too large to compute exactly (kMaxExactBits). False
+/// when no point could be evaluated (a pole or an overflow at every one).
 bool is_identically_zero(const GiNaC::ex& e, const std::vector<GiNaC::ex>& symbols);
 
 /// Number of nodes of an expression tree (a size measure).

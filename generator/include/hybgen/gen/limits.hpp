@@ -44,10 +44,35 @@ class LimitExceeded : public Error {
 };
 
 /// Estimated number of terms of expand(e) for polynomial structure: sums add,
-/// products multiply, (k terms)^n gives C(n+k−1, k−1) monomials; the largest
-/// such estimate over all subexpressions (function arguments are expanded
-/// too). An upper estimate; saturates at 1e300.
+/// products multiply, (k terms)^n gives C(n+k−1, k−1) monomials, and so does
+/// (k terms)^(n + x) (expand splits off the factor ^n); the largest such
+/// estimate over all subexpressions (function arguments are expanded too).
+/// An upper estimate; saturates at 1e300, which it also returns when expand
+/// would compute an exact numeric power past kMaxExactBits (a^(n + x), a a
+/// number: expand computes a^n).
 double expanded_terms(const GiNaC::ex& e);
+
+/// Bounds of exact arithmetic. GiNaC computes a numeric power a^n exactly, so
+/// an exponent of 10^17 is a hang, whether written (findings F1, F2), folded
+/// by expand (a^(n+x) = a^n·a^x) or met when a symbolic exponent is
+/// evaluated at an exact point (finding F8: (2/5)^(10^56·I) at I = 37/41).
+inline constexpr int kMaxExponent = 4096;
+/// Largest exactly computed numeric power, in bits (numerator + denominator).
+inline constexpr double kMaxExactBits = 65536;
+
+/// Size of the exact number a in bits (numerator + denominator, real + imaginary
+/// part); 0 for a floating-point number.
+double exact_bits(const GiNaC::numeric& a);
+
+/// Whether GiNaC would compute a^x exactly at a cost past kMaxExactBits: a
+/// exact with |a| ≠ 0, 1, x rational and exact_bits(a)·|x| > kMaxExactBits.
+bool exact_power_too_large(const GiNaC::numeric& a, const GiNaC::numeric& x);
+
+/// An upper bound of |c| where c is the constant term of expand(e): numbers
+/// give their absolute value, sums add, products multiply, positive integer
+/// powers raise; symbols, functions, constants and other powers give 0 (for
+/// expand they are atoms). expand(a^e) computes a^c when e expands to c + …
+double expanded_constant_bound(const GiNaC::ex& e);
 
 /// The limits in force on this thread while a derivation runs, and the object
 /// being derived (for messages). Scoped: constructing one activates it,
