@@ -85,33 +85,28 @@ void collect_symbols(const ex& e, GiNaC::exset& out) {
   for (std::size_t i = 0; i < e.nops(); ++i) collect_symbols(e.op(i), out);
 }
 
-/// e at the exact point `at` (symbols to numbers), evaluated bottom-up like
-/// e.subs(at), except that a numeric power whose exact value would pass
-/// kMaxExactBits is computed in floating point (at the current Digits):
-/// subs would compute (2/5)^(10^56·37/41) exactly and never end (finding F8,
-/// a symbolic exponent scaled by a reset). The result is then inexact, and
-/// `approximated()` says so.
-class AtPoint : public GiNaC::map_function {
+/// e with every power a^x whose exponent x is symbolic replaced by a float
+/// when, at the exact point `at`, a^x would be a number past kMaxExactBits:
+/// e.subs(at) would compute (2/5)^(10^56·37/41) exactly and never end
+/// (finding F8, a symbolic exponent scaled by a reset). Everything else is
+/// left symbolic, for e.subs(at) to evaluate exactly; `approximated()` says
+/// whether anything was replaced (the value at the point is then inexact).
+class ApproximateHugePowers : public GiNaC::map_function {
  public:
-  explicit AtPoint(const GiNaC::exmap& at) : at_(at) {}
+  explicit ApproximateHugePowers(const GiNaC::exmap& at) : at_(at) {}
   ex operator()(const ex& e) override {
-    if (GiNaC::is_a<GiNaC::symbol>(e)) {
-      const auto it = at_.find(e);
-      return it == at_.end() ? e : it->second;
-    }
     if (e.nops() == 0) return e;
-    if (GiNaC::is_a<GiNaC::power>(e)) {
-      const ex b = (*this)(e.op(0)), x = (*this)(e.op(1));
-      if (GiNaC::is_a<GiNaC::numeric>(b) && GiNaC::is_a<GiNaC::numeric>(x) &&
-          exact_power_too_large(GiNaC::ex_to<GiNaC::numeric>(b), GiNaC::ex_to<GiNaC::numeric>(x))) {
-        approximated_ = true;
-        return GiNaC::pow(GiNaC::evalf(b), GiNaC::evalf(x));
-      }
-      return GiNaC::pow(b, x);
+    if (!GiNaC::is_a<GiNaC::power>(e) || GiNaC::is_a<GiNaC::numeric>(e.op(1))) return e.map(*this);
+    const ex b = (*this)(e.op(0)), x = (*this)(e.op(1));
+    const ex bv = b.subs(at_), xv = x.subs(at_);  // may throw at a pole, like subs
+    if (GiNaC::is_a<GiNaC::numeric>(bv) && GiNaC::is_a<GiNaC::numeric>(xv) &&
+        exact_power_too_large(GiNaC::ex_to<GiNaC::numeric>(bv), GiNaC::ex_to<GiNaC::numeric>(xv))) {
+      approximated_ = true;
+      return GiNaC::pow(GiNaC::evalf(bv), GiNaC::evalf(xv));
     }
-    return e.map(*this);
+    return b.is_equal(e.op(0)) && x.is_equal(e.op(1)) ? e : GiNaC::pow(b, x);
   }
-  /// Whether some power was computed in floating point.
+  /// Whether some power was replaced by a float.
   [[nodiscard]] bool approximated() const { return approximated_; }
 
  private:
@@ -150,8 +145,8 @@ bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
     }
     try {
       const DigitsScope digits(40);
-      AtPoint at_point(at);
-      ex v = at_point(e);
+      ApproximateHugePowers approximate(at);
+      ex v = approximate(e).subs(at);
       if (GiNaC::is_a<GiNaC::numeric>(v) && v.info(GiNaC::info_flags::crational)) {
         if (!v.is_zero()) return false;  // exact: zero or not
       } else {
@@ -163,7 +158,7 @@ bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
           return false;
         // Tiny, but (2/5)^(10^20) is tiny and not zero: with a power too large
         // to compute exactly, a tiny value decides nothing.
-        if (at_point.approximated()) continue;
+        if (approximate.approximated()) continue;
       }
       ++evaluated;
     } catch (const std::exception&) {
