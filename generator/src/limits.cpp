@@ -26,7 +26,7 @@ SourceLoc g_object_loc{1, 1};
 
 constexpr double kInf = 1e300;
 
-/// log C(n+k−1, k−1), the number of monomials of (k terms)^n, as a term count.
+/// C(n+k−1, k−1), the number of monomials of (k terms)^n, saturating at kInf.
 double multinomial_terms(double n, double k) {
   const double log_c = std::lgamma(n + k) - std::lgamma(k) - std::lgamma(n + 1);
   return log_c > std::log(kInf) ? kInf : std::exp(log_c);
