@@ -102,7 +102,11 @@ class ApproximateHugePowers : public GiNaC::map_function {
     if (GiNaC::is_a<GiNaC::numeric>(bv) && GiNaC::is_a<GiNaC::numeric>(xv) &&
         exact_power_too_large(GiNaC::ex_to<GiNaC::numeric>(bv), GiNaC::ex_to<GiNaC::numeric>(xv))) {
       approximated_ = true;
-      return GiNaC::pow(GiNaC::evalf(bv), GiNaC::evalf(xv));
+      // numeric::power, not GiNaC::pow: when the float power overflows, pow
+      // leaks the power object it had allocated (GiNaC 1.8.6 is not
+      // exception-safe there); numeric arithmetic allocates nothing first.
+      const ex fb = GiNaC::evalf(bv), fx = GiNaC::evalf(xv);
+      return GiNaC::ex_to<GiNaC::numeric>(fb).power(GiNaC::ex_to<GiNaC::numeric>(fx));
     }
     return b.is_equal(e.op(0)) && x.is_equal(e.op(1)) ? e : GiNaC::pow(b, x);
   }
