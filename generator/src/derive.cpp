@@ -463,8 +463,17 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
       if (!state_free || is_identically_zero(c, all_symbols)) continue;
       ex solution = simplify(X[k] - g.surface / c);
       if (solution.has(X[k])) continue;
-      g.hybrid_jacobian_on_surface =
-          simplify(g.hybrid_jacobian.subs(GiNaC::exmap{{X[k], solution}}));
+      // J can have a pole on S (where the flow before the reset is tangent to
+      // it: ∇s·X⁻ = 0, e.g. y' = −y on the guard y = 0): GiNaC then throws
+      // "division by zero" and J keeps its general form (fuzz finding F9).
+      try {
+        g.hybrid_jacobian_on_surface =
+            simplify(g.hybrid_jacobian.subs(GiNaC::exmap{{X[k], solution}}));
+      } catch (const LimitExceeded&) {
+        throw;
+      } catch (const std::exception&) {
+        break;
+      }
       g.surface_note = m.state[k] + " = " + "(solved from s = 0)";
       break;
     }

@@ -469,6 +469,29 @@ TEST(FuzzRegressions, ConstantPartOfASymbolicExponentIsBounded) {
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 5.0);
 }
 
+// Finding F9 (fuzz/regressions/frontend/crash-pole-of-the-jacobian-on-the-surface.model,
+// a mutated filippov.model; found by the campaign on 691677d, and the same on
+// every earlier front end): derive restricts J to the surface by substituting
+// the solved coordinate (y = 0 here), and J = 1/y + 1 has a pole there (the
+// flow before the reset is tangent to the guard: y' = −y). GiNaC threw
+// "power::eval(): division by zero" out of derive: exit 70. J now keeps its
+// general form, and the run-time checks name the grazing.
+TEST(FuzzRegressions, PoleOfTheJacobianOnTheSurfaceKeepsTheGeneralForm) {
+  SourceText src("f9.model",
+                 "state x, y\nmode A { where y > 0\n x' = 1\n y' = -y }\n"
+                 "mode B { where y < 0\n x' = 1\n y' = -1 - y }\n"
+                 "guard g { from A to B  when y = 0 decreasing  reset identity }\n"
+                 "simulation { domain x in [-1, 1]  domain y in [-1, 1]  initial 1 }\n");
+  Model m = check(parse(src), src);
+  HybridSystem sys;
+  EXPECT_EQ(outcome([&] { sys = derive(m, src); }), "");
+  ASSERT_EQ(sys.guards.size(), 1u);
+  const GiNaC::ex y = m.state_symbols.at(1);
+  EXPECT_TRUE((sys.guards[0].hybrid_jacobian - (1 / y + 1)).normal().is_zero())
+      << sys.guards[0].hybrid_jacobian;
+  EXPECT_TRUE((sys.guards[0].hybrid_jacobian_on_surface - sys.guards[0].hybrid_jacobian).is_zero());
+}
+
 // Finding F3 (review of inputs fuzz_overrides accepts): parse_grid and
 // apply_overrides (check.cpp, `grid`) accepted any axis up to 999999999 nodes
 // and any product, so `--set grid=999999999x999999999` (10^18 nodes) passed
