@@ -493,8 +493,9 @@ class Parser {
     const bool integer = t.kind == Tok::Number && std::all_of(t.text.begin(), t.text.end(),
                                                               [](char c) { return is_digit(c); });
     if (!integer || t.text.size() > 2) unexpected("a matrix size N (1 to 99) in 'gl(N)'");
-    group.shortcut_n = std::stol(take().text);
-    if (group.shortcut_n < 1) fail(t.loc, "gl(N) needs N >= 1");
+    const Token n = take();  // t dangles after take() (fuzz finding F10: gl(0))
+    group.shortcut_n = std::stol(n.text);
+    if (group.shortcut_n < 1) fail(n.loc, "gl(N) needs N >= 1");
     expect_punct(")", "after 'gl(N'");
   }
 

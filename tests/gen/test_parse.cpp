@@ -927,6 +927,21 @@ TEST(ParseLieErrors, StructureConstantsAndMetric) {
   expect_error("metric 1\n", 1, 8, "after 'metric'");
 }
 
+// Fuzz finding F10 (fuzz/regressions/frontend/crash-gl0-token-read-after-take.model):
+// parse_group_def kept a reference to the token N of gl(N) and used it for the
+// "N >= 1" error after take() had popped it; when N was the last token of a
+// std::deque node, the node was freed (heap-use-after-free under ASan). The
+// token lands on every offset of a node for some number of padding tokens;
+// under the sanitizer build the old code fails here, and the location is
+// checked everywhere.
+TEST(ParseLieErrors, GlZeroIsReportedAtEveryTokenOffset) {
+  std::string pad;
+  for (int k = 0; k < 40; ++k) {
+    expect_error(pad + "group A = gl(0)\n", k + 1, 14, "N >= 1");
+    pad += "parameter p" + std::to_string(k) + " = 1\n";  // 4 tokens and a newline
+  }
+}
+
 TEST(ParseLieErrors, Statements) {
   expect_error("group A = gl(x)\n", 1, 14, "a matrix size N");
   expect_error("group A = sl(2)\n", 1, 11, "'gl(N)'");
