@@ -159,9 +159,7 @@ class Converter {
             if (GiNaC::is_a<GiNaC::numeric>(a)) {
               const auto& na = GiNaC::ex_to<GiNaC::numeric>(a);
               if (na.is_rational()) {
-                const double bits =
-                    static_cast<double>(na.numer().int_length() + na.denom().int_length()) *
-                    GiNaC::abs(nb).to_double();
+                const double bits = exact_bits(na) * GiNaC::abs(nb).to_double();
                 if (bits > kMaxExactBits)
                   throw src_.error(
                       e.loc, "number too large: this power has about " +
