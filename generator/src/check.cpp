@@ -84,10 +84,17 @@ class Converter {
   /// power and the factors of its product are new; deeper terms were checked.
   /// A symbolic exponent is bounded too, by its constant part: expand turns
   /// a^(n + x) into a^n·a^x (finding F8: (2/5)^(10^17 + x) hung in expand).
+  /// A power of zero with a symbolic exponent is refused: 0^e is 0 for e > 0 and
+  /// a pole for e < 0, and GiNaC differentiates it as 0^e·(e'·log 0 + e·0'·0^(-1)),
+  /// which throws, and leaks, even where 0^e = 0 (finding F11: 0^(-f) in a reset).
   ex bounded(const ex& r, const Expr& e) const {
     auto check_power = [&](const ex& f) {
       if (!GiNaC::is_a<GiNaC::power>(f)) return;
       if (!GiNaC::is_a<GiNaC::numeric>(f.op(1))) {
+        if (f.op(0).is_zero())
+          throw src_.error(e.loc,
+                           "0 to a symbolic power: 0^e is 0 for e > 0 and a pole for e < "
+                           "0, and hybgen cannot differentiate it; write the value it has");
         const double c = expanded_constant_bound(f.op(1));
         if (c > kMaxExponent) {
           char about[32];

@@ -239,11 +239,8 @@ HybridSystem derive(const Model& m, const SourceText& src) {
   LimitScope scope(m.limits);
   try {
     return derive_within_limits(m, src, scope);
-  } catch (const LimitExceeded& e) {
-    throw src.error(scope.loc(), "deriving " + scope.what() + ": " + e.what());
-  } catch (const std::bad_alloc&) {
-    throw src.error(scope.loc(), "deriving " + scope.what() +
-                                     ": out of memory (the symbolic expressions grew too large)");
+  } catch (...) {
+    scope.rethrow_at_object(src);
   }
 }
 

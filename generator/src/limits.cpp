@@ -9,6 +9,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <mutex>
+#include <stdexcept>
 #include <thread>
 
 #include "hybgen/gen/derive.hpp"
@@ -127,6 +128,22 @@ void LimitScope::object(std::string what, SourceLoc loc) {
   const std::lock_guard<std::mutex> lock(g_object_mutex);
   g_object = what_;
   g_object_loc = loc_;
+}
+
+void LimitScope::rethrow_at_object(const SourceText& src) const {
+  const std::string at = "deriving " + what_ + ": ";
+  try {
+    throw;
+  } catch (const LimitExceeded& e) {
+    throw src.error(loc_, at + e.what());
+  } catch (const std::bad_alloc&) {
+    throw src.error(loc_, at + "out of memory (the symbolic expressions grew too large)");
+  } catch (const std::domain_error& e) {
+    // GiNaC differentiates b^e with a symbolic e as b^e·(e'·log b + e·b'·b^(-1)),
+    // so for b = 0 it meets 0^(-1) however the model meant 0^e (fuzz finding F11).
+    throw src.error(loc_, at + "it is singular (" + e.what() +
+                              "), e.g. 0^e with a symbolic exponent e, or a pole");
+  }
 }
 
 LimitScope* LimitScope::current() {

@@ -364,11 +364,8 @@ Model reduce(const LieModel& lie, const SourceText& src, ReduceTarget target) {
   try {
     if (twin) return unreduced(lie, src);
     return lie.xi_of_w.empty() ? reduced(lie, src) : reduced_constrained(lie, src);
-  } catch (const LimitExceeded& e) {
-    throw src.error(scope.loc(), "deriving " + scope.what() + ": " + e.what());
-  } catch (const std::bad_alloc&) {
-    throw src.error(scope.loc(), "deriving " + scope.what() +
-                                     ": out of memory (the symbolic expressions grew too large)");
+  } catch (...) {
+    scope.rethrow_at_object(src);
   }
 }
 

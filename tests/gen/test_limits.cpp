@@ -178,5 +178,43 @@ TEST(LimitsDeathTest, WatchdogEndsTheProcess) {
   SUCCEED();
 }
 
+// The safety net behind F11's check: a GiNaC pole met while deriving (a
+// std::domain_error) becomes a model error at the object being derived, like a
+// limit hit; any other exception passes through unchanged (a bug stays exit 70).
+TEST(Limits, RethrowAtObjectLocatesWhatTheModelCaused) {
+  SourceText src("net.model", "state x\nmode m { x' = 1 }\n");
+  LimitScope scope(DeriveLimits{});
+  scope.object("the reset of guard 'g'", SourceLoc{2, 3});
+  auto rethrown = [&](auto&& thrower) -> std::string {
+    try {
+      try {
+        thrower();
+      } catch (...) {
+        scope.rethrow_at_object(src);
+      }
+    } catch (const ModelError& e) {
+      return std::string("model: ") + e.what();
+    } catch (const std::exception& e) {
+      return std::string("other: ") + e.what();
+    }
+    return "nothing";
+  };
+  const std::string pole = rethrown([] {
+    // what GiNaC throws on 0^(-1) (thrown here directly: GiNaC leaks the power it built)
+    throw GiNaC::pole_error("power::eval(): division by zero", 1);
+  });
+  EXPECT_EQ(pole.rfind("model: net.model:2:3: error: deriving the reset of guard 'g': it is "
+                       "singular (power::eval(): division by zero)",
+                       0),
+            0u)
+      << pole;
+  const std::string limit = rethrown([] { throw LimitExceeded("too big"); });
+  EXPECT_EQ(limit.rfind("model: net.model:2:3: error: deriving the reset of guard 'g': too big", 0),
+            0u)
+      << limit;
+  EXPECT_EQ(rethrown([] { throw std::runtime_error("a bug"); }), "other: a bug");
+  EXPECT_EQ(rethrown([] { throw InternalError("a bug"); }).rfind("other: ", 0), 0u);
+}
+
 }  // namespace
 }  // namespace hybgen::gen

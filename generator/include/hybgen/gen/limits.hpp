@@ -26,6 +26,7 @@
 
 #include "hybgen/gen/ast.hpp"
 #include "hybgen/gen/errors.hpp"
+#include "hybgen/gen/source.hpp"
 
 namespace hybgen::gen {
 
@@ -92,6 +93,12 @@ class LimitScope {
   [[nodiscard]] const std::string& what() const { return what_; }
   /// Where that object was written.
   [[nodiscard]] SourceLoc loc() const { return loc_; }
+  /// For a catch block around a derivation: rethrow the exception in flight as a
+  /// ModelError located at the object being derived when the model caused it — a
+  /// limit hit (LimitExceeded), memory exhausted (std::bad_alloc), or a singularity
+  /// GiNaC met (std::domain_error, its pole_error: 0^(-1) in the derivative of 0^e,
+  /// log(0)); rethrow anything else unchanged.
+  [[noreturn]] void rethrow_at_object(const SourceText& src) const;
 
   /// The active scope of this thread, or nullptr outside a derivation.
   static LimitScope* current();
