@@ -18,36 +18,18 @@
 #include "bouncing_ball_model.hpp"
 #include "hybgen/rt/budget.hpp"
 #include "support/ball_closed_form.hpp"
+#include "support/rt_setup.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
+using hybgen::testing::output_times;
+using hybgen::testing::paper_grid;
+using hybgen::testing::seconds_since;
+using hybgen::testing::tolerances;
 using Ball = rt::testing::BouncingBall;
 using hybgen::testing::ball_box_mass0;
 using hybgen::testing::zeno_mass;
-
-std::vector<double> output_times(int n, double dt) {
-  std::vector<double> t;
-  for (int k = 0; k < n; ++k) t.push_back(dt * k);
-  return t;
-}
-
-rt::CharacteristicsOptions options(double rtol, double atol) {
-  rt::CharacteristicsOptions o;
-  o.ode.rtol = rtol;
-  o.ode.atol = atol;
-  return o;
-}
-
-rt::TensorGrid<2> paper_grid() {
-  rt::TensorGrid<2> grid;
-  grid.axes = {rt::GridAxis{0.0, 2.0, 75}, rt::GridAxis{-2.0, 2.0, 75}};
-  return grid;
-}
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 // ---------------------------------------------------------------------------------------
 // The Zeno mass of the ball Z(t) (m = g = 1): `zeno_mass` of tests/support/ball_closed_form.hpp.
@@ -78,8 +60,8 @@ BallRun ball_budget(double e, const std::vector<double>& times, const rt::Adapti
   const std::array<double, 3> par{1.0, 1.0, e};
   BallRun r;
   const auto t0 = std::chrono::steady_clock::now();
-  r.res = rt::adaptive_mass_budget<Ball>(paper_grid(), times, par.data(), options(1e-10, 1e-12), ao,
-                                         3, &r.info);
+  r.res = rt::adaptive_mass_budget<Ball>(paper_grid(), times, par.data(), tolerances(1e-10, 1e-12),
+                                         ao, 3, &r.info);
   r.seconds = seconds_since(t0);
   return r;
 }
@@ -128,7 +110,7 @@ TEST(AdaptiveBudget, ZenoAtomIsTheZenoMass) {
   std::printf("   worst |atom − Z| = %.2e = %.2e mass0\n", worst, worst / b.mass0);
   // For contrast, the trapezoid budget on the grid nodes (what the runner reported).
   const std::array<double, 3> par{1.0, 1.0, 0.8};
-  const auto opt = options(1e-10, 1e-12);
+  const auto opt = tolerances(1e-10, 1e-12);
   const auto sol = rt::solve_grid<Ball>(paper_grid(), times, par.data(), opt);
   ASSERT_TRUE(sol.ok());
   const auto trap = rt::mass_budget<Ball>(paper_grid(), sol, times, par.data(), opt);
@@ -183,8 +165,8 @@ TEST(AdaptiveBudget, SmoothSpiralClosesTightly) {
   ao.rel_tol = 1e-9;
   rt::AdaptiveBudgetInfo info;
   const auto t0 = std::chrono::steady_clock::now();
-  const auto res = rt::adaptive_mass_budget<Spiral2D>(box, times, par.data(), options(1e-12, 1e-14),
-                                                      ao, 6, &info);
+  const auto res = rt::adaptive_mass_budget<Spiral2D>(box, times, par.data(),
+                                                      tolerances(1e-12, 1e-14), ao, 6, &info);
   const double secs = seconds_since(t0);
   ASSERT_TRUE(res.ok());
   const auto& b = res.budget;
@@ -220,8 +202,8 @@ TEST(AdaptiveBudget, TwoModeLineCloses) {
   ao.rel_tol = 1e-8;
   rt::AdaptiveBudgetInfo info;
   const auto t0 = std::chrono::steady_clock::now();
-  const auto res =
-      rt::adaptive_mass_budget<TwoMode1D>(box, times, nullptr, options(1e-11, 1e-13), ao, 6, &info);
+  const auto res = rt::adaptive_mass_budget<TwoMode1D>(box, times, nullptr,
+                                                       tolerances(1e-11, 1e-13), ao, 6, &info);
   const double secs = seconds_since(t0);
   ASSERT_TRUE(res.ok());
   const auto& b = res.budget;
@@ -302,7 +284,7 @@ TEST(AdaptiveBudget, IntegrableSingularitiesConverge) {
     Static<1>::c[0] = c;
     rt::TraceFailure<1> f;
     const auto am =
-        rt::adaptive_mass<Static<1>>(line, times, nullptr, options(1e-10, 1e-12), ao, f);
+        rt::adaptive_mass<Static<1>>(line, times, nullptr, tolerances(1e-10, 1e-12), ao, f);
     ASSERT_TRUE(f.ok());
     const double exact = 2.0 * (std::sqrt(1.0 + c) + std::sqrt(1.0 - c));
     EXPECT_TRUE(am.converged) << "c = " << c;
@@ -321,7 +303,7 @@ TEST(AdaptiveBudget, IntegrableSingularitiesConverge) {
   rt::TraceFailure<2> f;
   ao.rel_tol = 1e-5;
   const auto am =
-      rt::adaptive_mass<Static<2>>(square, times, nullptr, options(1e-10, 1e-12), ao, f);
+      rt::adaptive_mass<Static<2>>(square, times, nullptr, tolerances(1e-10, 1e-12), ao, f);
   ASSERT_TRUE(f.ok());
   const double exact = corner_integral(0.3, 0.7) + corner_integral(0.7, 0.7) +
                        corner_integral(0.3, 0.3) + corner_integral(0.7, 0.3);
@@ -370,7 +352,7 @@ TEST(AdaptiveBudget, FailuresPropagate) {
   const auto times = output_times(21, 0.5);
   const std::array<double, 3> par0{1.0, 1.0, 0.0};
   const auto res =
-      rt::adaptive_mass_budget<Ball>(paper_grid(), times, par0.data(), options(1e-10, 1e-12));
+      rt::adaptive_mass_budget<Ball>(paper_grid(), times, par0.data(), tolerances(1e-10, 1e-12));
   ASSERT_FALSE(res.ok());
   EXPECT_EQ(res.failure.status.error, rt::TraceError::non_finite_reset);
   EXPECT_EQ(res.failure.status.guard, 0);
@@ -383,12 +365,12 @@ TEST(AdaptiveBudget, FailuresPropagate) {
   box.axes = {rt::GridAxis{-3.0, 3.0, 61}};
   const std::array<double, 1> par{0.3};
   rt::TraceFailure<1> vf;
-  const auto am = rt::adaptive_mass<EdgeNaN1D>(box, times, par.data(), options(1e-10, 1e-12),
+  const auto am = rt::adaptive_mass<EdgeNaN1D>(box, times, par.data(), tolerances(1e-10, 1e-12),
                                                rt::AdaptiveOptions{}, vf);
   EXPECT_TRUE(vf.ok());
   EXPECT_TRUE(am.converged);
   const auto res1 =
-      rt::adaptive_mass_budget<EdgeNaN1D>(box, times, par.data(), options(1e-10, 1e-12));
+      rt::adaptive_mass_budget<EdgeNaN1D>(box, times, par.data(), tolerances(1e-10, 1e-12));
   ASSERT_FALSE(res1.ok());
   EXPECT_EQ(res1.failure.status.error, rt::TraceError::non_finite_flow);
   EXPECT_EQ(std::fabs(res1.failure.start[0]), 3.0);
@@ -422,7 +404,7 @@ TEST(AdaptiveBudget, ZeroDensityIsNotRefined) {
   const std::array<double, 3> par{1.0, 1.0, 0.8};
   rt::TraceFailure<2> f;
   const auto am = rt::adaptive_mass<Ball>(box, output_times(21, 0.5), par.data(),
-                                          options(1e-10, 1e-12), rt::AdaptiveOptions{}, f);
+                                          tolerances(1e-10, 1e-12), rt::AdaptiveOptions{}, f);
   ASSERT_TRUE(f.ok());
   EXPECT_TRUE(am.converged);
   EXPECT_EQ(am.mass0, 0.0);

@@ -18,10 +18,15 @@
 #include "bouncing_ball_model.hpp"
 #include "hybgen/rt/characteristics.hpp"
 #include "support/ball_closed_form.hpp"
+#include "support/rt_setup.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
+using hybgen::testing::output_times;
+using hybgen::testing::paper_grid;
+using hybgen::testing::seconds_since;
+using hybgen::testing::tolerances;
 using Ball = rt::testing::BouncingBall;
 using hybgen::testing::ball_exact_elastic;
 using hybgen::testing::ball_u0;
@@ -74,29 +79,6 @@ Admissible ball_exact(double x, double p, double T, double m, double g, double e
     T -= tau;
   }
   return {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::quiet_NaN()};
-}
-
-std::vector<double> output_times(int n, double dt) {
-  std::vector<double> t;
-  for (int k = 0; k < n; ++k) t.push_back(dt * k);
-  return t;
-}
-
-rt::CharacteristicsOptions options(double rtol, double atol) {
-  rt::CharacteristicsOptions o;
-  o.ode.rtol = rtol;
-  o.ode.atol = atol;
-  return o;
-}
-
-rt::TensorGrid<2> paper_grid() {
-  rt::TensorGrid<2> grid;
-  grid.axes = {rt::GridAxis{0.0, 2.0, 75}, rt::GridAxis{-2.0, 2.0, 75}};
-  return grid;
-}
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
 /// Relative L1 error Σ|u − u_exact| / Σ|u_exact| of a grid solution, overall and worst time.
@@ -154,7 +136,7 @@ TEST(Characteristics, BouncingBallElasticPaperGrid) {
   const auto grid = paper_grid();
   const auto times = output_times(50, 0.2);
   const std::array<double, 3> par{1.0, 1.0, 1.0};
-  const auto opt = options(1e-10, 1e-12);
+  const auto opt = tolerances(1e-10, 1e-12);
   const auto t0 = std::chrono::steady_clock::now();
   const auto sol = rt::solve_grid<Ball>(grid, times, par.data(), opt);
   const double secs = seconds_since(t0);
@@ -180,7 +162,7 @@ TEST(Characteristics, BouncingBallSpeed) {
   const auto times = output_times(50, 0.2);
   const std::array<double, 3> par{1.0, 1.0, 1.0};
   for (double rtol : {1e-8, 1e-10}) {
-    const auto opt = options(rtol, 1e-2 * rtol);
+    const auto opt = tolerances(rtol, 1e-2 * rtol);
     double best = 1e30;
     rt::Solution<2> sol;
     for (int rep = 0; rep < 5; ++rep) {
@@ -203,7 +185,7 @@ TEST(Characteristics, BouncingBallRestitutionPaperGrid) {
   const auto grid = paper_grid();
   const auto times = output_times(50, 0.2);
   const std::array<double, 3> par{1.0, 1.0, 0.8};
-  const auto opt = options(1e-10, 1e-12);
+  const auto opt = tolerances(1e-10, 1e-12);
   const auto t0 = std::chrono::steady_clock::now();
   const auto sol = rt::solve_grid<Ball>(grid, times, par.data(), opt);
   const double secs = seconds_since(t0);
@@ -223,7 +205,7 @@ TEST(Characteristics, TraceAtRandomPointsNonUnitParameters) {
   std::uniform_real_distribution<double> ux(0.0, 3.0), up(-3.0, 3.0);
   const auto times = output_times(31, 0.5);
   std::vector<double> out(times.size());
-  const auto opt = options(1e-11, 1e-13);
+  const auto opt = tolerances(1e-11, 1e-13);
   for (double e : {1.0, 0.8, 0.5}) {
     const std::array<double, 3> par{2.0, 1.5, e};
     double worst = 0.0;
@@ -274,7 +256,7 @@ TEST(Characteristics, DivergenceFactor) {
     const std::array<double, 1> par{a};
     rt::TensorGrid<1> grid;
     grid.axes = {rt::GridAxis{-3.0, 3.0, 61}};
-    const auto sol = rt::solve_grid<Linear1D>(grid, times, par.data(), options(1e-11, 1e-13));
+    const auto sol = rt::solve_grid<Linear1D>(grid, times, par.data(), tolerances(1e-11, 1e-13));
     ASSERT_TRUE(sol.ok());
     for (std::size_t k = 0; k < times.size(); ++k) {
       for (std::size_t i = 0; i < grid.size(); ++i) {
@@ -330,7 +312,7 @@ TEST(Characteristics, TwoModeSwitchingBranches) {
   std::uniform_real_distribution<double> ux(-3.5, 3.5);
   const auto times = output_times(25, 0.25);
   std::vector<double> out(times.size());
-  const auto opt = options(1e-11, 1e-13);
+  const auto opt = tolerances(1e-11, 1e-13);
   double worst = 0.0;
   for (int i = 0; i < 400; ++i) {
     const std::array<double, 1> y{ux(rng)};
@@ -352,7 +334,7 @@ TEST(Characteristics, TwoModeGridLayoutAndBudget) {
   rt::TensorGrid<1> grid;
   grid.axes = {rt::GridAxis{-2.0, 2.0, 41}};
   const auto times = output_times(9, 0.5);
-  const auto opt = options(1e-11, 1e-13);
+  const auto opt = tolerances(1e-11, 1e-13);
   const auto sol = rt::solve_grid<TwoMode1D>(grid, times, nullptr, opt);
   ASSERT_TRUE(sol.ok());
   ASSERT_EQ(sol.n_mode, 2u);
@@ -410,7 +392,7 @@ TEST(Characteristics, NewtonInverseReset) {
   std::uniform_real_distribution<double> ux(0.0, 2.0), up(-2.0, 2.0);
   for (int i = 0; i < 200; ++i) {
     const P2 y{ux(rng), up(rng)};
-    const auto st = rt::trace<NewtonBall>(y, 0, times, par.data(), options(1e-11, 1e-13), out);
+    const auto st = rt::trace<NewtonBall>(y, 0, times, par.data(), tolerances(1e-11, 1e-13), out);
     ASSERT_TRUE(st.ok()) << rt::trace_error_name(st.error);
     for (std::size_t k = 0; k < times.size(); ++k) {
       const Admissible ex = ball_exact(y[0], y[1], times[k], 1.0, 1.0, 0.7);
@@ -424,7 +406,7 @@ TEST(CharacteristicsFailure, RestitutionZeroHasNoFiniteInverse) {
   // (0, −2), already lies on Δ(S) = {x = 0}, so the reversed reset is tried at τ = 0.
   const auto times = output_times(50, 0.2);
   const std::array<double, 3> par{1.0, 1.0, 0.0};
-  const auto sol = rt::solve_grid<Ball>(paper_grid(), times, par.data(), options(1e-10, 1e-12));
+  const auto sol = rt::solve_grid<Ball>(paper_grid(), times, par.data(), tolerances(1e-10, 1e-12));
   ASSERT_FALSE(sol.ok());
   const auto& f = sol.failure;
   EXPECT_EQ(f.status.error, rt::TraceError::non_finite_reset);
@@ -436,7 +418,8 @@ TEST(CharacteristicsFailure, RestitutionZeroHasNoFiniteInverse) {
   EXPECT_EQ(f.status.tau, 0.0);
   // Mid-path: backward from (1, 0.5) the impact is at τ* = −0.5 + 1.5 = 1.
   std::vector<double> out(times.size());
-  const auto st = rt::trace<Ball>(P2{1.0, 0.5}, 0, times, par.data(), options(1e-10, 1e-12), out);
+  const auto st =
+      rt::trace<Ball>(P2{1.0, 0.5}, 0, times, par.data(), tolerances(1e-10, 1e-12), out);
   EXPECT_EQ(st.error, rt::TraceError::non_finite_reset);
   EXPECT_NEAR(st.tau, 1.0, 1e-12);
   EXPECT_NEAR(st.state[0], 0.0, 1e-12);
@@ -452,8 +435,8 @@ TEST(CharacteristicsFailure, ZeroHybridJacobian) {
   const auto times = output_times(50, 0.2);
   const std::array<double, 3> par{1.0, 1.0, 0.8};
   std::vector<double> out(times.size());
-  const auto st =
-      rt::trace<ZeroJacobianBall>(P2{1.0, 0.5}, 0, times, par.data(), options(1e-10, 1e-12), out);
+  const auto st = rt::trace<ZeroJacobianBall>(P2{1.0, 0.5}, 0, times, par.data(),
+                                              tolerances(1e-10, 1e-12), out);
   ASSERT_EQ(st.error, rt::TraceError::zero_jacobian);
   EXPECT_EQ(st.guard, 0);
   // Backward from (1, 0.5): impact at τ* = −0.5 + sqrt(0.25 + 2); pre-image (0, −p*/e).
@@ -469,7 +452,7 @@ TEST(CharacteristicsFailure, NaNVectorField) {
   std::vector<double> out(times.size());
   // Backward from (1, −1.2) the ball rises to x = 1 + 1.2²/2 = 1.72 > 1.5.
   const auto st =
-      rt::trace<NaNFlowBall>(P2{1.0, -1.2}, 0, times, par.data(), options(1e-10, 1e-12), out);
+      rt::trace<NaNFlowBall>(P2{1.0, -1.2}, 0, times, par.data(), tolerances(1e-10, 1e-12), out);
   ASSERT_EQ(st.error, rt::TraceError::non_finite_flow) << rt::trace_error_name(st.error);
   EXPECT_NEAR(st.state[0], 1.5, 1e-3);
   EXPECT_GT(st.tau, 0.0);
@@ -482,7 +465,7 @@ TEST(CharacteristicsFailure, EventCap) {
   const auto times = output_times(50, 0.2);
   const std::array<double, 3> par{1.0, 1.0, 1.0};
   std::vector<double> out(times.size());
-  auto opt = options(1e-10, 1e-12);
+  auto opt = tolerances(1e-10, 1e-12);
   opt.max_events = 5;
   // Low energy: period 2·sqrt(2·0.01) ≈ 0.28, about 35 impacts in 9.8.
   const auto st = rt::trace<Ball>(P2{0.01, 0.0}, 0, times, par.data(), opt, out);
@@ -512,8 +495,8 @@ TEST(MassBudget, SmoothFlowClosesTightly) {
   const std::array<double, 1> par{0.15};
   const auto times = output_times(13, 0.25);
   const rt::AxisRule r = rt::gauss_legendre_rule(-1.0, 1.0, 8, 8);
-  const auto res =
-      rt::mass_budget<Spiral2D>(box, {r, r}, {r, r}, times, par.data(), options(1e-12, 1e-14), 6);
+  const auto res = rt::mass_budget<Spiral2D>(box, {r, r}, {r, r}, times, par.data(),
+                                             tolerances(1e-12, 1e-14), 6);
   ASSERT_TRUE(res.ok());
   const auto& b = res.budget;
   std::printf("[ budget spiral ] mass0 %.12f mass(3) %.12f outflow(3) %.12f max|atom| %.3g\n",
@@ -527,7 +510,7 @@ TEST(MassBudget, ElasticBallPaperGrid) {
   const auto grid = paper_grid();
   const auto times = output_times(50, 0.2);
   const std::array<double, 3> par{1.0, 1.0, 1.0};
-  const auto opt = options(1e-10, 1e-12);
+  const auto opt = tolerances(1e-10, 1e-12);
   const auto sol = rt::solve_grid<Ball>(grid, times, par.data(), opt);
   ASSERT_TRUE(sol.ok());
   const auto t0 = std::chrono::steady_clock::now();
@@ -547,7 +530,7 @@ TEST(MassBudget, ElasticBallGaussConverges) {
   const auto grid = paper_grid();
   const auto times = output_times(50, 0.2);
   const std::array<double, 3> par{1.0, 1.0, 1.0};
-  const auto opt = options(1e-10, 1e-12);
+  const auto opt = tolerances(1e-10, 1e-12);
   std::vector<double> worst, early;
   for (int panels : {10, 40}) {
     const std::array<rt::AxisRule, 2> rules{rt::gauss_legendre_rule(0.0, 2.0, panels, 6),
@@ -596,7 +579,7 @@ TEST(MassBudget, ZenoAtomIsTheZenoMass) {
                                           rt::gauss_legendre_rule(bp, 6)};
   const auto t0 = std::chrono::steady_clock::now();
   const auto res =
-      rt::mass_budget<Ball>(box, rules, rules, times, par.data(), options(1e-10, 1e-12), 16);
+      rt::mass_budget<Ball>(box, rules, rules, times, par.data(), tolerances(1e-10, 1e-12), 16);
   const double secs = seconds_since(t0);
   ASSERT_TRUE(res.ok()) << rt::describe<Ball>(res.failure);
   const auto& b = res.budget;

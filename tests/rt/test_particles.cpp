@@ -19,19 +19,15 @@
 #include "hybgen/rt/budget.hpp"
 #include "hybgen/rt/particles.hpp"
 #include "support/ball_closed_form.hpp"
+#include "support/rt_setup.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
+using hybgen::testing::paper_grid;
 using Ball = rt::testing::BouncingBall;
 using hybgen::testing::zeno_mass;
 using P2 = std::array<double, 2>;
-
-rt::TensorGrid<2> paper_grid() {
-  rt::TensorGrid<2> grid;
-  grid.axes = {rt::GridAxis{0.0, 2.0, 75}, rt::GridAxis{-2.0, 2.0, 75}};
-  return grid;
-}
 
 rt::ParticleOptions particle_options(std::size_t n, std::uint64_t seed) {
   rt::ParticleOptions o;

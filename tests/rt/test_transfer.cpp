@@ -17,10 +17,12 @@
 #include "bouncing_ball_model.hpp"
 #include "hybgen/rt/transfer.hpp"
 #include "support/ball_closed_form.hpp"
+#include "support/rt_setup.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
+using hybgen::testing::seconds_since;
 using Ball = rt::testing::BouncingBall;
 
 // ---------------------------------------------------------------------------------------
@@ -95,10 +97,6 @@ double rel_l1(const rt::TensorGrid<N>& grid, const rt::Solution<N>& sol, std::si
     den += w * std::fabs(ue);
   }
   return num / den;
-}
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
 // ---------------------------------------------------------------------------------------

@@ -53,6 +53,7 @@
 #include <iomanip>
 #include <limits>
 #include <numbers>
+#include <ostream>
 #include <span>
 #include <sstream>
 #include <stdexcept>
@@ -68,6 +69,27 @@ namespace hybgen::rt {
 /// Dimension N of a model's state, as a compile-time size.
 template <class M>
 inline constexpr std::size_t state_dim_v = static_cast<std::size_t>(M::n_state);
+
+/// Name of mode `m` of M for messages, or "?" when `m` is no mode index.
+template <HybridModel M>
+const char* mode_name(int m) {
+  return m >= 0 && m < M::n_mode ? M::mode_names[static_cast<std::size_t>(m)] : "?";
+}
+
+/// Name of guard `g` of M for messages, or "?" when `g` is no guard index.
+template <HybridModel M>
+const char* guard_name(int g) {
+  return g >= 0 && g < M::n_guard ? M::guard_names[static_cast<std::size_t>(g)] : "?";
+}
+
+/// Writes the state x as "(x = 0, p = -2)" with M's state names, at os's precision.
+template <HybridModel M>
+void write_state(std::ostream& os, const std::array<double, state_dim_v<M>>& x) {
+  os << '(';
+  for (std::size_t i = 0; i < x.size(); ++i)
+    os << (i ? ", " : "") << M::state_names[i] << " = " << x[i];
+  os << ')';
+}
 
 /// One axis of a tensor grid: n nodes at linspace(min, max, n), both ends included.
 struct GridAxis {
@@ -886,23 +908,15 @@ std::string describe(const TraceFailure<state_dim_v<M>>& f) {
   constexpr std::size_t N = state_dim_v<M>;
   std::ostringstream os;
   os << std::setprecision(17);
-  auto point = [&os](const std::array<double, N>& x) {
-    os << '(';
-    for (std::size_t i = 0; i < N; ++i) os << (i ? ", " : "") << M::state_names[i] << " = " << x[i];
-    os << ')';
-  };
-  auto mode_name = [](int m) -> const char* {
-    return m >= 0 && m < M::n_mode ? M::mode_names[static_cast<std::size_t>(m)] : "?";
-  };
+  auto point = [&os](const std::array<double, N>& x) { write_state<M>(os, x); };
   const TraceStatus<N>& s = f.status;
   os << "characteristic from ";
   point(f.start);
-  os << " in mode '" << mode_name(f.start_mode) << "' failed: " << trace_error_name(s.error);
-  if (s.guard >= 0 && s.guard < M::n_guard)
-    os << " at guard '" << M::guard_names[static_cast<std::size_t>(s.guard)] << "'";
+  os << " in mode '" << mode_name<M>(f.start_mode) << "' failed: " << trace_error_name(s.error);
+  if (s.guard >= 0 && s.guard < M::n_guard) os << " at guard '" << guard_name<M>(s.guard) << "'";
   os << " at backward time tau = " << s.tau << ", state ";
   point(s.state);
-  os << ", mode '" << mode_name(s.mode) << "', after " << s.events << " resets";
+  os << ", mode '" << mode_name<M>(s.mode) << "', after " << s.events << " resets";
   if (s.error == TraceError::grazing) detail::describe_grazing(os, s.value);
   return os.str();
 }

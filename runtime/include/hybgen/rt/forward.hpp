@@ -451,23 +451,15 @@ std::string describe(const ForwardResult<state_dim_v<M>>& r, int start_mode,
   constexpr std::size_t N = state_dim_v<M>;
   std::ostringstream os;
   os.precision(17);
-  auto point = [&os](const std::array<double, N>& x) {
-    os << '(';
-    for (std::size_t i = 0; i < N; ++i) os << (i ? ", " : "") << M::state_names[i] << " = " << x[i];
-    os << ')';
-  };
-  auto mode_name = [](int m) -> const char* {
-    return m >= 0 && m < M::n_mode ? M::mode_names[static_cast<std::size_t>(m)] : "?";
-  };
+  auto point = [&os](const std::array<double, N>& x) { write_state<M>(os, x); };
   os << "forward trajectory from ";
   point(start);
-  os << " in mode '" << mode_name(start_mode) << "': " << forward_status_name(r.status);
+  os << " in mode '" << mode_name<M>(start_mode) << "': " << forward_status_name(r.status);
   if (r.error != TraceError::none) os << " (" << trace_error_name(r.error) << ")";
-  if (r.guard >= 0 && r.guard < M::n_guard)
-    os << " at guard '" << M::guard_names[static_cast<std::size_t>(r.guard)] << "'";
+  if (r.guard >= 0 && r.guard < M::n_guard) os << " at guard '" << guard_name<M>(r.guard) << "'";
   os << " at time t = " << r.t_stop << ", state ";
   point(r.x);
-  os << ", mode '" << mode_name(r.mode) << "', after " << r.events << " guard crossings";
+  os << ", mode '" << mode_name<M>(r.mode) << "', after " << r.events << " guard crossings";
   if (r.error == TraceError::grazing) detail::describe_grazing(os, r.value);
   return os.str();
 }

@@ -349,29 +349,19 @@ std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
   constexpr std::size_t N = state_dim_v<M>;
   std::ostringstream os;
   os << std::setprecision(17);
-  auto point = [&os](const std::array<double, N>& x) {
-    os << '(';
-    for (std::size_t i = 0; i < N; ++i) os << (i ? ", " : "") << M::state_names[i] << " = " << x[i];
-    os << ')';
-  };
-  auto mode_name = [](int m) -> const char* {
-    return m >= 0 && m < M::n_mode ? M::mode_names[static_cast<std::size_t>(m)] : "?";
-  };
-  auto guard_name = [](int g) -> const char* {
-    return g >= 0 && g < M::n_guard ? M::guard_names[static_cast<std::size_t>(g)] : "?";
-  };
+  auto point = [&os](const std::array<double, N>& x) { write_state<M>(os, x); };
   if (f.guard < 0) {
     os << "pre-flight scan of the initial density at t = 0: " << preflight_error_name(f.error)
        << " u0 = " << f.value << " at the grid node ";
     point(f.state);
-    os << " in mode '" << mode_name(f.mode) << "'";
+    os << " in mode '" << mode_name<M>(f.mode) << "'";
     return os.str();
   }
-  os << "pre-flight scan of guard '" << guard_name(f.guard)
+  os << "pre-flight scan of guard '" << guard_name<M>(f.guard)
      << "' at t = 0: " << preflight_error_name(f.error);
   os << (f.error == PreflightError::non_finite_guard ? " at the grid node " : " at the point ");
   point(f.state);
-  os << " of its surface in mode '" << mode_name(f.mode) << "'";
+  os << " of its surface in mode '" << mode_name<M>(f.mode) << "'";
   switch (f.error) {
     case PreflightError::non_finite_guard:
       os << ": s = " << f.value;
@@ -394,7 +384,7 @@ std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
       const auto to = detail::guard_info<M>(static_cast<std::size_t>(f.guard)).to;
       os << ": Delta = ";
       point(f.image);
-      os << " is on guard '" << guard_name(f.other_guard) << "' of mode '" << mode_name(to)
+      os << " is on guard '" << guard_name<M>(f.other_guard) << "' of mode '" << mode_name<M>(to)
          << "', which fires there at once";
       break;
     }
