@@ -154,6 +154,15 @@ TEST(NumericalFailure, ZeroHybridJacobianAtACrossing) {
                   "Jacobian at the point (x = 0, p = -1) of its surface in mode 'flight': J = 0"});
 }
 
+TEST(NumericalFailure, NonFiniteHybridJacobianAtACrossing) {
+  // J = 9/8 + 3p/32 − √(p + 2)/2 − p/(8√(p + 2)) (derived by hand in the model's comment) is
+  // +inf at the first ground node p = −2, where dΔ_p/dp = −inf.
+  expect_failure("nan_jacobian",
+                 {"pre-flight scan of guard 'ground' at t = 0: zero or non-finite hybrid "
+                  "Jacobian at the point (x = 0, p = -2) of its surface in mode 'flight': "
+                  "J = inf"});
+}
+
 TEST(NumericalFailure, Grazing) {
   expect_failure("grazing", {"pre-flight scan of guard 'g' at t = 0: grazing: the flow is tangent "
                              "to the guard at a crossing at the point (x = 0, y = 0) of its "
