@@ -54,10 +54,10 @@ struct Frontend {
     ModelAst ast = parse(src);  // stage 1: text -> AST
     if (is_lie_model(ast)) {
       LieModel lie = [&] {
-        const Watchdog watchdog(src.path(), DeriveLimits{}.derive_seconds * 1.5 + 5);
+        const Watchdog watchdog(src.path(), DeriveLimits{}.derive_seconds);
         return check_lie(ast, src);  // stage 2: AST -> LieModel
       }();
-      const Watchdog watchdog(src.path(), lie.base.limits.derive_seconds * 1.5 + 5);
+      const Watchdog watchdog(src.path(), lie.base.limits.derive_seconds);
       model = reduce(lie, src, req.target);  // reduce: LieModel -> Model (general kind)
     } else {
       if (req.target == ReduceTarget::Unreduced)
@@ -70,7 +70,7 @@ struct Frontend {
       // A single GiNaC operation cannot be interrupted: past the derivation's
       // own budget (checked between operations) the watchdog ends the process
       // with a located error naming the object being derived.
-      const Watchdog watchdog(src.path(), model.limits.derive_seconds * 1.5 + 5);
+      const Watchdog watchdog(src.path(), model.limits.derive_seconds);
       sys = derive(model, src);  // stage 3: Model -> IR
     }
     sys.model = &model;

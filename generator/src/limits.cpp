@@ -179,9 +179,15 @@ struct Watchdog::State {
   std::thread thread;
 };
 
-Watchdog::Watchdog(std::string file, double seconds) : state_(std::make_unique<State>()) {
+double watchdog_seconds(double derive_seconds) {
+  return 1.5 * derive_seconds + 5;
+}
+
+Watchdog::Watchdog(std::string file, double derive_seconds, double fire_after)
+    : state_(std::make_unique<State>()) {
   State* s = state_.get();
-  s->thread = std::thread([s, file = std::move(file), seconds] {
+  const double seconds = fire_after < 0 ? watchdog_seconds(derive_seconds) : fire_after;
+  s->thread = std::thread([s, file = std::move(file), derive_seconds, seconds] {
     std::unique_lock<std::mutex> lock(s->mutex);
     const auto limit = std::chrono::duration<double>(std::min(seconds, 1e9));
     if (s->cv.wait_for(lock, limit, [s] { return s->done; })) return;
@@ -193,10 +199,11 @@ Watchdog::Watchdog(std::string file, double seconds) : state_(std::make_unique<S
       loc = g_object_loc;
     }
     std::fprintf(stderr,
-                 "%s:%d:%d: error: deriving %s took longer than derive_seconds = %g s, inside one "
-                 "symbolic operation (raise it with --set derive_seconds=S, or simplify the "
+                 "%s:%d:%d: error: deriving %s took longer than %g s, inside one symbolic "
+                 "operation (derive_seconds = %g s, and the one operation that overruns it is "
+                 "given 50 %% + 5 s more; raise it with --set derive_seconds=S, or simplify the "
                  "model)\n",
-                 file.c_str(), loc.line, loc.col, what.c_str(), seconds);
+                 file.c_str(), loc.line, loc.col, what.c_str(), seconds, derive_seconds);
     std::fflush(stderr);
     ::_exit(static_cast<int>(ExitCode::ModelError));
   });

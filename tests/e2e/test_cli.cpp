@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -128,6 +129,38 @@ TEST(Cli, BrokenModelsExitOneWithLocation) {
     EXPECT_NE(r.out.find(path + c.where), std::string::npos) << r.out;
     EXPECT_NE(r.out.find(c.fragment), std::string::npos) << r.out;
   }
+}
+
+// Issue 5's "10-D inverse": a reset x ↦ A x with a dense 10×10 matrix of parameters. Its
+// closed-form inverse needs det A, 10! = 3,628,800 terms, in one GiNaC call that the derivation's
+// own time checks cannot interrupt; the watchdog ends it at 1.5 · derive_seconds + 5 s with a
+// located error naming the object and the setting (everything before det A takes ~0.01 s).
+TEST(Cli, DenseTenDimensionalInverseEndsAtTheWatchdog) {
+  constexpr int n = 10;
+  std::ostringstream m;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) m << "parameter a" << i << '_' << j << " = " << (i == j) << "\n";
+  m << "state x0";
+  for (int i = 1; i < n; ++i) m << ", x" << i;
+  m << "\nmode m {\n  x0' = -1\n";
+  for (int i = 1; i < n; ++i) m << "  x" << i << "' = x" << i - 1 << "\n";
+  m << "}\nguard g {\n  when x0 = 0 decreasing\n  reset (";
+  for (int i = 0; i < n; ++i) {
+    m << (i ? ", " : "");
+    for (int j = 0; j < n; ++j) m << (j ? "+" : "") << 'a' << i << '_' << j << "*x" << j;
+  }
+  m << ")\n}\n";
+  const std::string path = write_model("dense10.model", m.str());
+  const auto t0 = std::chrono::steady_clock::now();
+  const Result r = hybgen("derive '" + path + "' --set derive_seconds=1");
+  const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_EQ(r.code, 1) << r.out;
+  EXPECT_NE(r.out.find(path + ":" + std::to_string(n * n + n + 6) +
+                       ":3: error: deriving the inverse reset of guard 'g' took longer than "
+                       "6.5 s, inside one symbolic operation (derive_seconds = 1 s"),
+            std::string::npos)
+      << r.out;
+  EXPECT_LT(secs, 60.0) << "the watchdog did not end the derivation";
 }
 
 TEST(Cli, BadCommandLinesExitTwo) {

@@ -170,12 +170,15 @@ TEST(LimitsDeathTest, WatchdogEndsTheProcess) {
   GTEST_FLAG_SET(death_test_style, "threadsafe");
   EXPECT_EXIT(
       {
-        const Watchdog w("slow.model", 0.05);
+        const Watchdog w("slow.model", 0.02, 0.05);
         std::this_thread::sleep_for(std::chrono::seconds(10));
       },
-      ::testing::ExitedWithCode(1), "slow.model:1:1: error: deriving the model took longer");
+      ::testing::ExitedWithCode(1),
+      "slow.model:1:1: error: deriving the model took longer than 0.05 s, inside one symbolic "
+      "operation \\(derive_seconds = 0.02 s,");
   { const Watchdog w("fast.model", 5); }
-  SUCCEED();
+  // The CLI's default: the budget, half of it again and 5 s (derive_seconds = 20 fires at 35 s).
+  EXPECT_EQ(watchdog_seconds(20), 35.0);
 }
 
 // The safety net behind F11's check: a GiNaC pole met while deriving (a

@@ -120,15 +120,21 @@ class LimitScope {
   LimitScope* previous_;
 };
 
+/// Seconds after which the watchdog ends a derivation whose budget is `derive_seconds`:
+/// 1.5 · derive_seconds + 5 (the budget itself is enforced between operations).
+double watchdog_seconds(double derive_seconds);
+
 /// A watchdog for one operation that cannot be interrupted (a single GiNaC
-/// call): if it is still alive `seconds` after construction, it prints
-/// `FILE: error: deriving OBJECT took longer than S s ...` to stderr and ends
-/// the process with exit 1. For the command-line tool only (nothing is
-/// written before derive ends, so ending the process loses nothing).
+/// call): if it is still alive `fire_after` seconds after construction, it
+/// prints `FILE:LINE:COL: error: deriving OBJECT took longer than T s ...`
+/// (with the setting derive_seconds) to stderr and ends the process with exit 1.
+/// For the command-line tool only (nothing is written before derive ends, so
+/// ending the process loses nothing).
 class Watchdog {
  public:
-  /// Arm the watchdog for `file`, firing after `seconds`.
-  Watchdog(std::string file, double seconds);
+  /// Arm the watchdog for `file` under the setting `derive_seconds`, firing after
+  /// `fire_after` seconds (negative, the default: watchdog_seconds(derive_seconds)).
+  Watchdog(std::string file, double derive_seconds, double fire_after = -1);
   /// Disarm it.
   ~Watchdog();
   Watchdog(const Watchdog&) = delete;             ///< Not copyable.
