@@ -232,14 +232,21 @@ TEST_F(OutputTest, NpyReaderRejectsTruncatedAndMalformedFiles) {
   EXPECT_EQ(read_npy(p).data, data);
 }
 
+// numpy is an independent reader of the format. scripts/setup.sh installs Debian's
+// python3-numpy for /usr/bin/python3 (a python3 earlier on PATH may lack it).
 TEST_F(OutputTest, NpyLoadsInNumpyIfAvailable) {
-  if (std::system("python3 -c 'import numpy' >/dev/null 2>&1") != 0)
-    GTEST_SKIP() << "python3 with numpy not available";
+  std::string python;
+  for (const char* candidate : {"/usr/bin/python3", "python3"})
+    if (std::system((std::string(candidate) + " -c 'import numpy' >/dev/null 2>&1").c_str()) == 0) {
+      python = candidate;
+      break;
+    }
+  if (python.empty()) GTEST_SKIP() << "python3 with numpy not available";
   const std::string p = path("np.npy");
   std::vector<double> data(24);
   for (std::size_t i = 0; i < data.size(); ++i) data[i] = static_cast<double>(i) * 0.5;
   write_npy(p, data.data(), {2, 3, 4});
-  const std::string cmd = "python3 -c \"import numpy as np; a = np.load('" + p +
+  const std::string cmd = python + " -c \"import numpy as np; a = np.load('" + p +
                           "'); assert a.shape == (2, 3, 4) and a.dtype == np.float64; "
                           "assert a[1, 2, 3] == 11.5 and a.flags.c_contiguous\"";
   EXPECT_EQ(std::system(cmd.c_str()), 0);
