@@ -217,10 +217,39 @@ void sync_directory(const fs::path& dir) {
   }
 }
 
+/// Put the finished staging directory in the place of `target` (which holds earlier outputs
+/// when `had_outputs`). Invariant: at every instant either target holds a complete set of
+/// outputs (old or new) or, between the two renames of the fallback, the old set is
+/// `old` and the next run restores it. The exchange (renameat2 RENAME_EXCHANGE) leaves no
+/// such instant; the fallback (filesystems without it) moves target to `old`, then staging
+/// to target. Returns an error message, empty on success; on failure target is as before.
+std::string swap_into_place(const fs::path& staging, const fs::path& target, const fs::path& old,
+                            bool had_outputs) {
+  std::error_code ec;
+  if (had_outputs) {
+    if (::renameat2(AT_FDCWD, staging.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
+      fs::rename(staging, old, ec);  // the old outputs, under the name a leftover has
+      return {};
+    }
+    if (errno != EINVAL && errno != ENOSYS)
+      return std::string("cannot exchange it with the new outputs: ") + std::strerror(errno);
+    if (::rename(target.c_str(), old.c_str()) != 0)
+      return std::string("cannot move it aside: ") + std::strerror(errno);
+  }
+  if (::rename(staging.c_str(), target.c_str()) != 0) {
+    const std::string err = std::strerror(errno);
+    if (had_outputs) ::rename(old.c_str(), target.c_str());
+    return "cannot move the new outputs into it: " + err;
+  }
+  return {};
+}
+
 /// `hybgen run`: the runner writes into a fresh staging directory `OUT.partial-<pid>` next
-/// to OUT; only when it succeeds is the staging directory swapped into place (OUT →
-/// `OUT.old-<pid>`, staging → OUT, old removed). A failed run removes the staging directory
-/// and leaves OUT as it was. The lock `OUT.lock` serialises runs into the same OUT.
+/// to OUT; only when it succeeds is the staging directory swapped into place
+/// (swap_into_place), and the old outputs removed. A failed run removes the staging
+/// directory and leaves OUT as it was. The lock `OUT.lock` serialises runs into the same OUT;
+/// a run that finds OUT missing but a complete `OUT.old-<pid>` of a run killed mid-swap
+/// restores it first.
 int cmd_run(const Request& req, std::string out, const std::string& cache, bool quiet) {
   Frontend fe(req);
   fe.print_warnings();
@@ -255,11 +284,24 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
                        "', which hybgen did not write (a run replaces the whole directory); "
                        "choose another --out");
   }
-  // Leftovers of runs that were killed (we hold the lock, so nobody else is using them).
+  // Leftovers of runs that were killed (we hold the lock, so nobody else is using them):
+  // staging directories are incomplete and go; an old-outputs directory is complete, and
+  // if OUT is missing (a run killed between the fallback's two renames) it is OUT again.
+  std::vector<fs::path> leftovers;
   for (const auto& e : fs::directory_iterator(parent, ec)) {
     const std::string n = e.path().filename().string();
     if (n.rfind(name + ".partial-", 0) == 0 || n.rfind(name + ".old-", 0) == 0)
-      fs::remove_all(e.path(), ec);
+      leftovers.push_back(e.path());
+  }
+  std::sort(leftovers.begin(), leftovers.end());
+  for (const auto& p : leftovers) {
+    if (p.filename().string().rfind(name + ".old-", 0) == 0 && !fs::exists(target, ec) &&
+        ::rename(p.c_str(), target.c_str()) == 0) {
+      std::cerr << "hybgen: restored the outputs of an interrupted run from '" << p.string()
+                << "' to '" << out << "'\n";
+      continue;
+    }
+    fs::remove_all(p, ec);
   }
 
   BuildResult b = do_build(fe, cache, false, quiet);
@@ -282,7 +324,6 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
   cfg["method"] = m.sim.method;
   cfg["out_dir"] = staging.string();  // where the runner writes
   cfg["final_out_dir"] = out;         // where the outputs end up (for its messages)
-  cfg["final_out_dir"] = out;
   std::vector<double> params;
   for (const auto& p : m.params) params.push_back(p.value_d);
   cfg["params"] = params;
@@ -329,19 +370,10 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
     fs::remove_all(staging, ec);
     throw InternalError(std::string(e.what()) + "; " + unchanged());
   }
-  // Swap: OUT → OUT.old-<pid>, staging → OUT, remove the old outputs.
-  if (had_outputs && ::rename(target.c_str(), old.c_str()) != 0) {
-    const std::string err = std::strerror(errno);
+  // Swap: the new outputs into OUT, the old ones (if any) to OUT.old-<pid>, then removed.
+  if (const std::string err = swap_into_place(staging, target, old, had_outputs); !err.empty()) {
     fs::remove_all(staging, ec);
-    throw InternalError("cannot move the previous outputs '" + out + "' aside: " + err + "; " +
-                        unchanged());
-  }
-  if (::rename(staging.c_str(), target.c_str()) != 0) {
-    const std::string err = std::strerror(errno);
-    if (had_outputs) ::rename(old.c_str(), target.c_str());
-    fs::remove_all(staging, ec);
-    throw InternalError("cannot move the new outputs into '" + out + "': " + err + "; " +
-                        unchanged());
+    throw InternalError("cannot replace the outputs in '" + out + "': " + err + "; " + unchanged());
   }
   sync_directory(parent);
   if (had_outputs) {

@@ -248,6 +248,33 @@ TEST(NothingLost, FailedRunLeavesThePreviousOutputsAndASuccessReplacesThemWhole)
   EXPECT_TRUE(leftovers(out).empty());
 }
 
+TEST(NothingLost, OutputsOfARunKilledMidSwapAreRestored) {
+  // A run killed between the two renames of the swap's fallback (OUT → OUT.old-<pid>, then
+  // staging → OUT) leaves no OUT, its complete old outputs in OUT.old-<pid> and its new ones
+  // in OUT.partial-<pid>. Staged here by hand; the next run restores the old outputs, so
+  // that a failing next run still leaves them in OUT.
+  const fs::path out = fresh_out("killed_mid_swap");
+  const std::string run = "run models/bouncing_ball.model --quiet --out '" + out.string() + "' ";
+  Result r = hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::string summary = hybgen::gen::read_file((out / "summary.json").string());
+  const fs::path old = out.string() + ".old-4242", staging = out.string() + ".partial-4242";
+  fs::rename(out, old);
+  fs::create_directories(staging);
+  std::ofstream(staging / "summary.json") << "{}\n";
+  r = hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5 --set e=1.5");
+  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_NE(r.out.find("hybgen: restored the outputs of an interrupted run from '" + old.string() +
+                       "' to '" + out.string() + "'"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("the previous outputs in '" + out.string() + "' are unchanged"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(hybgen::gen::read_file((out / "summary.json").string()), summary);
+  EXPECT_TRUE(leftovers(out).empty());
+}
+
 TEST(NothingLost, ADirectoryWithOtherFilesIsNotReplaced) {
   const fs::path out = fresh_out("foreign");
   fs::create_directories(out);
