@@ -11,8 +11,10 @@
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -84,21 +86,73 @@ struct Frontend {
   }
 };
 
-/// Run `exe config` and return its exit code (70 if it was killed by a signal).
-int run_process(const std::string& exe, const std::string& config) {
+/// The signal (SIGINT, SIGTERM, SIGHUP) that interrupted `hybgen run`, 0 if none.
+volatile std::sig_atomic_t g_interrupt = 0;
+/// The runner's pid while it runs, else 0: where an interrupt is forwarded.
+volatile std::sig_atomic_t g_runner = 0;
+
+extern "C" void on_interrupt(int sig) {
+  g_interrupt = sig;
+  if (g_runner > 0) ::kill(static_cast<pid_t>(g_runner), sig);  // async-signal-safe
+}
+
+/// While alive, SIGINT, SIGTERM and SIGHUP do not end hybgen: they are recorded in
+/// g_interrupt and forwarded to the runner, so that `hybgen run` can remove its staging
+/// directory and say that the previous outputs are unchanged. A signal that hybgen was
+/// started ignoring (nohup, a background job) stays ignored.
+class InterruptGuard {
+ public:
+  /// Install the handler.
+  InterruptGuard() {
+    g_interrupt = 0;
+    struct sigaction sa {};
+    sa.sa_handler = on_interrupt;
+    sigemptyset(&sa.sa_mask);
+    for (std::size_t i = 0; i < kSignals.size(); ++i) {
+      ::sigaction(kSignals[i], nullptr, &previous_[i]);
+      if (previous_[i].sa_handler != SIG_IGN) ::sigaction(kSignals[i], &sa, nullptr);
+    }
+  }
+  /// Restore the dispositions hybgen had (in the runner's child too, before exec).
+  static void restore_in_child(const InterruptGuard& g) {
+    for (std::size_t i = 0; i < kSignals.size(); ++i)
+      ::sigaction(kSignals[i], &g.previous_[i], nullptr);
+  }
+  ~InterruptGuard() {
+    for (std::size_t i = 0; i < kSignals.size(); ++i)
+      ::sigaction(kSignals[i], &previous_[i], nullptr);
+  }
+  InterruptGuard(const InterruptGuard&) = delete;             ///< One guard, one owner.
+  InterruptGuard& operator=(const InterruptGuard&) = delete;  ///< Not assignable.
+
+ private:
+  static constexpr std::array<int, 3> kSignals{SIGINT, SIGTERM, SIGHUP};
+  std::array<struct sigaction, 3> previous_{};
+};
+
+/// Run `exe config` under `guard` and return its exit code: 70 if it was killed by a signal,
+/// 128 + the signal if hybgen was interrupted (before the runner started, nothing is run).
+int run_process(const std::string& exe, const std::string& config, const InterruptGuard& guard) {
   std::fflush(stdout);
   std::fflush(stderr);
+  if (g_interrupt) return 128 + g_interrupt;
+  g_runner = 0;  // the child's copy stays 0: a signal caught there before exec is not forwarded
   pid_t pid = ::fork();
   if (pid < 0) throw InternalError("fork failed");
   if (pid == 0) {
+    InterruptGuard::restore_in_child(guard);
     ::execl(exe.c_str(), exe.c_str(), config.c_str(), static_cast<char*>(nullptr));
     std::perror("hybgen: cannot execute the runner");
     ::_exit(70);
   }
+  g_runner = pid;
+  if (g_interrupt) ::kill(pid, g_interrupt);  // arrived between the check and now
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0) {
     if (errno != EINTR) throw InternalError("waitpid failed");
   }
+  g_runner = 0;
+  if (g_interrupt) return 128 + g_interrupt;
   if (WIFEXITED(status)) return WEXITSTATUS(status);
   const int sig = WTERMSIG(status);
   std::cerr << "hybgen: the runner was killed by signal " << sig << " (" << ::strsignal(sig)
@@ -305,6 +359,8 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
   }
 
   BuildResult b = do_build(fe, cache, false, quiet);
+  // From here on an interrupt removes the staging directory instead of leaving it.
+  const InterruptGuard interrupt_guard;
   const std::string tag = std::to_string(::getpid());
   const fs::path staging = parent / (name + ".partial-" + tag);
   const fs::path old = parent / (name + ".old-" + tag);
@@ -352,14 +408,18 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
   }
   int rc = 70;
   try {
-    rc = run_process(b.executable, config);
+    rc = run_process(b.executable, config, interrupt_guard);
   } catch (...) {
     fs::remove_all(staging, ec);
     throw;
   }
   if (rc != 0) {
     fs::remove_all(staging, ec);
-    std::cerr << "hybgen: the run failed (exit " << rc << "); " << unchanged() << "\n";
+    if (rc > 128)
+      std::cerr << "hybgen: interrupted by signal " << rc - 128 << " (" << ::strsignal(rc - 128)
+                << "); " << unchanged() << "\n";
+    else
+      std::cerr << "hybgen: the run failed (exit " << rc << "); " << unchanged() << "\n";
     return rc;
   }
   // The config as it applies to OUT (the runner has finished with the staging path).

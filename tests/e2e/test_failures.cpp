@@ -10,7 +10,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -343,6 +345,39 @@ TEST(NothingLost, TwoConcurrentRunsIntoOneDirectoryDoNotInterleave) {
   std::printf("[ race ] exit codes %d and %d\n", a.code, b.code);
   const json s = json::parse(hybgen::gen::read_file((out / "summary.json").string()));
   for (const auto& f : s["files"]) EXPECT_TRUE(fs::exists(out / f.get<std::string>())) << f;
+  EXPECT_TRUE(leftovers(out).empty());
+}
+
+TEST(NothingLost, AnInterruptedRunRemovesItsStagingAndKeepsThePreviousOutputs) {
+  // SIGINT to hybgen (as Ctrl-C would, or SIGTERM from a batch system) while the runner
+  // works on a 2049² grid for some seconds: forwarded to the runner, then the staging
+  // directory is removed, the previous outputs stay, and the exit code is 128 + 2.
+  const fs::path out = fresh_out("interrupted");
+  const std::string run = "run models/bouncing_ball.model --quiet --out '" + out.string() + "' ";
+  ASSERT_EQ(hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5").code, 0);
+  const std::string summary = hybgen::gen::read_file((out / "summary.json").string());
+  Result r;
+  std::thread t([&] { r = hybgen(run + "--set grid=2049x2049 --set t_end=10 --set dt=5"); });
+  // The staging directory OUT.partial-<pid> names hybgen's pid; its config.json is written
+  // just before the runner starts.
+  pid_t pid = 0;
+  for (int i = 0; i < 3000 && pid == 0; ++i) {
+    for (const auto& e : fs::directory_iterator(out.parent_path())) {
+      const std::string n = e.path().filename().string(), prefix = "interrupted.partial-";
+      if (n.rfind(prefix, 0) == 0 && fs::exists(e.path() / "config.json"))
+        pid = static_cast<pid_t>(std::stol(n.substr(prefix.size())));
+    }
+    if (pid == 0) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  if (pid != 0) ::kill(pid, SIGINT);
+  t.join();
+  ASSERT_NE(pid, 0) << "the run never staged its outputs\n" << r.out;
+  EXPECT_EQ(r.code, 130) << r.out;
+  EXPECT_NE(r.out.find("hybgen: interrupted by signal 2 (Interrupt); the previous outputs in '" +
+                       out.string() + "' are unchanged"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(hybgen::gen::read_file((out / "summary.json").string()), summary);
   EXPECT_TRUE(leftovers(out).empty());
 }
 
