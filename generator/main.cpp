@@ -415,6 +415,7 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
   }
   if (rc != 0) {
     fs::remove_all(staging, ec);
+    if (rc > 128 && ::isatty(STDERR_FILENO)) std::cerr << '\n';  // end a progress bar's line
     if (rc > 128)
       std::cerr << "hybgen: interrupted by signal " << rc - 128 << " (" << ::strsignal(rc - 128)
                 << "); " << unchanged() << "\n";
