@@ -7,6 +7,7 @@ cd "$(dirname "$0")/.."
 packages=(build-essential cmake ninja-build pkg-config libginac-dev libcln-dev libeigen3-dev
           libspectra-dev libgtest-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev libpng-dev
           libssl-dev
+          clang-format   # scripts/check-format.sh (CI)
           python3-numpy  # an independent reader of the .npy outputs (tests/rt/test_output.cpp)
           clang libclang-rt-14-dev)  # clang + compiler-rt: libFuzzer harnesses (fuzz/run.sh)
 missing=()

@@ -217,8 +217,8 @@ class Dopri5 {
       // A sliver to t_end below the resolution of t (e.g. an event that fell on t_end up to
       // rounding) is not an underflow: the last step is taken with the tiny h and lands on
       // t_end exactly.
-      if (!(h > 0.0) ||
-          (!last && !(0.1 * std::fabs(h) > std::fabs(t_) * std::numeric_limits<double>::epsilon()))) {
+      if (!(h > 0.0) || (!last && !(0.1 * std::fabs(h) >
+                                    std::fabs(t_) * std::numeric_limits<double>::epsilon()))) {
         return failed_non_finite ? OdeStatus::non_finite : OdeStatus::step_underflow;
       }
       Vec yt;
