@@ -48,13 +48,6 @@ Result hybgen(const std::string& args, const std::string& prefix = "",
 }
 
 /// A fresh (removed) output directory for test `name`, and its leftovers' siblings.
-fs::path fresh_out(const std::string& name) {
-  const fs::path out = kWork / "runs" / name;
-  fs::create_directories(out.parent_path());
-  fs::remove_all(out);
-  return out;
-}
-
 /// Names in the directory of `out` that begin with out's name followed by `.partial-` or
 /// `.old-` (a staging or old directory left behind).
 std::vector<std::string> leftovers(const fs::path& out) {
@@ -65,6 +58,16 @@ std::vector<std::string> leftovers(const fs::path& out) {
     if (n.rfind(name + ".partial-", 0) == 0 || n.rfind(name + ".old-", 0) == 0) v.push_back(n);
   }
   return v;
+}
+
+/// A fresh output directory for test `name`: removed, with the leftovers of earlier runs
+/// of the test beside it (a stale `.partial-<pid>` would name another process).
+fs::path fresh_out(const std::string& name) {
+  const fs::path out = kWork / "runs" / name;
+  fs::create_directories(out.parent_path());
+  fs::remove_all(out);
+  for (const auto& n : leftovers(out)) fs::remove_all(out.parent_path() / n);
+  return out;
 }
 
 /// Run a failure model of tests/data/failures into a fresh directory: exit 3, every
