@@ -482,10 +482,14 @@ class EventLocator {
         };
         cd.root = brent_root(phi, cd.a, cd.b, cd.ga, cd.gb, 1e-16);
       }
-      std::sort(cand.begin(), cand.begin() + static_cast<std::ptrdiff_t>(nc),
-                [](const Candidate& l, const Candidate& r) {
-                  return l.root < r.root || (l.root == r.root && l.k < r.k);
-                });
+      // Insertion sort by (root, k): nc ≤ MaxEvents is a handful (and GCC 12 at -O3 reads
+      // std::sort's introsort on this short std::array as out of bounds, -Warray-bounds).
+      const auto before = [](const Candidate& l, const Candidate& r) {
+        return l.root < r.root || (l.root == r.root && l.k < r.k);
+      };
+      for (std::size_t c = 1; c < nc; ++c)
+        for (std::size_t d = c; d > 0 && before(cand[d], cand[d - 1]); --d)
+          std::swap(cand[d], cand[d - 1]);
       for (std::size_t c = 0; c < nc; ++c) {
         Vec xr;
         ode.dense_theta(cand[c].root, xr);
