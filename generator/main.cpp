@@ -92,8 +92,10 @@ volatile std::sig_atomic_t g_interrupt = 0;
 volatile std::sig_atomic_t g_runner = 0;
 
 extern "C" void on_interrupt(int sig) {
+  const int saved_errno = errno;
   g_interrupt = sig;
   if (g_runner > 0) ::kill(static_cast<pid_t>(g_runner), sig);  // async-signal-safe
+  errno = saved_errno;
 }
 
 /// While alive, SIGINT, SIGTERM and SIGHUP do not end hybgen: they are recorded in
@@ -113,7 +115,14 @@ class InterruptGuard {
       if (previous_[i].sa_handler != SIG_IGN) ::sigaction(kSignals[i], &sa, nullptr);
     }
   }
-  /// Restore the dispositions hybgen had (in the runner's child too, before exec).
+  /// The three signals as a set (to block them around fork).
+  static sigset_t signal_set() {
+    sigset_t set;
+    sigemptyset(&set);
+    for (int sig : kSignals) sigaddset(&set, sig);
+    return set;
+  }
+  /// Restore the dispositions hybgen had (in the runner's child, before exec).
   static void restore_in_child(const InterruptGuard& g) {
     for (std::size_t i = 0; i < kSignals.size(); ++i)
       ::sigaction(kSignals[i], &g.previous_[i], nullptr);
@@ -130,28 +139,57 @@ class InterruptGuard {
   std::array<struct sigaction, 3> previous_{};
 };
 
+/// End hybgen by `sig` itself (default disposition, unblocked), as the shell convention
+/// for a cleaned-up interrupt asks: the caller sees a death by that signal, not an exit.
+void die_by_signal(int sig) {
+  std::cout.flush();
+  std::cerr.flush();
+  std::signal(sig, SIG_DFL);
+  sigset_t set;
+  sigemptyset(&set);
+  sigaddset(&set, sig);
+  ::sigprocmask(SIG_UNBLOCK, &set, nullptr);
+  ::raise(sig);
+}
+
 /// Run `exe config` under `guard` and return its exit code: 70 if it was killed by a signal,
 /// 128 + the signal if hybgen was interrupted (before the runner started, nothing is run).
+/// The signals are blocked from before fork until g_runner names the child, so that none
+/// is caught in the child before exec (where it would be forwarded nowhere): a signal sent
+/// then stays pending, in the parent until it is unblocked, in the child until exec's
+/// restored dispositions take it.
 int run_process(const std::string& exe, const std::string& config, const InterruptGuard& guard) {
   std::fflush(stdout);
   std::fflush(stderr);
-  if (g_interrupt) return 128 + g_interrupt;
-  g_runner = 0;  // the child's copy stays 0: a signal caught there before exec is not forwarded
+  const sigset_t blocked = InterruptGuard::signal_set();
+  sigset_t mask;
+  ::sigprocmask(SIG_BLOCK, &blocked, &mask);
+  if (g_interrupt) {
+    ::sigprocmask(SIG_SETMASK, &mask, nullptr);
+    return 128 + g_interrupt;
+  }
   pid_t pid = ::fork();
-  if (pid < 0) throw InternalError("fork failed");
   if (pid == 0) {
     InterruptGuard::restore_in_child(guard);
+    ::sigprocmask(SIG_SETMASK, &mask, nullptr);
     ::execl(exe.c_str(), exe.c_str(), config.c_str(), static_cast<char*>(nullptr));
     std::perror("hybgen: cannot execute the runner");
     ::_exit(70);
   }
-  g_runner = pid;
-  if (g_interrupt) ::kill(pid, g_interrupt);  // arrived between the check and now
+  if (pid > 0) g_runner = pid;
+  ::sigprocmask(SIG_SETMASK, &mask, nullptr);
+  if (pid < 0) throw InternalError("fork failed");
+  // Wait without reaping first, so that the pid is not reused while a handler may still
+  // forward a signal to it.
+  siginfo_t info{};
+  while (::waitid(P_PID, static_cast<id_t>(pid), &info, WEXITED | WNOWAIT) < 0) {
+    if (errno != EINTR) throw InternalError("waitid failed");
+  }
+  g_runner = 0;
   int status = 0;
   while (::waitpid(pid, &status, 0) < 0) {
     if (errno != EINTR) throw InternalError("waitpid failed");
   }
-  g_runner = 0;
   if (g_interrupt) return 128 + g_interrupt;
   if (WIFEXITED(status)) return WEXITSTATUS(status);
   const int sig = WTERMSIG(status);
@@ -271,30 +309,42 @@ void sync_directory(const fs::path& dir) {
   }
 }
 
+/// How swap_into_place ended.
+struct SwapResult {
+  std::string error;     ///< Empty on success.
+  std::string stranded;  ///< Where the outputs are when a failed rollback left OUT missing.
+};
+
 /// Put the finished staging directory in the place of `target` (which holds earlier outputs
-/// when `had_outputs`). Invariant: at every instant either target holds a complete set of
-/// outputs (old or new) or, between the two renames of the fallback, the old set is
-/// `old` and the next run restores it. The exchange (renameat2 RENAME_EXCHANGE) leaves no
-/// such instant; the fallback (filesystems without it) moves target to `old`, then staging
-/// to target. Returns an error message, empty on success; on failure target is as before.
-std::string swap_into_place(const fs::path& staging, const fs::path& target, const fs::path& old,
-                            bool had_outputs) {
-  std::error_code ec;
+/// when `had_outputs`); on success the old outputs, if any, are under the staging name,
+/// to be removed. Invariant: a `.old-` directory is always a complete set of outputs, and
+/// at every instant either target holds a complete set (old or new) or, between the two
+/// renames of the fallback, the old set is `old` and the next run restores it; what is
+/// under a `.partial-` name is never restored, so it may be deleted in place. The exchange
+/// (renameat2 RENAME_EXCHANGE) leaves no instant without target; the fallback (filesystems
+/// without it) moves target to `old`, staging to target, then `old` to the staging name.
+SwapResult swap_into_place(const fs::path& staging, const fs::path& target, const fs::path& old,
+                           bool had_outputs) {
   if (had_outputs) {
-    if (::renameat2(AT_FDCWD, staging.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0) {
-      fs::rename(staging, old, ec);  // the old outputs, under the name a leftover has
+    if (::renameat2(AT_FDCWD, staging.c_str(), AT_FDCWD, target.c_str(), RENAME_EXCHANGE) == 0)
       return {};
-    }
     if (errno != EINVAL && errno != ENOSYS)
-      return std::string("cannot exchange it with the new outputs: ") + std::strerror(errno);
+      return {std::string("cannot exchange it with the new outputs: ") + std::strerror(errno), {}};
     if (::rename(target.c_str(), old.c_str()) != 0)
-      return std::string("cannot move it aside: ") + std::strerror(errno);
+      return {std::string("cannot move it aside: ") + std::strerror(errno), {}};
   }
   if (::rename(staging.c_str(), target.c_str()) != 0) {
-    const std::string err = std::strerror(errno);
-    if (had_outputs) ::rename(old.c_str(), target.c_str());
-    return "cannot move the new outputs into it: " + err;
+    const std::string err =
+        "cannot move the new outputs into it: " + std::string(std::strerror(errno));
+    if (had_outputs && ::rename(old.c_str(), target.c_str()) != 0)
+      return {err + "; nor could the previous outputs be moved back (" + std::strerror(errno) + ")",
+              "the previous outputs are in '" + old.string() + "', the new ones in '" +
+                  staging.string() + "'"};
+    return {err, {}};
   }
+  if (had_outputs && ::rename(old.c_str(), staging.c_str()) != 0)
+    std::cerr << "hybgen: warning: the previous outputs stay in '" << old.string()
+              << "': " << std::strerror(errno) << "\n";
   return {};
 }
 
@@ -413,14 +463,18 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
     fs::remove_all(staging, ec);
     throw;
   }
+  if (rc == 0 && g_interrupt) rc = 128 + g_interrupt;  // finished, but asked to stop: no swap
+  if (rc > 128) {
+    fs::remove_all(staging, ec);
+    if (::isatty(STDERR_FILENO)) std::cerr << '\n';  // end a progress bar's line
+    std::cerr << "hybgen: interrupted by signal " << rc - 128 << " (" << ::strsignal(rc - 128)
+              << "); " << unchanged() << "\n";
+    die_by_signal(rc - 128);  // so that a calling shell or script stops too
+    return rc;
+  }
   if (rc != 0) {
     fs::remove_all(staging, ec);
-    if (rc > 128 && ::isatty(STDERR_FILENO)) std::cerr << '\n';  // end a progress bar's line
-    if (rc > 128)
-      std::cerr << "hybgen: interrupted by signal " << rc - 128 << " (" << ::strsignal(rc - 128)
-                << "); " << unchanged() << "\n";
-    else
-      std::cerr << "hybgen: the run failed (exit " << rc << "); " << unchanged() << "\n";
+    std::cerr << "hybgen: the run failed (exit " << rc << "); " << unchanged() << "\n";
     return rc;
   }
   // The config as it applies to OUT (the runner has finished with the staging path).
@@ -431,16 +485,20 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
     fs::remove_all(staging, ec);
     throw InternalError(std::string(e.what()) + "; " + unchanged());
   }
-  // Swap: the new outputs into OUT, the old ones (if any) to OUT.old-<pid>, then removed.
-  if (const std::string err = swap_into_place(staging, target, old, had_outputs); !err.empty()) {
+  // Swap: the new outputs into OUT, the old ones (if any) under the staging name, removed.
+  if (const SwapResult sw = swap_into_place(staging, target, old, had_outputs); !sw.error.empty()) {
+    if (!sw.stranded.empty())
+      throw InternalError("cannot replace the outputs in '" + out + "': " + sw.error + "; " +
+                          sw.stranded);
     fs::remove_all(staging, ec);
-    throw InternalError("cannot replace the outputs in '" + out + "': " + err + "; " + unchanged());
+    throw InternalError("cannot replace the outputs in '" + out + "': " + sw.error + "; " +
+                        unchanged());
   }
   sync_directory(parent);
-  if (had_outputs) {
-    fs::remove_all(old, ec);
+  if (had_outputs && fs::exists(staging, ec)) {
+    fs::remove_all(staging, ec);
     if (ec)
-      std::cerr << "hybgen: warning: cannot remove the previous outputs '" << old.string()
+      std::cerr << "hybgen: warning: cannot remove the previous outputs '" << staging.string()
                 << "': " << ec.message() << "\n";
   }
   return 0;
