@@ -122,15 +122,12 @@ class InterruptGuard {
     for (int sig : kSignals) sigaddset(&set, sig);
     return set;
   }
-  /// Restore the dispositions hybgen had (in the runner's child, before exec).
-  static void restore_in_child(const InterruptGuard& g) {
-    for (std::size_t i = 0; i < kSignals.size(); ++i)
-      ::sigaction(kSignals[i], &g.previous_[i], nullptr);
-  }
-  ~InterruptGuard() {
+  /// Restore the dispositions hybgen had (at the end, and in the runner's child before exec).
+  void restore() const {
     for (std::size_t i = 0; i < kSignals.size(); ++i)
       ::sigaction(kSignals[i], &previous_[i], nullptr);
   }
+  ~InterruptGuard() { restore(); }
   InterruptGuard(const InterruptGuard&) = delete;             ///< One guard, one owner.
   InterruptGuard& operator=(const InterruptGuard&) = delete;  ///< Not assignable.
 
@@ -170,7 +167,7 @@ int run_process(const std::string& exe, const std::string& config, const Interru
   }
   pid_t pid = ::fork();
   if (pid == 0) {
-    InterruptGuard::restore_in_child(guard);
+    guard.restore();
     ::sigprocmask(SIG_SETMASK, &mask, nullptr);
     ::execl(exe.c_str(), exe.c_str(), config.c_str(), static_cast<char*>(nullptr));
     std::perror("hybgen: cannot execute the runner");

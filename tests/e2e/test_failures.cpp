@@ -59,6 +59,18 @@ std::vector<std::string> leftovers(const fs::path& out) {
   return v;
 }
 
+/// After a run `r` into `out` that failed or was stopped: it said that the previous outputs
+/// are unchanged, they are (summary.json reads `summary` as before), and no staging or old
+/// directory is left beside `out`.
+void expect_previous_outputs_kept(const Result& r, const fs::path& out,
+                                  const std::string& summary) {
+  EXPECT_NE(r.out.find("the previous outputs in '" + out.string() + "' are unchanged"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(hybgen::gen::read_file((out / "summary.json").string()), summary);
+  EXPECT_TRUE(leftovers(out).empty());
+}
+
 /// A fresh output directory for test `name`: removed, with the leftovers of earlier runs
 /// of the test beside it (a stale `.partial-<pid>` would name another process).
 fs::path fresh_out(const std::string& name) {
@@ -235,12 +247,8 @@ TEST(NothingLost, FailedRunLeavesThePreviousOutputsAndASuccessReplacesThemWhole)
   // A failing run (the reset leaves the box with e = 1.5) into the same directory.
   r = hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5 --set e=1.5");
   EXPECT_EQ(r.code, 3) << r.out;
-  EXPECT_NE(r.out.find("the previous outputs in '" + out.string() + "' are unchanged"),
-            std::string::npos)
-      << r.out;
-  EXPECT_EQ(hybgen::gen::read_file((out / "summary.json").string()), summary);
+  expect_previous_outputs_kept(r, out, summary);
   EXPECT_TRUE(fs::exists(out / "u_0004.npy"));
-  EXPECT_TRUE(leftovers(out).empty());
   // A successful run replaces the directory as a whole: no stale frame survives.
   r = hybgen(run + "--set grid=11x11 --set t_end=1 --set dt=0.5");
   ASSERT_EQ(r.code, 0) << r.out;
@@ -272,11 +280,7 @@ TEST(NothingLost, OutputsOfARunKilledMidSwapAreRestored) {
                        "' to '" + out.string() + "'"),
             std::string::npos)
       << r.out;
-  EXPECT_NE(r.out.find("the previous outputs in '" + out.string() + "' are unchanged"),
-            std::string::npos)
-      << r.out;
-  EXPECT_EQ(hybgen::gen::read_file((out / "summary.json").string()), summary);
-  EXPECT_TRUE(leftovers(out).empty());
+  expect_previous_outputs_kept(r, out, summary);
 }
 
 TEST(NothingLost, ADirectoryWithOtherFilesIsNotReplaced) {
@@ -381,8 +385,7 @@ TEST(NothingLost, AnInterruptedRunRemovesItsStagingAndKeepsThePreviousOutputs) {
                        out.string() + "' are unchanged"),
             std::string::npos)
       << r.out;
-  EXPECT_EQ(hybgen::gen::read_file((out / "summary.json").string()), summary);
-  EXPECT_TRUE(leftovers(out).empty());
+  expect_previous_outputs_kept(r, out, summary);
 }
 
 TEST(NothingLost, AFullDiskIsAClearErrorAndKeepsThePreviousOutputs) {
@@ -401,11 +404,7 @@ TEST(NothingLost, AFullDiskIsAClearErrorAndKeepsThePreviousOutputs) {
   EXPECT_EQ(r.code, 70) << r.out;  // runner.hpp: I/O failures exit 70, naming the file
   EXPECT_NE(r.out.find("cannot write '"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("/u_0000.npy': File too large"), std::string::npos) << r.out;
-  EXPECT_NE(r.out.find("the previous outputs in '" + out.string() + "' are unchanged"),
-            std::string::npos)
-      << r.out;
-  EXPECT_EQ(hybgen::gen::read_file((out / "summary.json").string()), summary);
-  EXPECT_TRUE(leftovers(out).empty());
+  expect_previous_outputs_kept(r, out, summary);
   std::printf("[ message ] %s\n", r.out.c_str());
 }
 
