@@ -243,7 +243,7 @@ void transfer_run(benchmark::State& state, const Config<rt::state_dim_v<M>>& c) 
   }
   rt::TransferOptions o;
   o.step = c.dt;
-  o.trace = trace_options();
+  o.forward.ode = trace_options().ode;
   const auto par = M::param_defaults;
   rt::TransferRun<N> run;
   double rss = -1.0, assembly = 0.0, nnz = 0.0;

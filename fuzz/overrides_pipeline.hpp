@@ -70,7 +70,8 @@ inline std::string override_invariant_violation(const gen::Model& m) {
   if (s.method != "characteristics" && s.method != "transfer" && s.method != "invariant" &&
       s.method != "particles")
     return "unknown method accepted";
-  if (s.scheme != "interpolate" && s.scheme != "conservative") return "unknown scheme accepted";
+  if (s.scheme != "hat" && s.scheme != "cell") return "unknown scheme accepted";
+  if (s.samples < 0 || s.samples > 64) return "bad samples accepted";
   if (!(m.limits.derive_seconds > 0) || m.limits.max_expr_nodes < 1 ||
       !(m.limits.max_expand_terms >= 1))
     return "bad derivation limit accepted";

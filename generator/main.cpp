@@ -443,6 +443,7 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
   cfg["seed"] = m.sim.seed;
   cfg["step"] = m.sim.step > 0 ? m.sim.step : m.sim.dt;
   cfg["scheme"] = m.sim.scheme;
+  cfg["samples"] = m.sim.samples;
   cfg["eigenvalues"] = m.sim.eigenvalues;
   cfg["quiet"] = quiet;
   cfg["seconds"] = {{"derive", fe.seconds}, {"build", b.seconds}};

@@ -613,9 +613,7 @@ Model check(const ModelAst& ast, const SourceText& src) {
     for (const auto& st : s.settings) {
       const std::string& k = st.key.name;
       if (!seen.insert(k).second) throw src.error(st.key.loc, "setting '" + k + "' is given twice");
-      if (k == "t_end" || k == "dt" || k == "tol" || k == "max_events" || k == "method" ||
-          k == "particles" || k == "seed" || k == "step" || k == "scheme" || k == "eigenvalues" ||
-          k == "max_expr_nodes" || k == "max_expand_terms" || k == "derive_seconds") {
+      if (is_simulation_setting(k)) {
         SettingValue v;
         v.word = st.word;
         if (st.value && st.word.empty())
@@ -663,6 +661,7 @@ const std::vector<std::string>& setting_names() {
                                                  "seed",
                                                  "step",
                                                  "scheme",
+                                                 "samples",
                                                  "eigenvalues",
                                                  "max_expr_nodes",
                                                  "max_expand_terms",
@@ -733,9 +732,9 @@ double parse_override_number(const std::string& key, const std::string& value) {
 
 bool is_simulation_setting(const std::string& key) {
   static const std::set<std::string> keys = {
-      "t_end",         "dt",   "tol",    "max_events",  "method",         "particles",
-      "seed",          "step", "scheme", "eigenvalues", "max_expr_nodes", "max_expand_terms",
-      "derive_seconds"};
+      "t_end",          "dt",     "tol",    "max_events",  "method",         "particles",
+      "seed",           "step",   "scheme", "eigenvalues", "max_expr_nodes", "max_expand_terms",
+      "derive_seconds", "samples"};
   return keys.count(key) > 0;
 }
 
@@ -762,7 +761,18 @@ std::string set_simulation_setting(Model& model, const std::string& key, const S
   };
   if (key == "method")
     return word({"characteristics", "transfer", "invariant", "particles"}, sim.method);
-  if (key == "scheme") return word({"interpolate", "conservative"}, sim.scheme);
+  if (key == "scheme") {
+    // The backward interpolating scheme created mass at resets with |J| != 1 and was
+    // withdrawn; its spelling gets the reason (runtime/include/hybgen/rt/transfer.hpp).
+    if (v.word == "interpolate" || v.word == "conservative")
+      return "'" + v.word +
+             "' was withdrawn: use 'hat' (the default: forward samples "
+             "deposited on hat functions) or 'cell' (Ulam); both conserve mass";
+    return word({"hat", "cell"}, sim.scheme);
+  }
+  if (key == "samples")
+    return num(0, 64, true, "an integer in [0, 64] (0: 4 per axis up to 2-D, 3 in 3-D, 2 above)",
+               [&](double x) { sim.samples = static_cast<int>(x); });
   if (key == "t_end")
     return num(std::nextafter(0.0, 1.0), 1e300, false, "positive",
                [&](double x) { sim.t_end = x; });

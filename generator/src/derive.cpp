@@ -3,6 +3,7 @@
 #include "hybgen/gen/derive.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <new>
 #include <random>
 #include <string>
@@ -491,7 +492,18 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
       const IrMode& after = sys.modes[static_cast<std::size_t>(g.to)];
       ex lie = 0;
       for (std::size_t i = 0; i < n; ++i) lie += g.gradient[i] * before.flow[i];
-      int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0;
+      int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0, leaks = 0;
+      std::vector<double> leak_point;
+      // The rate of change of each support condition along the flow of `before`: where the
+      // surface lies on the support's boundary and the guard does not fire, a negative
+      // rate (for ≥ / >; positive for ≤ / <) means the flow leaves the state space there.
+      std::vector<ex> support_rate;
+      for (const auto& c : m.sim.support) {
+        ex r = 0;
+        for (std::size_t i = 0; i < n; ++i)
+          r += c.expr.diff(GiNaC::ex_to<GiNaC::symbol>(X[i])) * before.flow[i];
+        support_rate.push_back(r);
+      }
       for (int trial = 0; trial < 400 && crossing < 60; ++trial) {
         LimitScope::check_time();
         std::vector<double> x(n);
@@ -535,7 +547,21 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         if (!inside) continue;
         ++on_surface;
         double rate = eval(lie, x);
-        if (!(g.direction == Direction::Decreasing ? rate < 0 : rate > 0)) continue;
+        if (!(g.direction == Direction::Decreasing ? rate < 0 : rate > 0)) {
+          // The guard does not fire here: does the flow leave the support through S here?
+          double scale = 1;
+          for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(x[i]));
+          for (std::size_t ci = 0; ci < m.sim.support.size() && rate != 0; ++ci) {
+            const Condition& c = m.sim.support[ci];
+            if (!(std::fabs(eval(c.expr, x)) <= 1e-9 * scale)) continue;
+            const double out = eval(support_rate[ci], x);
+            if (c.op == "<" || c.op == "<=" ? out > 0 : out < 0) {
+              if (leaks++ == 0) leak_point = x;
+              break;
+            }
+          }
+          continue;
+        }
         ++crossing;
         std::vector<double> y(n);
         for (std::size_t i = 0; i < n; ++i) y[i] = eval(g.reset[i], x);
@@ -558,6 +584,23 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
             break;
           }
         }
+      }
+      if (leaks > 0) {
+        std::string point;
+        for (std::size_t i = 0; i < n; ++i) {
+          char b[64];
+          std::snprintf(b, sizeof b, "%.6g", leak_point[i]);
+          point += (i ? ", " : "") + m.state[i] + " = " + b;
+        }
+        const bool dec = g.direction == Direction::Decreasing;
+        sys.warnings.push_back(
+            where + ": at (" + point + ") and " + std::to_string(leaks - 1) +
+            " more sampled points the flow of mode '" + before.name +
+            "' leaves the support through the surface in the direction the guard does not fire "
+            "(declared " +
+            (dec ? "decreasing" : "increasing") +
+            "): that mass leaves the state space unnoticed; did you mean '" +
+            (dec ? "increasing" : "decreasing") + "'?");
       }
       if (on_surface == 0) {
         sys.warnings.push_back(where +

@@ -360,6 +360,24 @@ TEST(Derive, WarnsWhenGuardNeverFires) {
   EXPECT_NE(d.sys.warnings[0].find("never fires"), std::string::npos);
 }
 
+TEST(Derive, WarnsWhenTheFlowLeavesTheSupportWhereTheGuardDoesNotFire) {
+  // The ball with its wall declared 'increasing': on x = 0 the flow with p < 0 leaves the
+  // support x >= 0 and no guard catches it (a run then books that mass as an atom "at a Zeno
+  // point"). The warning names the guard, a point with p < 0 and the likely fix. With the
+  // wall declared right, the same scan finds nothing.
+  const std::string good = read_model("bouncing_ball.model");
+  std::string text = good;
+  text.replace(text.find("when x = 0 decreasing"), 21, "when x = 0 increasing");
+  Derived d(text);
+  ASSERT_EQ(d.sys.warnings.size(), 1u);
+  const std::string& w = d.sys.warnings[0];
+  EXPECT_NE(w.find("guard 'ground': at (x = 0, p = -"), std::string::npos) << w;
+  EXPECT_NE(w.find("leaves the support"), std::string::npos) << w;
+  EXPECT_NE(w.find("did you mean 'decreasing'?"), std::string::npos) << w;
+  Derived ok(good);
+  EXPECT_TRUE(ok.sys.warnings.empty());
+}
+
 TEST(Derive, NonAffineResetHasNumericInverse) {
   Derived d(R"(state x, p
 mode a { x' = p; p' = -1 }

@@ -1,5 +1,6 @@
 // Tests of hybgen/rt/invariant.hpp: a 1-D cyclic hybrid system whose invariant density is
-// known in closed form, reproduced by the leading eigenvector of the transfer operator.
+// known in closed form, reproduced by the leading eigenvector of the transfer operator (both
+// schemes).
 
 #include <gtest/gtest.h>
 
@@ -108,21 +109,27 @@ CycleResult solve_cycle(int n, double h, const rt::InvariantOptions& iopt = {}) 
 }
 
 TEST(Invariant, CycleDensityIsReproducedAndConverges) {
-  // The invariant density c/a(x) from the leading eigenvector, on grids of 51 … 401 nodes at
-  // h = 0.05. Multilinear interpolation is second order, so the L1 error should fall like
-  // Δx². Asserted: each refinement divides the error by at least 3 (order ≥ 1.58); the
-  // coarsest error is below 1e-3. λ₁ = 1 − O(Δx²) (interpolation conserves mass only to
-  // O(Δx²)): |λ₁ − 1| ≤ 10·error.
+  // The invariant density c/a(x) from the leading eigenvector of the `hat` operator, on
+  // grids of 51 … 401 nodes at h = 0.05. Every sample stays in [0, 1] (a sample crossing x = 1
+  // is reset to the start), so P is a Markov matrix: λ₁ = 1 to the eigen-solver's tolerance
+  // (the withdrawn interpolating scheme had λ₁ = 1 − O(Δx²)). The error is dominated by the
+  // two guard nodes x = 0 and x = 1, where a sample's sub-cell that straddles the guard is
+  // booked whole on the side of its centre (an O(Δx/K) layer in L1; transfer.hpp), and by the
+  // O(Δx²/h) smoothing. Measured L1: 5.6e-3, 4.5e-3, 3.7e-3, 1.3e-3 (the interpolating scheme:
+  // 6e-4 … 2e-5, at the price of creating mass elsewhere). Asserted: below 1e-2 on every grid,
+  // below 2e-3 at 401 nodes, falling from 51 to 401 by at least 3.
   // The rest of the spectrum lies just inside the unit circle (transport without mixing):
   // λ₂ = e^{±2πih/T}·(1 − O(Δx²)), so arg λ₂ = 2πh/T (asserted to 1 %) and 1 − |λ₂| — the
   // numerical diffusion — shrinks by ≥ 3 per refinement. Such a clustered spectrum is hard
   // for Arnoldi: with 4 eigenvalues in a 20-vector basis Spectra converges to eigenvalues
-  // that are not the largest (e.g. the 2θ mode instead of θ at 101 nodes); the defaults, 12
-  // eigenvalues searched in a 60-vector basis, resolve the cluster on all four grids (measured 1 −
-  // |λ₂| = 1.3e-3, 3.0e-4, 7.9e-5, 2.1e-5, arg λ₂ = 0.4641 vs 2πh/T = 0.4640).
+  // that are not the largest; the defaults, 12 eigenvalues searched in a 60-vector basis,
+  // resolve the cluster on all four grids (measured 1 − |λ₂| = 2.0e-3, 5.1e-4, 1.3e-4, 3.2e-5,
+  // arg λ₂ = 0.46403 at 401 nodes vs 2πh/T = 0.46402). At 801 nodes Spectra does not converge
+  // within its restarts and the power-iteration fallback hits its iteration cap (the run then
+  // warns; tests/rt/test_invariant.cpp measures it no further).
   const double h = 0.05, T = period();
   const rt::InvariantOptions io;  // the defaults: n_eigen 4, search 12, ncv 60
-  double prev = 0.0, prev_damp = 0.0;
+  double prev = 0.0, prev_damp = 0.0, first = 0.0;
   for (const int n : {51, 101, 201, 401}) {
     const CycleResult r = solve_cycle(n, h, io);
     ASSERT_TRUE(r.inv.converged);
@@ -134,8 +141,8 @@ TEST(Invariant, CycleDensityIsReproducedAndConverges) {
         "gap %.3e, decay %.3e/s, min %.3e, residual %.1e, %ld restarts\n",
         n, r.l1, l1.real(), std::abs(l2), std::fabs(std::arg(l2)), 2.0 * std::numbers::pi * h / T,
         r.inv.gap, r.inv.decay_rate, r.inv.min_value, r.inv.residual, r.inv.iterations);
-    EXPECT_LT(r.l1, 1e-3);
-    EXPECT_LE(std::fabs(l1.real() - 1.0), 10.0 * r.l1);
+    EXPECT_LT(r.l1, 1e-2);
+    EXPECT_NEAR(l1.real(), 1.0, 1e-12);
     EXPECT_EQ(l1.imag(), 0.0);
     EXPECT_GT(std::abs(l2), 0.99);
     EXPECT_LT(std::abs(l2), 1.0);
@@ -147,8 +154,13 @@ TEST(Invariant, CycleDensityIsReproducedAndConverges) {
     EXPECT_NEAR(r.inv.decay_rate, -std::log(std::abs(l2) / l1.real()) / h, 1e-9);
     const double damp = 1.0 - std::abs(l2);
     if (prev > 0.0) {
-      EXPECT_LT(r.l1, prev / 3.0);
+      EXPECT_LT(r.l1, prev);
       EXPECT_LT(damp, prev_damp / 3.0);
+    }
+    if (first == 0.0) first = r.l1;
+    if (n == 401) {
+      EXPECT_LT(r.l1, 2e-3);
+      EXPECT_LT(r.l1, first / 3.0);
     }
     prev = r.l1;
     prev_damp = damp;
@@ -182,12 +194,12 @@ TEST(Invariant, PowerIterationFallbackAgreesWithSpectra) {
 
 namespace {
 
-TEST(Invariant, ConservativeCycleIsMarkov) {
-  // Ulam's operator of the cycle: every sample stays in [0, 1] (a sample crossing x = 1 is
-  // reset to the start), so the columns sum to 1 exactly, P is a Markov matrix and λ₁ = 1 to
-  // the eigen-solver's tolerance. Sampled Ulam quantises each transition fraction to k/K, an
-  // error of O(1/K) that does NOT shrink with Δx; the cycle is nearly a translation, so the
-  // bias repeats every step. Measured L1 errors of the invariant density (h = 0.05):
+TEST(Invariant, CellCycleIsMarkov) {
+  // The `cell` (Ulam) operator of the cycle: every sample stays in [0, 1] (a sample crossing x = 1
+  // is reset to the start), so the columns sum to 1 exactly, P is a Markov matrix and λ₁ = 1 to the
+  // eigen-solver's tolerance. Sampled Ulam quantises each transition fraction to k/K, an error of
+  // O(1/K) that does NOT shrink with Δx; the cycle is nearly a translation, so the bias repeats
+  // every step. Measured L1 errors of the invariant density (h = 0.05):
   //   K = 8:   6.4e-2, 5.5e-2, 6.9e-2, 7.5e-2  (51, 101, 201, 401 nodes)
   //   K = 32:  9.6e-3, 1.4e-2, 1.8e-2, 1.6e-2
   //   K = 128: 3.3e-3, 3.2e-3, 3.4e-3, 4.8e-3
@@ -199,7 +211,7 @@ TEST(Invariant, ConservativeCycleIsMarkov) {
   for (const int k : {8, 32, 128}) {
     rt::TransferOptions o;
     o.step = 0.05;
-    o.scheme = rt::TransferScheme::conservative;
+    o.scheme = rt::TransferScheme::cell;
     o.samples_per_axis = k;
     const auto op = rt::assemble_transfer<Cycle>(grid, nullptr, o);
     ASSERT_TRUE(op.ok()) << op.failure_message;

@@ -1,9 +1,13 @@
 // Progress reporting (runtime/include/hybgen/rt/progress.hpp): silent for short
-// or quiet runs, a line per 10 % on a non-terminal stderr, from many threads.
+// or quiet runs, a line per 10 % on a non-terminal stderr, from many threads. The time is
+// a fake clock that the tests advance themselves: nothing here sleeps or depends on the
+// machine's speed.
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <barrier>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -37,6 +41,12 @@ std::string capture_stderr(F&& f) {
   return ss.str();
 }
 
+/// A fake clock: `fake_now` returns the epoch plus `fake_ms` milliseconds.
+std::atomic<long> fake_ms{0};
+Progress::Clock::time_point fake_now() {
+  return Progress::Clock::time_point{} + std::chrono::milliseconds(fake_ms.load());
+}
+
 std::size_t count(const std::string& s, const std::string& what) {
   std::size_t n = 0;
   for (std::size_t p = s.find(what); p != std::string::npos; p = s.find(what, p + 1)) ++n;
@@ -44,35 +54,47 @@ std::size_t count(const std::string& s, const std::string& what) {
 }
 
 TEST(Progress, ShortRunsPrintNothing) {
+  // 1000 units within 0.999 s of fake time: nothing, not even the final line.
+  fake_ms = 0;
   const std::string out = capture_stderr([] {
-    Progress p("solving", 1000, false);
-    for (int i = 0; i < 1000; ++i) p.advance();
-  });
-  EXPECT_EQ(out, "");
-}
-
-TEST(Progress, QuietPrintsNothing) {
-  const std::string out = capture_stderr([] {
-    Progress p("solving", 100, true);
-    for (int i = 0; i < 100; ++i) {
+    Progress p("solving", 1000, false, &fake_now);
+    for (int i = 0; i < 1000; ++i) {
+      fake_ms = i;
       p.advance();
-      std::this_thread::sleep_for(std::chrono::milliseconds(15));
     }
   });
   EXPECT_EQ(out, "");
 }
 
-// A 1.5 s run from 4 threads: after the first second, one line per decile
-// reached (the file is not a terminal), then a final 100 % line.
-TEST(Progress, LongRunsPrintDecilesFromManyThreads) {
+TEST(Progress, QuietPrintsNothing) {
+  fake_ms = 0;
   const std::string out = capture_stderr([] {
-    Progress p("solving test", 400, false);
+    Progress p("solving", 100, true, &fake_now);
+    for (int i = 0; i < 100; ++i) {
+      fake_ms = 15 * i;
+      p.advance();
+    }
+  });
+  EXPECT_EQ(out, "");
+}
+
+// A 1.5 s run (fake time: 15 ms per round of 4 units) from 4 threads: after the first
+// second, one line per decile reached (the file is not a terminal), then a final 100 % line.
+// The threads advance in lock-step rounds (a barrier per round), so the fake time of unit u
+// is 15·(u/4) ms and the output is the same on every machine: nothing before 1 s (the first
+// 268 units, 67 %), then, at least 1/8 s apart, the deciles 6, 7, 8, 9 (rounds 67, 76, 85,
+// 94) and 100 %.
+TEST(Progress, LongRunsPrintDecilesFromManyThreads) {
+  fake_ms = 0;
+  const std::string out = capture_stderr([] {
+    Progress p("solving test", 400, false, &fake_now);
+    std::barrier round(4, []() noexcept { fake_ms += 15; });
     std::vector<std::thread> workers;
     for (int w = 0; w < 4; ++w)
-      workers.emplace_back([&p] {
+      workers.emplace_back([&p, &round] {
         for (int i = 0; i < 100; ++i) {
           p.advance();
-          std::this_thread::sleep_for(std::chrono::milliseconds(15));
+          round.arrive_and_wait();
         }
       });
     for (auto& t : workers) t.join();
@@ -81,10 +103,10 @@ TEST(Progress, LongRunsPrintDecilesFromManyThreads) {
   EXPECT_NE(out.find("hybgen: solving test ["), std::string::npos) << out;
   EXPECT_NE(out.find("100.0%"), std::string::npos) << out;
   EXPECT_EQ(out.find('\r'), std::string::npos) << out;  // not a terminal: no redraws
-  // Nothing in the first second (≈ 2/3 of the work), so at most the deciles 6..10.
-  EXPECT_GE(count(out, "\n"), 2u) << out;
-  EXPECT_LE(count(out, "\n"), 6u) << out;
+  // Nothing in the first second (2/3 of the work), so the deciles 6 … 9 and the final line.
+  EXPECT_EQ(count(out, "\n"), 5u) << out;
   EXPECT_EQ(count(out, "  0.0%"), 0u) << out;
+  EXPECT_NE(out.find("1.0 s elapsed"), std::string::npos) << out;
 }
 
 }  // namespace

@@ -1,6 +1,8 @@
-// Tests of hybgen/rt/transfer.hpp: the interpolating (semi-Lagrangian) transfer operator on
-// the elastic bouncing ball against its closed-form density, its structure (positivity, row
-// sums), mass accounting, step/time validation and failure reporting.
+// Tests of hybgen/rt/transfer.hpp: the mass-moving transfer operators (`hat`, `cell`) on the
+// bouncing ball — conservation column by column and step by step (checked against quantities
+// computed here, not by the code under test), accuracy against the closed-form elastic
+// density, the restitution case that the withdrawn interpolating scheme blew up, Zeno atoms,
+// the detection of a broken budget, step/time validation and failure reporting.
 
 #include <gtest/gtest.h>
 
@@ -69,11 +71,14 @@ rt::TensorGrid<2> ball_grid(int n) {
   return g;
 }
 
-rt::TransferOptions interp_options(double h) {
+rt::TransferOptions options(double h, rt::TransferScheme scheme = rt::TransferScheme::hat,
+                            int samples = 0) {
   rt::TransferOptions o;
   o.step = h;
-  o.trace.ode.rtol = 1e-10;
-  o.trace.ode.atol = 1e-12;
+  o.scheme = scheme;
+  o.samples_per_axis = samples;
+  o.forward.ode.rtol = 1e-10;
+  o.forward.ode.atol = 1e-12;
   return o;
 }
 
@@ -103,7 +108,8 @@ double rel_l1(const rt::TensorGrid<N>& grid, const rt::Solution<N>& sol, std::si
 
 TEST(Transfer, HatWeightsReproduceLinearFunctions) {
   // Multilinear interpolation is exact for affine functions and its weights are a partition
-  // of unity with non-negative entries; points outside the box are rejected.
+  // of unity with non-negative entries; points outside the box are rejected. (The `hat`
+  // deposit relies on both: mass is split without loss, and its centre is kept.)
   const auto grid = ball_grid(9);
   std::array<std::size_t, 4> idx{};
   std::array<double, 4> wt{};
@@ -125,67 +131,66 @@ TEST(Transfer, HatWeightsReproduceLinearFunctions) {
   EXPECT_FALSE(rt::detail::hat_weights<2>(grid, out2.data(), idx, wt));
 }
 
-TEST(Transfer, BallOperatorStructure) {
-  // Elastic ball: div X = 0 and |J| = e² = 1, so each row is Σ_k φ_k(foot) = 1 when its single
-  // foot is in the box and empty when the foot left it; entries are > 0. With e = 0.8 the
-  // rows reached through a reversed reset carry 1/e² (the density jump of Thm 3.11).
-  const auto grid = ball_grid(41);
-  for (const double e : {1.0, 0.8}) {
-    const std::array<double, 3> par{1.0, 1.0, e};
-    const auto op = rt::assemble_transfer<Ball>(grid, par.data(), interp_options(0.05));
-    ASSERT_TRUE(op.ok()) << rt::describe<Ball>(op.failure);
-    ASSERT_EQ(op.P.rows(), static_cast<Eigen::Index>(grid.size()));
-    int n_one = 0, n_reset = 0, n_empty = 0;
-    for (Eigen::Index r = 0; r < op.P.rows(); ++r) {
-      double s = 0.0;
-      for (rt::CsrMatrix::InnerIterator it(op.P, r); it; ++it) {
-        EXPECT_GT(it.value(), 0.0);
-        s += it.value();
-      }
-      if (s == 0.0)
-        ++n_empty;
-      else if (std::fabs(s - 1.0) < 1e-12)
-        ++n_one;
-      else if (std::fabs(s - 1.0 / (e * e)) < 1e-12)
-        ++n_reset;
-      else
-        ADD_FAILURE() << "row " << r << " sums to " << s;
-    }
-    EXPECT_GT(n_one, 1000);
-    EXPECT_GT(n_empty, 0);  // feet beyond x = 2 or |p| = 2
-    if (e < 1.0) {
-      EXPECT_GT(n_reset, 0);
-    }
-    // Nodes near the ground with p > 0 came through a bounce within h: a foot on the other side.
-    const std::size_t near_ground = 1 * 41 + 30;  // x = 0.05, p = 1
-    const auto yg = grid.node(near_ground);
-    ASSERT_NEAR(yg[0], 0.05, 1e-15);
-    bool has_lower = false;
-    for (rt::CsrMatrix::InnerIterator it(op.P, static_cast<Eigen::Index>(near_ground)); it; ++it)
-      has_lower = has_lower || grid.node(static_cast<std::size_t>(it.col()))[1] < 0.0;
-    EXPECT_TRUE(has_lower);
-  }
+/// Column sums of P computed here from the CSR arrays (independently of check_columns).
+std::vector<double> column_sums(const rt::TransferOperator<2>& op) {
+  std::vector<double> col(op.size(), 0.0);
+  for (Eigen::Index r = 0; r < op.P.rows(); ++r)
+    for (rt::CsrMatrix::InnerIterator it(op.P, r); it; ++it)
+      col[static_cast<std::size_t>(it.col())] += it.value();
+  return col;
 }
 
-TEST(Transfer, BallConvergesAtSecondOrder) {
-  // L1 error against the closed form on grids 65² … 513². The trace is exact to the ODE
-  // tolerance (1e-10), so the error is the interpolation error: each step's multilinear
-  // interpolation errs by θ(1−θ)(Δx²/2)|∂²u| (θ: the fractional cell shift of the foot),
-  // accumulated over t/h steps: order 2 in Δx at fixed h.
-  //
-  // h = 1/16: the momentum shift per step, g·h = 1/16, is a whole number of cells (1, 2, 4,
-  // 8) on every grid, so θ = 0 along p and the error constant is the same on every grid. (At
-  // h = 0.05 the p-shift is 0.8, 1.6, 3.2, 6.4 … cells: θ(1−θ) alternates 0.16, 0.24, which
-  // moves the observed order by ±log₂1.5 = ±0.58 from level to level; the benchmark
-  // BM_TransferGrid shows both.)
-  //
-  // Measured (h = 1/16): t = 1: 1.50e-2, 3.74e-3, 9.37e-4, 2.42e-4: orders 2.00, 2.00, 1.95
-  // — second order. t = 10: 3.26e-1, 1.44e-1, 5.55e-2, 1.98e-2: orders 1.17, 1.38, 1.49,
-  // rising towards 2 (1.52 at 1025²): pre-asymptotic, because the shear of the flow (the
-  // period 2√(2E) depends on the energy) grows the density's second derivatives like t², so
-  // Δx²|∂²u| ≪ |u| needs finer grids at t = 10. Asserted: every refinement reduces both errors;
-  // the t = 1 orders lie in [1.85, 2.1] (second order; the band's width is the measured drift
-  // plus 0.05) and the t = 10 orders in [1.0, 1.7] (the measured 1.17–1.49 ± 0.2).
+TEST(Transfer, EveryColumnMovesExactlyItsMass) {
+  // For both schemes, e = 1 and e = 0.8 (|J| = e² ≠ 1 at the ground, the case where the
+  // withdrawn interpolating scheme created mass): entries > 0, and every column's entries
+  // plus its outflow and atom sum to 1 to 1e-14. The outflow is counted independently here:
+  // a column whose dual cell lies at distance > h·max|X| from the box faces x = 2 and
+  // |p| = 2 cannot lose mass (|X| = |(p, −1)| ≤ √5 in the box).
+  const auto grid = ball_grid(41);
+  for (const auto scheme : {rt::TransferScheme::hat, rt::TransferScheme::cell})
+    for (const double e : {1.0, 0.8}) {
+      SCOPED_TRACE(std::string(rt::scheme_name(scheme)) + " e=" + std::to_string(e));
+      const std::array<double, 3> par{1.0, 1.0, e};
+      const double h = 0.05;
+      const auto op = rt::assemble_transfer<Ball>(grid, par.data(), options(h, scheme));
+      ASSERT_TRUE(op.ok()) << op.failure_message;
+      EXPECT_LE(op.column_defect, 1e-14);
+      const auto col = column_sums(op);
+      int interior = 0;
+      for (std::size_t i = 0; i < col.size(); ++i) {
+        EXPECT_GE(op.outflow[i], 0.0);
+        EXPECT_GE(op.atom[i], 0.0);
+        ASSERT_NEAR(col[i] + op.outflow[i] + op.atom[i], 1.0, 1e-14) << i;
+        const auto y = grid.node(i);
+        const double reach = h * std::sqrt(5.0) + 0.5 * 0.1;  // + half a cell
+        if (y[0] < 2.0 - reach && std::fabs(y[1]) < 2.0 - reach && y[0] > 0.3) {
+          ++interior;
+          EXPECT_EQ(op.outflow[i], 0.0) << i;
+          EXPECT_EQ(op.atom[i], 0.0) << i;
+          EXPECT_NEAR(col[i], 1.0, 1e-14) << i;
+        }
+      }
+      EXPECT_GT(interior, 800);
+      for (Eigen::Index r = 0; r < op.P.rows(); ++r)
+        for (rt::CsrMatrix::InnerIterator it(op.P, r); it; ++it) ASSERT_GT(it.value(), 0.0);
+    }
+}
+
+/// Elastic ball, m = g = 1: u(t, x, p) = u0(φ₋ₜ(x, p)) (tests/support/ball_closed_form.hpp).
+TEST(Transfer, BallConvergesUnderRefinement) {
+  // L1 error of the `hat` scheme against the closed form on grids 65² … 513², h = 1/16. Per
+  // step the scheme smooths by (Δx²/8)∂²u per axis (transfer.hpp), so the error is O(Δx²) at
+  // t = 1 and O(Δx²·t/h) later, pre-asymptotic at t = 10 where the shear of the flow (the
+  // period depends on the energy) grows ∂²u like t².
+  // Measured (hat, 4×4 samples): t = 1: 5.23e-2, 1.43e-2, 3.80e-3, 1.01e-3 (orders 1.88, 1.91,
+  // 1.90); t = 10: 5.31e-1, 3.45e-1, 1.55e-1, 5.54e-2 (0.62, 1.15, 1.49). The withdrawn
+  // interpolating scheme measured 1.50e-2 … 2.42e-4 and 3.26e-1 … 1.98e-2 here, 3–4× less, at
+  // an h chosen in its favour (g·h a whole number of cells: no interpolation along p): the
+  // price of moving mass instead of values; on the paper's configuration (h = 0.2) the two
+  // differ by 6 % (README). The smoothing carries mass beyond E = 1.8 to the faces on coarse
+  // grids (outflow 4.7e-2, 1.9e-3, 1.0e-5, 6e-10 of 2.3): it is booked as outflow, never lost.
+  // Asserted: both errors fall at every refinement; the t = 1 orders lie in [1.8, 2.1]; the
+  // t = 10 orders of the two finer refinements in [1.0, 1.7]; mass + outflow = mass0 to 1e-12.
   const std::array<double, 3> par{1.0, 1.0, 1.0};
   const double h = 1.0 / 16.0;
   const std::vector<double> times{0.0, 1.0, 10.0};
@@ -193,13 +198,13 @@ TEST(Transfer, BallConvergesAtSecondOrder) {
   for (const int n : {65, 129, 257, 513}) {
     const auto grid = ball_grid(n);
     const auto t0 = std::chrono::steady_clock::now();
-    const auto op = rt::assemble_transfer<CompactBall>(grid, par.data(), interp_options(h));
-    ASSERT_TRUE(op.ok()) << rt::describe<CompactBall>(op.failure);
+    const auto op = rt::assemble_transfer<CompactBall>(grid, par.data(), options(h));
+    ASSERT_TRUE(op.ok()) << op.failure_message;
     const auto u0 = rt::initial_vector<CompactBall>(grid, par.data());
     const auto run = rt::march(op, u0, times);
+    ASSERT_TRUE(run.ok()) << run.failure;
     const double secs = seconds_since(t0);
     EXPECT_EQ(run.n_steps, 160);
-    // t = 0 is the initial vector itself.
     EXPECT_EQ(rel_l1(grid, run.solution, 0, [](const auto& y) { return compact_u0(y[0], y[1]); }),
               0.0);
     err1.push_back(rel_l1(grid, run.solution, 1, [](const auto& y) {
@@ -208,71 +213,168 @@ TEST(Transfer, BallConvergesAtSecondOrder) {
     err10.push_back(rel_l1(grid, run.solution, 2, [](const auto& y) {
       return exact_elastic(y[0], y[1], 10.0, compact_u0);
     }));
-    const double loss = run.budget.mass0 - run.budget.mass[2];
     std::printf(
         "[ transfer ball ] %4d^2: assembly %.3f s, total %.3f s, nnz %ld, rel L1 "
-        "t=1 %.3e t=10 %.3e, mass loss %.2e\n",
-        n, op.seconds, secs, static_cast<long>(op.P.nonZeros()), err1.back(), err10.back(), loss);
-    // No mass reaches the faces, so the loss is the scheme's conservation error alone:
-    // |Σ w(u − u_ex)| ≤ Σ w|u − u_ex|, and Σ w u_ex(10) = mass0 up to the trapezoid rule's
-    // O(Δx²) error (far below the L1 error), hence |loss| ≤ 1.5·(L1 error)·mass0.
-    EXPECT_LT(std::fabs(loss), 1.5 * err10.back() * run.budget.mass0);
+        "t=1 %.3e t=10 %.3e, mass change %.2e\n",
+        n, op.seconds, secs, static_cast<long>(op.P.nonZeros()), err1.back(), err10.back(),
+        run.budget.mass[2] - run.budget.mass0);
+    // No Zeno point (e = 1): what the grid loses went through the faces, counted per column.
+    EXPECT_EQ(run.budget.atom[2], 0.0);
+    EXPECT_NEAR(run.budget.mass[2] + run.budget.outflow[2], run.budget.mass0,
+                1e-12 * run.budget.mass0);
   }
   for (std::size_t j = 1; j < err1.size(); ++j) {
     EXPECT_LT(err1[j], err1[j - 1]);
     EXPECT_LT(err10[j], err10[j - 1]);
     const double o1 = std::log2(err1[j - 1] / err1[j]), o10 = std::log2(err10[j - 1] / err10[j]);
     std::printf("[ transfer ball ] observed order t=1 %.3f, t=10 %.3f\n", o1, o10);
-    EXPECT_GE(o1, 1.85);
+    EXPECT_GE(o1, 1.8);
     EXPECT_LE(o1, 2.1);
-    EXPECT_GE(o10, 1.0);
-    EXPECT_LE(o10, 1.7);
+    if (j >= 2) {
+      EXPECT_GE(o10, 1.0);
+      EXPECT_LE(o10, 1.7);
+    }
+  }
+  EXPECT_LT(err1.back(), 1.5e-3);
+  EXPECT_LT(err10.back(), 7e-2);
+}
+
+TEST(Transfer, RestitutionNeverCreatesMass) {
+  // The run that exposed the interpolating scheme: e = 0.8, 301², step 0.2 to t = 10 (its grid
+  // mass went from 2.6 to 3e14). Now, for both schemes, the grid mass never grows (to the
+  // rounding of a 90601-term sum) and the budget closes at every step. At h = 0.2 the Zeno
+  // cell does not drain into the atom (see ZenoMassBecomesAnAtom), so the mass that has come
+  // to rest sits near (0, 0) as density; it is bracketed by closed forms independent of
+  // hybgen (tests/support/ball_closed_form.hpp): every state with T_Z ≤ 10 is at (0, 0), so
+  // mass(E ≤ 0.05) + atom ≥ zeno_mass(10) = 0.434; a state with E ≤ 0.05 has v = √(2E) ≤
+  // √0.1 and reaches the Zeno point within p + v(1+e)/(1−e) ≤ 10v ≤ 3.17, so that mass ≤
+  // zeno_mass(13.17) = 1.085. Measured: 1.0046 (hat), 1.0125 (cell); asserted with 5 % margin
+  // for the schemes' smoothing across E = 0.05.
+  const auto grid = ball_grid(301);
+  const std::array<double, 3> par{1.0, 1.0, 0.8};
+  std::vector<double> times;
+  for (int k = 0; k <= 50; ++k) times.push_back(0.2 * k);
+  for (const auto scheme : {rt::TransferScheme::hat, rt::TransferScheme::cell}) {
+    SCOPED_TRACE(rt::scheme_name(scheme));
+    const auto op = rt::assemble_transfer<Ball>(grid, par.data(), options(0.2, scheme));
+    ASSERT_TRUE(op.ok()) << op.failure_message;
+    const auto run = rt::march(op, rt::initial_vector<Ball>(grid, par.data()), times);
+    ASSERT_TRUE(run.ok()) << run.failure;
+    double out = 0.0, atom = 0.0;
+    for (std::size_t n = 0; n < run.step_outflow.size(); ++n) {
+      EXPECT_LE(run.step_mass[n + 1], run.step_mass[n] * (1.0 + 1e-13)) << n;
+      out += run.step_outflow[n];
+      atom += run.step_atom[n];
+      EXPECT_NEAR(run.step_mass[n + 1] + out + atom, run.budget.mass0, 1e-12) << n;
+    }
+    EXPECT_GE(*std::min_element(run.solution.u.begin(), run.solution.u.end()), 0.0);
+    // Mass within E = p²/2 + x ≤ 0.05 at t = 10 (by the trapezoid weights) plus the atom.
+    const auto w = rt::detail::trapezoid_weights(grid, 1);
+    double low = 0.0;
+    for (std::size_t i = 0; i < grid.size(); ++i) {
+      const auto y = grid.node(i);
+      if (0.5 * y[1] * y[1] + y[0] <= 0.05) low += w[i] * run.solution.at(50, 0, i);
+    }
+    const double zm = hybgen::testing::zeno_mass(10.0, 0.8);
+    std::printf(
+        "[ transfer e=0.8 ] %s 301^2 h=0.2: mass %.5f -> %.5f, outflow %.5f, atom %.5f, "
+        "near-Zeno density %.5f; closed-form Zeno mass %.5f\n",
+        rt::scheme_name(scheme), run.budget.mass0, run.budget.mass.back(),
+        run.budget.outflow.back(), run.budget.atom.back(), low, zm);
+    EXPECT_LE(run.budget.mass.back(), run.budget.mass0);
+    EXPECT_GE(run.budget.atom.back() + low, 0.95 * zm);
+    EXPECT_LE(run.budget.atom.back() + low, 1.05 * hybgen::testing::zeno_mass(13.17, 0.8));
   }
 }
 
-TEST(Transfer, MassBudgetIsReportedNotRenormalised) {
-  // The paper's Gaussian leaves the box: the mass must fall (never renormalised), the per-step
-  // losses must add up to the total loss, and mass + outflow + atom = mass0 by definition.
-  const auto grid = ball_grid(65);
-  const std::array<double, 3> par{1.0, 1.0, 1.0};
-  const auto op = rt::assemble_transfer<Ball>(grid, par.data(), interp_options(0.2));
-  ASSERT_TRUE(op.ok());
-  const auto u0 = rt::initial_vector<Ball>(grid, par.data());
-  std::vector<double> times;
-  for (int k = 0; k <= 10; ++k) times.push_back(0.4 * k);
-  const auto run = rt::march(op, u0, times);
-  ASSERT_EQ(run.step_mass.size(), 21U);
-  ASSERT_EQ(run.step_outflow.size(), 20U);
-  double sum = 0.0;
-  for (const double l : run.step_outflow) sum += l;
-  EXPECT_NEAR(sum, run.step_mass.front() - run.step_mass.back(), 1e-13);
-  // Mass at t = 4 well below mass0: E > 2 orbits (≈ 10 % of the mass in the box) leave it.
-  EXPECT_LT(run.budget.mass.back(), 0.97 * run.budget.mass0);
-  for (std::size_t k = 0; k < times.size(); ++k) {
-    EXPECT_DOUBLE_EQ(run.budget.mass[k], run.step_mass[2 * k]);
-    EXPECT_NEAR(run.budget.mass[k] + run.budget.outflow[k] + run.budget.atom[k], run.budget.mass0,
-                1e-14);
+TEST(Transfer, ZenoMassBecomesAnAtom) {
+  // e = 0.8: samples whose forward flow reaches the Zeno point (0, 0) within the step
+  // (t_Z ≤ h) are atoms. The atom must grow monotonically (atoms never return) and the
+  // budget still close to 1e-12. Reference: the closed-form mass of the initial states with
+  // T_Z ≤ t (0.43415 at t = 10; ≈ all of it starts inside the box).
+  // The limitation at a Zeno point: every step spreads the mass of the Zeno point's own
+  // cell uniformly over it again, and only its samples with T_Z ≤ h drain into the atom.
+  // T_Z = p0 + v1(1+e)/(1−e) with v1 = √(p0² + 2x0) ~ √Δx in that cell, so for h below
+  // ~9√(2Δx) the cell never drains and for larger h the atom lags the truth by the cell's
+  // Zeno times. Asserted on 257², h = 0.5: atom(10) within [0.6, 1.0] of the closed form.
+  const auto grid = ball_grid(257);
+  const std::array<double, 3> par{1.0, 1.0, 0.8};
+  for (const auto scheme : {rt::TransferScheme::hat, rt::TransferScheme::cell}) {
+    SCOPED_TRACE(rt::scheme_name(scheme));
+    const auto op = rt::assemble_transfer<Ball>(grid, par.data(), options(0.5, scheme));
+    ASSERT_TRUE(op.ok()) << op.failure_message;
+    const auto u0 = rt::initial_vector<Ball>(grid, par.data());
+    const std::vector<double> times{0.0, 2.0, 5.0, 10.0};
+    const auto run = rt::march(op, u0, times);
+    ASSERT_TRUE(run.ok()) << run.failure;
+    double out = 0.0, atom = 0.0;
+    for (std::size_t n = 0; n < run.step_atom.size(); ++n) {
+      out += run.step_outflow[n];
+      atom += run.step_atom[n];
+      EXPECT_GE(run.step_atom[n], 0.0);
+      EXPECT_NEAR(run.step_mass[n + 1] + out + atom, run.budget.mass0, 1e-12) << n;
+    }
+    const double zm = hybgen::testing::zeno_mass(10.0, 0.8);
+    std::printf(
+        "[ transfer e=0.8 ] %s 257^2 h=0.5: assembly %.3f s, atom(2, 5, 10) = %.5f %.5f "
+        "%.5f, closed form at 10: %.5f, outflow(10) %.5f, mass0 %.5f\n",
+        rt::scheme_name(scheme), op.seconds, run.budget.atom[1], run.budget.atom[2],
+        run.budget.atom[3], zm, run.budget.outflow[3], run.budget.mass0);
+    EXPECT_GT(run.budget.atom[1], 0.0);
+    EXPECT_LT(run.budget.atom[1], run.budget.atom[2]);
+    EXPECT_LT(run.budget.atom[2], run.budget.atom[3]);
+    EXPECT_GE(run.budget.atom[3], 0.6 * zm);
+    EXPECT_LE(run.budget.atom[3], zm);
   }
-  // Discrete mass at t = 0 is the trapezoid rule of u0.
-  double m0 = 0.0;
-  for (std::size_t r = 0; r < u0.size(); ++r) m0 += op.weight[r] * u0[r];
-  EXPECT_NEAR(run.budget.mass0, m0, 1e-14 * m0);  // summation order differs
+}
+
+TEST(Transfer, ABrokenColumnOrStepIsAFailureNeverAResult) {
+  // The conservation checks are able to fail: an operator whose column gains 10 % is refused
+  // at assembly (check_columns names the node), and a march over an operator corrupted after
+  // the check stops at the first step with the step and its time.
+  const auto grid = ball_grid(33);
+  const std::array<double, 3> par{1.0, 1.0, 1.0};
+  auto op = rt::assemble_transfer<Ball>(grid, par.data(), options(0.1));
+  ASSERT_TRUE(op.ok()) << op.failure_message;
+  // Find an interior node's column and scale its entries by 1.1.
+  const std::size_t target = 16 * 33 + 16;  // (x, p) = (1, 0)
+  for (Eigen::Index r = 0; r < op.P.rows(); ++r)
+    for (rt::CsrMatrix::InnerIterator it(op.P, r); it; ++it)
+      if (static_cast<std::size_t>(it.col()) == target) it.valueRef() *= 1.1;
+  rt::detail::check_columns<Ball>(op);
+  EXPECT_FALSE(op.ok());
+  EXPECT_NEAR(op.column_defect, 0.1, 1e-12);
+  EXPECT_NE(op.failure_message.find("(x = 1, p = 0)"), std::string::npos) << op.failure_message;
+  EXPECT_NE(op.failure_message.find("instead of 1"), std::string::npos) << op.failure_message;
+  op.failure_message.clear();  // as if the check had not run
+  const auto u0 = rt::initial_vector<Ball>(grid, par.data());
+  const std::vector<double> times{0.0, 0.5};
+  const auto run = rt::march(op, u0, times);
+  EXPECT_FALSE(run.ok());
+  EXPECT_NE(run.failure.find("at step 1 (t = 0.1)"), std::string::npos) << run.failure;
+  // The defect of step 1 is the 10 % gain of that column's mass, w·u0(1, 0) = Δx·Δp·1.
+  const double dm = 0.1 * op.weight[target] * u0[target];
+  EXPECT_NEAR(run.budget_defect, dm / run.budget.mass0, 1e-9);
 }
 
 TEST(Transfer, OutputTimesMustBeMultiplesOfTheStep) {
   const auto grid = ball_grid(9);
   const std::array<double, 3> par{1.0, 1.0, 1.0};
-  const auto op = rt::assemble_transfer<Ball>(grid, par.data(), interp_options(0.05));
+  const auto op = rt::assemble_transfer<Ball>(grid, par.data(), options(0.05));
   const auto u0 = rt::initial_vector<Ball>(grid, par.data());
   const std::vector<double> good{0.0, 0.1, 0.5}, bad{0.0, 0.12};
   EXPECT_NO_THROW(rt::march(op, u0, good));
   EXPECT_THROW(rt::march(op, u0, bad), std::invalid_argument);
-  EXPECT_THROW(rt::assemble_transfer<Ball>(grid, par.data(), interp_options(0.0)),
-               std::invalid_argument);
+  EXPECT_THROW(rt::assemble_transfer<Ball>(grid, par.data(), options(0.0)), std::invalid_argument);
+  EXPECT_THROW(
+      rt::assemble_transfer<Ball>(grid, par.data(), options(0.05, rt::TransferScheme::hat, -1)),
+      std::invalid_argument);
   auto g1 = grid;
   g1.axes[0].n = 1;
-  EXPECT_THROW(rt::assemble_transfer<Ball>(g1, par.data(), interp_options(0.05)),
-               std::invalid_argument);
+  EXPECT_THROW(rt::assemble_transfer<Ball>(g1, par.data(), options(0.05)), std::invalid_argument);
+  EXPECT_EQ(rt::parse_scheme("hat"), rt::TransferScheme::hat);
+  EXPECT_EQ(rt::parse_scheme("cell"), rt::TransferScheme::cell);
+  EXPECT_THROW(rt::parse_scheme("interpolate"), std::invalid_argument);
 }
 
 /// The ball with a vector field that is NaN for p > 1.5 (a broken kernel).
@@ -287,124 +389,15 @@ struct BrokenBall : Ball {
 TEST(Transfer, FailureNamesThePlace) {
   const auto grid = ball_grid(17);
   const std::array<double, 3> par{1.0, 1.0, 1.0};
-  const auto op = rt::assemble_transfer<BrokenBall>(grid, par.data(), interp_options(0.05));
+  const auto op = rt::assemble_transfer<BrokenBall>(grid, par.data(), options(0.05));
   ASSERT_FALSE(op.ok());
-  // A backward step of 0.05 moves p by 0.05 and a reversed reset maps p to −p, so the failing
-  // state is within 0.05 of the NaN region |p| > 1.5 (here: the pre-image (0, 2) of (0, −2)).
-  EXPECT_GT(std::fabs(op.failure.status.state[1]), 1.45);
+  // The first failing column is the first node (C order: x slowest) whose dual cell has a
+  // sample with p > 1.5, i.e. at x = 0; its sample starts there.
+  EXPECT_GT(op.failure.status.state[1], 1.5);
   EXPECT_EQ(op.failure.status.error, rt::TraceError::non_finite_flow);
-  const std::string msg = rt::describe<BrokenBall>(op.failure);
-  EXPECT_NE(msg.find("characteristic from"), std::string::npos) << msg;
-  EXPECT_NE(msg.find("flight"), std::string::npos) << msg;
-}
-
-}  // namespace
-
-namespace {
-
-// ---------------------------------------------------------------------------------------
-// The conservative (Ulam) operator.
-
-rt::TransferOptions ulam_options(double h, int samples) {
-  rt::TransferOptions o;
-  o.step = h;
-  o.scheme = rt::TransferScheme::conservative;
-  o.samples_per_axis = samples;
-  o.forward.ode.rtol = 1e-10;
-  o.forward.ode.atol = 1e-12;
-  return o;
-}
-
-/// Every column: entries ≥ 0, Σ_j P_ji + outflow_i + atom_i = 1 to 1e-14, Σ_j P_ji ≤ 1 + 1e-14.
-void check_columns(const rt::TransferOperator<2>& op) {
-  std::vector<double> col(op.size(), 0.0);
-  for (Eigen::Index r = 0; r < op.P.rows(); ++r)
-    for (rt::CsrMatrix::InnerIterator it(op.P, r); it; ++it) {
-      ASSERT_GT(it.value(), 0.0);
-      col[static_cast<std::size_t>(it.col())] += it.value();
-    }
-  for (std::size_t i = 0; i < col.size(); ++i) {
-    ASSERT_LE(col[i], 1.0 + 1e-14) << i;
-    ASSERT_GE(op.outflow[i], 0.0);
-    ASSERT_GE(op.atom[i], 0.0);
-    ASSERT_NEAR(col[i] + op.outflow[i] + op.atom[i], 1.0, 1e-14) << i;
-  }
-}
-
-TEST(TransferConservative, BudgetClosesAtEveryStep) {
-  // Elastic ball, the paper's Gaussian on 65², h = 0.1 to t = 10: mass + outflow + atom =
-  // mass0 to 1e-12 after every step (each column distributes exactly its mass: the identity
-  // holds to rounding, ~1e-16 per step and entry), no atom (no Zeno point for e = 1 but the
-  // measure-zero grazing point), outflow > 0 (orbits with E > 2 leave the box), u ≥ 0.
-  const auto grid = ball_grid(65);
-  const std::array<double, 3> par{1.0, 1.0, 1.0};
-  const auto op = rt::assemble_transfer<Ball>(grid, par.data(), ulam_options(0.1, 4));
-  ASSERT_TRUE(op.ok()) << op.failure_message;
-  check_columns(op);
-  const auto u0 = rt::initial_vector<Ball>(grid, par.data());
-  std::vector<double> times;
-  for (int k = 0; k <= 20; ++k) times.push_back(0.5 * k);
-  const auto run = rt::march(op, u0, times);
-  ASSERT_EQ(run.step_mass.size(), 101U);
-  double out = 0.0, atom = 0.0;
-  for (std::size_t n = 0; n < run.step_outflow.size(); ++n) {
-    out += run.step_outflow[n];
-    atom += run.step_atom[n];
-    EXPECT_GE(run.step_outflow[n], 0.0);
-    EXPECT_NEAR(run.step_mass[n + 1] + out + atom, run.budget.mass0, 1e-12) << n;
-  }
-  EXPECT_EQ(atom, 0.0);
-  EXPECT_GT(out, 0.05 * run.budget.mass0);
-  for (std::size_t k = 0; k < times.size(); ++k)
-    EXPECT_NEAR(run.budget.mass[k] + run.budget.outflow[k] + run.budget.atom[k], run.budget.mass0,
-                1e-12);
-  EXPECT_GE(*std::min_element(run.solution.u.begin(), run.solution.u.end()), 0.0);
-  std::printf(
-      "[ ulam ball e=1 ] 65^2 h=0.1: assembly %.3f s, nnz %ld, mass(10) %.6f of %.6f, "
-      "outflow %.6f\n",
-      op.seconds, static_cast<long>(op.P.nonZeros()), run.budget.mass.back(), run.budget.mass0,
-      run.budget.outflow.back());
-}
-
-TEST(TransferConservative, ZenoMassBecomesAnAtom) {
-  // e = 0.8: samples whose forward flow reaches the Zeno point (0, 0) within the step
-  // (t_Z ≤ h) are atoms. The atom must grow monotonically (atoms never return) and the
-  // budget still close to 1e-12. Reference: the closed-form mass of the initial states with
-  // T_Z ≤ t (0.43415 at t = 10; ≈ all of it starts inside the box).
-  // Ulam's limitation at a Zeno point: every step spreads the mass of the Zeno point's own
-  // cell uniformly over it again, and only its samples with T_Z ≤ h drain into the atom.
-  // T_Z = p0 + v1(1+e)/(1−e) with v1 = √(p0² + 2x0) ~ √Δx in that cell, so for h below
-  // ~9√(2Δx) the cell never drains (measured: 129² or 257² at h = 0.1 or 0.25 give atom 0,
-  // the mass sits in the corner cell as density) and for larger h the atom lags the truth
-  // by the cell's Zeno times, converging like √Δx. Measured at h = 0.5: atom(10) = 0.251
-  // (129²), 0.367 (257²); at h = 0.25: 0.329 (513²). Asserted on 257², h = 0.5: atom(10)
-  // within [0.6, 1.0] of the closed form (measured 0.845).
-  const auto grid = ball_grid(257);
-  const std::array<double, 3> par{1.0, 1.0, 0.8};
-  const auto op = rt::assemble_transfer<Ball>(grid, par.data(), ulam_options(0.5, 4));
-  ASSERT_TRUE(op.ok()) << op.failure_message;
-  check_columns(op);
-  const auto u0 = rt::initial_vector<Ball>(grid, par.data());
-  const std::vector<double> times{0.0, 2.0, 5.0, 10.0};
-  const auto run = rt::march(op, u0, times);
-  double out = 0.0, atom = 0.0;
-  for (std::size_t n = 0; n < run.step_atom.size(); ++n) {
-    out += run.step_outflow[n];
-    atom += run.step_atom[n];
-    EXPECT_GE(run.step_atom[n], 0.0);
-    EXPECT_NEAR(run.step_mass[n + 1] + out + atom, run.budget.mass0, 1e-12) << n;
-  }
-  const double zm = hybgen::testing::zeno_mass(10.0, 0.8);
-  std::printf(
-      "[ ulam ball e=0.8 ] 257^2 h=0.5: assembly %.3f s, atom(2, 5, 10) = %.5f %.5f "
-      "%.5f, closed form at 10: %.5f, outflow(10) %.5f, mass0 %.5f\n",
-      op.seconds, run.budget.atom[1], run.budget.atom[2], run.budget.atom[3], zm,
-      run.budget.outflow[3], run.budget.mass0);
-  EXPECT_GT(run.budget.atom[1], 0.0);
-  EXPECT_LT(run.budget.atom[1], run.budget.atom[2]);
-  EXPECT_LT(run.budget.atom[2], run.budget.atom[3]);
-  EXPECT_GE(run.budget.atom[3], 0.6 * zm);
-  EXPECT_LE(run.budget.atom[3], zm);
+  EXPECT_NE(op.failure_message.find("forward trajectory from"), std::string::npos)
+      << op.failure_message;
+  EXPECT_NE(op.failure_message.find("flight"), std::string::npos) << op.failure_message;
 }
 
 }  // namespace

@@ -78,8 +78,9 @@ struct Simulation {
   long particles = 1000000;                ///< Samples of method particles.
   long seed = 1;                           ///< Random seed of method particles.
   double step = 0;                         ///< Transfer-operator step (0: dt).
-  std::string scheme = "interpolate";      ///< Transfer operator: interpolate | conservative.
-  int eigenvalues = 6;                     ///< Eigenvalues reported by method invariant.
+  std::string scheme = "hat";              ///< Transfer operator: hat | cell.
+  int samples = 0;      ///< Transfer operator: sample points per axis and cell (0: default).
+  int eigenvalues = 6;  ///< Eigenvalues reported by method invariant.
 };
 
 /// What the reduce stage derived for a Lie-group model (paper §3.2): carried by

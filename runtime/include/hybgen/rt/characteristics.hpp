@@ -22,9 +22,10 @@
 /// flow direction generally has two histories (arrived by the flow of mode m across Δ(S), or
 /// by the reset) and the density is their sum (the paper's "General hybrid infinitesimal
 /// generator" theorem sums over pre-images likewise). Branches that
-/// leave `in_support` (checked at step ends) end — no state outside the state space has a
-/// history. For the bouncing ball this means: at each backward impact the reset branch
-/// continues and the straight continuation into x < 0 ends at its step's end.
+/// leave `in_support` (checked at step ends) end, and a reversed reset whose pre-image lies
+/// outside `in_support` spawns no branch — no state outside the state space has a history.
+/// For the bouncing ball this means: at each backward impact the reset branch continues and
+/// the straight continuation into x < 0 ends at its step's end.
 ///
 /// Ties at a measure-zero coincidence (an output time equal to a reset time up to ~1e-12) are
 /// resolved consistently: the reset branch serves t_k iff the continuing trajectory at t_k is
@@ -441,21 +442,6 @@ class Tracer {
     return status_;
   }
 
-  /// The same backward trace from (y, mode) over τ ∈ [0, tau], but instead of evaluating u0
-  /// every branch reports its foot: sink(int mode', const State& foot, double weight) with
-  /// weight = exp(−∫div X)·Π 1/|J| (so u(tau, y) = Σ weight·u0_mode'(foot)). Feet outside
-  /// `in_support` are reported too (the caller drops them). Used by transfer.hpp.
-  template <class Sink>
-  TraceStatus<N> trace_feet(const State& y, int mode, double tau, Sink& sink) {
-    const std::array<double, 1> t{tau};
-    double unused = 0.0;
-    foot_ctx_ = &sink;
-    foot_fn_ = [](void* c, int m, const State& x, double w) { (*static_cast<Sink*>(c))(m, x, w); };
-    const TraceStatus<N> st = run(y, mode, t, std::span<double>(&unused, 1), nullptr);
-    foot_fn_ = nullptr;
-    return st;
-  }
-
  private:
   struct Branch {
     Vec x{};  // state and I at τ
@@ -537,17 +523,6 @@ class Tracer {
   }
 
   double contribution(const Vec& x, int mode, double w, double tau) {
-    if (foot_fn_ != nullptr) {  // trace_feet: report the foot instead of evaluating u0
-      const double wt = w * std::exp(-x[N]);
-      if (!std::isfinite(wt)) {
-        fail(TraceError::non_finite_density, x.data(), mode, -1, tau);
-        return 0.0;
-      }
-      State foot;
-      for (std::size_t i = 0; i < N; ++i) foot[i] = x[i];
-      foot_fn_(foot_ctx_, mode, foot, wt);
-      return 0.0;
-    }
     // The model contract: u0 is already 0 outside the support/region of `mode`.
     const double u0 = M::initial_density(mode, x.data(), par_);
     const double v = w * std::exp(-x[N]) * u0;
@@ -584,6 +559,10 @@ class Tracer {
       if (!(gg > 0.0) || !std::isfinite(gg) || !std::isfinite(s) || s == 0.0) break;
       for (std::size_t i = 0; i < N; ++i) z[i] -= s * grad[i] / gg;
     }
+    // A pre-image outside the state space has no history: the branch would contribute
+    // nothing, and from there its own reversed resets could spawn pre-images without end
+    // (tests/validation/test_support_pruning.cpp).
+    if (!M::in_support(z.data(), par_)) return;
     // A pre-image where the flow of `from` grazes S_g: the forward guard fires at a tangency.
     const double ratio = grazing<M>(g, gi.from, z, par_, opt_.graze_tol,
                                     [this](double) { return graze_delta(times_.back()); });
@@ -777,8 +756,6 @@ class Tracer {
   std::array<Vec, 8> dense_x_{};          // their states (dense_at)
   std::size_t n_dense_ = 0;
   std::size_t npend_ = 0;
-  void (*foot_fn_)(void*, int, const State&, double) = nullptr;  // trace_feet's sink, or null
-  void* foot_ctx_ = nullptr;                                     // its context
 };
 
 }  // namespace detail

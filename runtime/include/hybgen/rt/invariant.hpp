@@ -205,12 +205,11 @@ InvariantResult invariant_density(const TransferOperator<N>& op, const Invariant
     for (std::size_t r = 0; r < y.size(); ++r) num += std::fabs(y[r] - lam1 * v[r]);
     res.residual = num / std::max(detail::l1(v), 1e-300);
   }
-  // P's variable → densities: the conservative operator acts on cell masses.
-  const bool cons = op.scheme == TransferScheme::conservative;
+  // P's variable → densities: the operator acts on node masses.
   res.density.resize(v.size());
   double mass = 0.0;
   for (std::size_t r = 0; r < v.size(); ++r) {
-    res.density[r] = cons ? v[r] / op.weight[r] : v[r];
+    res.density[r] = v[r] / op.weight[r];
     mass += op.weight[r] * res.density[r];
   }
   if (mass == 0.0) mass = 1.0;

@@ -7,16 +7,16 @@
 ///
 ///  - characteristics: exact backward characteristics per node (characteristics.hpp); the
 ///    budget by adaptive cubature of the same characteristics (budget.hpp);
-///  - transfer: one step h as a sparse matrix, marched by mat-vecs (transfer.hpp); scheme
-///    `interpolate` (default) or `conservative` (exact mass budget);
+///  - transfer: one step h as a sparse matrix on node masses, marched by mat-vecs
+///    (transfer.hpp); scheme `hat` (default) or `cell`, both conserving mass column by column;
 ///  - invariant: the leading eigenvector of the transfer operator and the next eigenvalues
 ///    (invariant.hpp); one frame, `invariant`, instead of the time series;
 ///  - particles: Monte-Carlo samples of u0 pushed forward and deposited (particles.hpp).
 ///
 /// Invariants of a successful result: solution.n_time == frame_names.size(); for the time
 /// methods frame_times == times and budget.{mass, outflow, atom} have one entry per time with
-/// mass + outflow + atom = mass0 (the atom is defined that way for characteristics and the
-/// interpolating transfer operator; it is counted for particles and the conservative one).
+/// mass + outflow + atom = mass0 (the atom is defined that way for characteristics; it is
+/// counted for particles and the transfer operator).
 
 #include <chrono>
 #include <cstdint>
@@ -48,11 +48,12 @@ struct MethodSettings {
   long max_events = 100000;                ///< Cap on resets per characteristic/trajectory.
   double budget_tol = 3e-4;                ///< characteristics: the budget cubature's rel. tol.
   double step = 0.0;                       ///< transfer/invariant: step h (0: the output dt).
-  std::string scheme = "interpolate";      ///< transfer/invariant: interpolate | conservative.
-  int eigenvalues = 6;                     ///< invariant: eigenvalues to report (≥ 2).
-  long long particles = 1000000;           ///< particles: number of samples.
-  std::uint64_t seed = 1;                  ///< particles: random seed.
-  bool quiet = false;                      ///< No progress output.
+  std::string scheme = "hat";              ///< transfer/invariant: hat | cell (transfer.hpp).
+  int samples = 0;      ///< transfer/invariant: sample points per axis and cell (0: default).
+  int eigenvalues = 6;  ///< invariant: eigenvalues to report (≥ 2).
+  long long particles = 1000000;  ///< particles: number of samples.
+  std::uint64_t seed = 1;         ///< particles: random seed.
+  bool quiet = false;             ///< No progress output.
 };
 
 /// What a method produced.
@@ -106,19 +107,21 @@ inline CharacteristicsOptions trace_options(const MethodSettings& s) {
 inline TransferOptions transfer_options(const MethodSettings& s, double dt) {
   TransferOptions o;
   o.step = s.step > 0 ? s.step : dt;
-  o.scheme =
-      s.scheme == "conservative" ? TransferScheme::conservative : TransferScheme::interpolate;
-  o.trace = trace_options(s);
+  o.scheme = parse_scheme(s.scheme);
+  o.samples_per_axis = s.samples;
+  o.forward.max_events = static_cast<int>(std::min<long>(s.max_events, 1000000000L));
   o.forward.ode.rtol = s.tol;
   o.forward.ode.atol = s.tol * 1e-2;
   return o;
 }
 
-/// The operator's part of summary.json: scheme, step, size, assembly time.
+/// The operator's part of summary.json: scheme, step, samples, size, conservation, time.
 template <std::size_t N>
 nlohmann::json operator_summary(const TransferOptions& o, const TransferOperator<N>& op) {
-  return {{"scheme", o.scheme == TransferScheme::conservative ? "conservative" : "interpolate"},
+  return {{"scheme", scheme_name(o.scheme)},
           {"step", o.step},
+          {"samples_per_axis", op.samples_per_axis},
+          {"column_defect", op.column_defect},
           {"rows", op.size()},
           {"nonzeros", static_cast<std::size_t>(op.P.nonZeros())},
           {"assembly_seconds", op.seconds}};
@@ -226,16 +229,19 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   TransferRun<N> run = march(op, u0, times, &progress);
   progress.finish();
   r.solve_s = detail::seconds_since(t0);
+  if (!run.ok()) {
+    r.failure = "(marching the transfer operator) " + run.failure;
+    return r;
+  }
   r.solution = std::move(run.solution);
   r.budget = std::move(run.budget);
   nlohmann::json t = detail::operator_summary(o, op);
   t["steps"] = run.n_steps;
   t["march_seconds"] = run.seconds;
-  if (o.scheme == TransferScheme::interpolate)
-    t["note"] =
-        "interpolating scheme: outflow is the cumulative discrete mass loss (faces plus the "
-        "scheme's conservation error) and atom is 0; use scheme=conservative for an exact "
-        "budget";
+  t["budget_defect"] = run.budget_defect;
+  t["note"] =
+      "outflow and atom are counted per column of the operator (where the forward flow of each "
+      "cell's samples ends); mass + outflow + atom = initial mass to budget_defect";
   r.summary["transfer"] = t;
   return r;
 }

@@ -23,14 +23,17 @@ namespace hybgen::rt {
 class Progress {
  public:
   using Clock = std::chrono::steady_clock;  ///< The clock of elapsed times.
+  using Now = Clock::time_point (*)();      ///< A clock: Clock::now, or a test's own.
 
-  /// Start counting; `quiet` (or total == 0) disables all output.
-  Progress(std::string label, std::size_t total, bool quiet)
+  /// Start counting; `quiet` (or total == 0) disables all output. `now` reads the time
+  /// (tests pass a clock they advance themselves, so that no test depends on sleeping).
+  Progress(std::string label, std::size_t total, bool quiet, Now now = &Clock::now)
       : label_(std::move(label)),
         total_(total),
         quiet_(quiet || total == 0),
         tty_(::isatty(STDERR_FILENO) == 1),
-        start_(Clock::now()) {}
+        now_(now),
+        start_(now()) {}
   /// Ends the line of a bar that was drawn.
   ~Progress() { finish(); }
   Progress(const Progress&) = delete;             ///< Not copyable.
@@ -58,7 +61,7 @@ class Progress {
   void draw(std::size_t done, bool final) {
     std::unique_lock<std::mutex> lock(mutex_, std::try_to_lock);
     if (!lock.owns_lock()) return;
-    const double t = std::chrono::duration<double>(Clock::now() - start_).count();
+    const double t = std::chrono::duration<double>(now_() - start_).count();
     const double frac = std::min(1.0, static_cast<double>(done) / static_cast<double>(total_));
     if (final && complete_drawn_) return;  // the 100 % line is already there
     if (frac >= 1.0 && (drawn_ || t >= 1.0)) final = true;
@@ -89,6 +92,7 @@ class Progress {
   std::size_t total_;
   bool quiet_;
   bool tty_;
+  Now now_;
   Clock::time_point start_;
   std::atomic<std::size_t> done_{0};
   std::atomic<bool> finished_{false};

@@ -52,12 +52,13 @@ struct RunConfig {
   long max_events = 100000;             ///< Cap on resets per characteristic.
   double budget_tol = 3e-4;             ///< Relative tolerance of the mass budget's cubature.
   double step = 0.0;                    ///< Transfer-operator step (0: dt).
-  std::string scheme = "interpolate";   ///< Transfer operator: interpolate | conservative.
-  int eigenvalues = 6;                  ///< Eigenvalues reported by method invariant.
-  long long particles = 1000000;        ///< Samples of method particles.
-  std::uint64_t seed = 1;               ///< Seed of method particles.
-  bool quiet = false;                   ///< No progress output.
-  nlohmann::json seconds;               ///< Timings of the earlier stages.
+  std::string scheme = "hat";           ///< Transfer operator: hat | cell (transfer.hpp).
+  int samples = 0;      ///< Transfer operator: sample points per axis and cell (0: default).
+  int eigenvalues = 6;  ///< Eigenvalues reported by method invariant.
+  long long particles = 1000000;  ///< Samples of method particles.
+  std::uint64_t seed = 1;         ///< Seed of method particles.
+  bool quiet = false;             ///< No progress output.
+  nlohmann::json seconds;         ///< Timings of the earlier stages.
 };
 
 /// A configuration error (exit 2).
@@ -107,7 +108,8 @@ RunConfig read_config(const std::string& path) {
     c.budget_tol = j.value("budget_tol", 3e-4);
     c.quiet = j.value("quiet", false);
     c.step = j.value("step", 0.0);
-    c.scheme = j.value("scheme", std::string("interpolate"));
+    c.scheme = j.value("scheme", std::string("hat"));
+    c.samples = j.value("samples", 0);
     c.eigenvalues = j.value("eigenvalues", 6);
     c.particles = j.value("particles", 1000000LL);
     c.seed = j.value("seed", std::uint64_t{1});
@@ -130,8 +132,9 @@ RunConfig read_config(const std::string& path) {
   if (c.method != "characteristics" && c.method != "transfer" && c.method != "invariant" &&
       c.method != "particles")
     throw ConfigError("unknown method '" + c.method + "'");
-  if (c.scheme != "interpolate" && c.scheme != "conservative")
-    throw ConfigError("unknown transfer scheme '" + c.scheme + "'");
+  if (c.scheme != "hat" && c.scheme != "cell")
+    throw ConfigError("unknown transfer scheme '" + c.scheme + "' (hat or cell)");
+  if (c.samples < 0 || c.samples > 64) throw ConfigError("samples must be in 0..64");
   if (!(c.step >= 0) || c.particles < 1 || c.eigenvalues < 1)
     throw ConfigError("step, particles and eigenvalues must be positive");
   return c;
@@ -164,6 +167,7 @@ int run_model(const RunConfig& c) {
   ms.budget_tol = c.budget_tol;
   ms.step = c.step;
   ms.scheme = c.scheme;
+  ms.samples = c.samples;
   ms.eigenvalues = c.eigenvalues;
   ms.particles = c.particles;
   ms.seed = c.seed;
