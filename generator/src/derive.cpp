@@ -498,10 +498,14 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
       // surface lies on the support's boundary and the guard does not fire, a negative
       // rate (for ≥ / >; positive for ≤ / <) means the flow leaves the state space there.
       std::vector<ex> support_rate;
+      std::vector<std::vector<ex>> support_grad;
       for (const auto& c : m.sim.support) {
         ex r = 0;
-        for (std::size_t i = 0; i < n; ++i)
-          r += c.expr.diff(GiNaC::ex_to<GiNaC::symbol>(X[i])) * before.flow[i];
+        support_grad.emplace_back();
+        for (std::size_t i = 0; i < n; ++i) {
+          support_grad.back().push_back(c.expr.diff(GiNaC::ex_to<GiNaC::symbol>(X[i])));
+          r += support_grad.back().back() * before.flow[i];
+        }
         support_rate.push_back(r);
       }
       for (int trial = 0; trial < 400 && crossing < 60; ++trial) {
@@ -548,12 +552,31 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         ++on_surface;
         double rate = eval(lie, x);
         if (!(g.direction == Direction::Decreasing ? rate < 0 : rate > 0)) {
-          // The guard does not fire here: does the flow leave the support through S here?
+          // The guard does not fire here: does the flow leave the support through S here,
+          // with no other guard of this mode firing at x to catch it?
           double scale = 1;
           for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(x[i]));
-          for (std::size_t ci = 0; ci < m.sim.support.size() && rate != 0; ++ci) {
+          bool caught = false;
+          for (std::size_t hj = 0; hj < sys.guards.size() && !caught; ++hj) {
+            const IrGuard& h = sys.guards[hj];
+            if (hj == gi || h.from != g.from) continue;
+            double gn = 0, r = 0;
+            for (std::size_t i = 0; i < n; ++i) {
+              const double d = eval(h.gradient[i], x);
+              gn += d * d;
+              r += d * eval(before.flow[i], x);
+            }
+            caught = std::fabs(eval(h.surface, x)) <= 1e-9 * std::sqrt(gn) * scale &&
+                     (h.direction == Direction::Decreasing ? r < 0 : r > 0);
+          }
+          for (std::size_t ci = 0; ci < m.sim.support.size() && rate != 0 && !caught; ++ci) {
             const Condition& c = m.sim.support[ci];
-            if (!(std::fabs(eval(c.expr, x)) <= 1e-9 * scale)) continue;
+            double cn = 0;
+            for (std::size_t i = 0; i < n; ++i) {
+              const double d = eval(support_grad[ci][i], x);
+              cn += d * d;
+            }
+            if (!(std::fabs(eval(c.expr, x)) <= 1e-9 * std::sqrt(cn) * scale)) continue;
             const double out = eval(support_rate[ci], x);
             if (c.op == "<" || c.op == "<=" ? out > 0 : out < 0) {
               if (leaks++ == 0) leak_point = x;

@@ -298,6 +298,73 @@ TEST(Cli, RestitutionMassBudget) {
   EXPECT_LE(worst, 2e-3);
 }
 
+TEST(Cli, TransferNeverCreatesMassThroughTheCommandLine) {
+  // The issue's own command: the ball with e = 0.8 on 301², method transfer (the default
+  // scheme). The withdrawn interpolating scheme took its grid mass from 2.6 to 3e14 with exit
+  // 0. Checked from summary.json alone: the mass never exceeds the initial mass, and mass +
+  // outflow + atom = initial mass to 1e-12, with the conservation defects reported.
+  json s =
+      run("bouncing_ball", "transfer_e08", "--set e=0.8 --set grid=301x301 --set method=transfer");
+  ASSERT_TRUE(s.contains("transfer")) << s.dump();
+  EXPECT_EQ(s["transfer"]["scheme"], "hat");
+  EXPECT_LE(s["transfer"]["column_defect"].get<double>(), 1e-12);
+  EXPECT_LE(s["transfer"]["budget_defect"].get<double>(), 1e-12);
+  const double m0 = s["initial_mass"];
+  for (std::size_t k = 0; k < s["times"].size(); ++k) {
+    const double m = s["mass"][k], out = s["outflow"][k], atom = s["atom"][k];
+    EXPECT_LE(m, m0 * (1.0 + 1e-13)) << "t = " << s["times"][k];
+    EXPECT_NEAR(m + out + atom, m0, 1e-12 * m0) << "t = " << s["times"][k];
+  }
+  std::printf("transfer e=0.8 301^2: mass %.6f -> %.6f, outflow %.6f, atom %.6f\n", m0,
+              s["mass"].back().get<double>(), s["outflow"].back().get<double>(),
+              s["atom"].back().get<double>());
+  // The withdrawn schemes are refused with the reason, before anything is built.
+  for (const char* old : {"interpolate", "conservative"}) {
+    Result r = hybgen(std::string("check models/bouncing_ball.model --set scheme=") + old);
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_NE(r.out.find("was withdrawn"), std::string::npos) << r.out;
+  }
+}
+
+TEST(Cli, ThermostatInvariantDensityThroughTheCommandLine) {
+  // A model hybgen does not ship (tests/validation/test_thermostat.cpp has the same system
+  // and the derivation of its closed form): heating x' = 4 − x to x = 2, cooling x' = −1.5x to
+  // x = 1; the invariant density is u_m = (1/P)/|f_m| with P = ln(3/2) + ln(2)/1.5. Through
+  // `hybgen run … method=invariant` on 401 nodes: λ₁ within 1e-9 of 1 (a closed system) and
+  // the density per mode (invariant_on.npy, invariant_off.npy) within 1 % in relative L1.
+  const std::string path = write_model("thermostat.model", R"(model thermostat
+state x
+mode on  { x' = 4 - x }
+mode off { x' = -1.5*x }
+guard cut  { from on to off  when x = 2 increasing  reset identity }
+guard heat { from off to on  when x = 1 decreasing  reset identity }
+simulation { domain x in [1, 2]; grid 401; initial on: 1; t_end 1; dt 0.05; method invariant }
+)");
+  fs::path out = run_dir("thermostat");
+  fs::remove_all(out);
+  Result r = hybgen("run '" + path + "' --quiet --out '" + out.string() + "'");
+  ASSERT_EQ(r.code, 0) << r.out;
+  json s = read_json((out / "summary.json").string());
+  const double lam = s["invariant"]["eigenvalues"][0]["re"];
+  EXPECT_NEAR(lam, 1.0, 1e-9);
+  const double P = std::log(1.5) + std::log(2.0) / 1.5;
+  double num = 0.0, den = 0.0;
+  for (const char* mode : {"on", "off"}) {
+    auto arr = hybgen::rt::read_npy((out / (std::string("invariant_") + mode + ".npy")).string());
+    ASSERT_EQ(arr.data.size(), 401u);
+    for (std::size_t i = 0; i < 401; ++i) {
+      const double x = 1.0 + static_cast<double>(i) / 400.0;
+      const double w = (i == 0 || i == 400) ? 0.5 : 1.0;
+      const double exact = 1.0 / P / (mode[1] == 'n' ? 4.0 - x : 1.5 * x);
+      num += w * std::fabs(arr.data[i] - exact);
+      den += w * exact;
+    }
+  }
+  std::printf("thermostat invariant (CLI): lambda1 - 1 = %.2e, rel L1 %.3e\n", lam - 1.0,
+              num / den);
+  EXPECT_LT(num / den, 1e-2);
+}
+
 TEST(Cli, NumericalFailureExitsThree) {
   // On the Chaplygin energy surface |v| ≤ √(2E/m) = √2; widening the domain to
   // |v| ≤ 2 asks for θ' = √(negative): the vector field is not finite there,

@@ -90,4 +90,43 @@ TEST(SupportPruning, ExpandingResetFromOutsideSpawnsNoBranch) {
   expect_translate_without_resets<Conveyor<2, 6>>();
 }
 
+/// The conveyor feeding 0 from x = 2, the support's own closed end (reset x ↦ x − 2): the
+/// pre-image z = 2 is ON the support's boundary, where the flow arrives from inside.
+struct Loop : Conveyor<1, 2> {
+  /// s = x − 2.
+  static double guard_surface(int, const double* x, const double*) { return x[0] - 2.0; }
+};
+
+/// The same loop with the support open at its end, [0, 2): z = 2 is outside by a hair, but
+/// the flow arrives at it from inside, so the history is real (a review found the first
+/// version of the pruning dropped it: it tested z instead of the state just before it).
+struct OpenLoop : Loop {
+  /// [0, 2).
+  static bool in_support(const double* x, const double*) { return x[0] >= 0.0 && x[0] < 2.0; }
+};
+
+template <class M>
+void expect_rotation() {
+  // A rotation of period 2: u(t, y) = u0((y − t) mod 2), u0 = 1 + x, with one reset per pass.
+  const std::vector<double> times{0.0, 0.5, 1.5, 3.0};
+  rt::CharacteristicsOptions opt;
+  opt.ode.rtol = 1e-12;
+  opt.ode.atol = 1e-14;
+  for (const double y : {0.3, 1.1, 1.7}) {
+    std::vector<double> out(times.size());
+    const auto st = rt::trace<M>(std::array<double, 1>{y}, 0, times, nullptr, opt, out);
+    ASSERT_TRUE(st.ok()) << rt::trace_error_name(st.error);
+    EXPECT_GE(st.events, 1);
+    for (std::size_t k = 0; k < times.size(); ++k) {
+      const double x0 = std::fmod(std::fmod(y - times[k], 2.0) + 2.0, 2.0);
+      EXPECT_NEAR(out[k], 1.0 + x0, 1e-8) << "y = " << y << ", t = " << times[k];
+    }
+  }
+}
+
+TEST(SupportPruning, PreImageOnAClosedOrOpenSupportBoundaryKeepsItsHistory) {
+  expect_rotation<Loop>();
+  expect_rotation<OpenLoop>();
+}
+
 }  // namespace

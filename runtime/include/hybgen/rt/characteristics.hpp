@@ -283,14 +283,14 @@ inline GuardInfo guard_info(std::size_t g) {
   }
 }
 
-/// Δ_g⁻¹(y) by Newton's method on Δ_g(z) = y from z = y, into z: stops when
+/// A solution z of Δ_g(z) = y by Newton's method from z = start: stops when
 /// ‖δz‖∞ ≤ tol·(1 + ‖z‖∞); false if the Jacobian is singular, a value is not finite, or
 /// `max_iter` iterations do not reach the tolerance.
 template <HybridModel M>
-bool newton_reset_inverse(int g, const double* y, const double* par, int max_iter, double tol,
-                          std::array<double, state_dim_v<M>>& z) {
+bool newton_reset_solve(int g, const double* y, const double* start, const double* par,
+                        int max_iter, double tol, std::array<double, state_dim_v<M>>& z) {
   constexpr std::size_t N = state_dim_v<M>;
-  for (std::size_t i = 0; i < N; ++i) z[i] = y[i];
+  for (std::size_t i = 0; i < N; ++i) z[i] = start[i];
   std::array<double, N * N> A;
   std::array<double, N> r;
   for (int it = 0; it < max_iter; ++it) {
@@ -308,6 +308,13 @@ bool newton_reset_inverse(int g, const double* y, const double* par, int max_ite
     if (dz <= tol * (1.0 + zn)) return true;
   }
   return false;
+}
+
+/// Δ_g⁻¹(y) by Newton's method on Δ_g(z) = y from z = y (`newton_reset_solve`), into z.
+template <HybridModel M>
+bool newton_reset_inverse(int g, const double* y, const double* par, int max_iter, double tol,
+                          std::array<double, state_dim_v<M>>& z) {
+  return newton_reset_solve<M>(g, y, y, par, max_iter, tol, z);
 }
 
 /// One RK4 step of mode m's flow (sign +1 forward, −1 backward) of size h.
@@ -561,8 +568,19 @@ class Tracer {
     }
     // A pre-image outside the state space has no history: the branch would contribute
     // nothing, and from there its own reversed resets could spawn pre-images without end
-    // (tests/validation/test_support_pruning.cpp).
-    if (!M::in_support(z.data(), par_)) return;
+    // (tests/validation/test_support_pruning.cpp). Tested just BEFORE the crossing, at
+    // z − δ·X_from(z) with δ|X| = 1e-7·(1 + ‖z‖∞): z itself is on S_g only to rounding, and a
+    // support that is open at S_g (x > 0 for the ball) or curved there must keep its histories.
+    {
+      State Xf, zb;
+      M::flow(gi.from, z.data(), par_, Xf.data());
+      const double speed = std::sqrt(dot<N>(Xf.data(), Xf.data()));
+      double zn = 0.0;
+      for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
+      const double delta = speed > 0.0 && std::isfinite(speed) ? 1e-7 * (1.0 + zn) / speed : 0.0;
+      for (std::size_t i = 0; i < N; ++i) zb[i] = z[i] - delta * Xf[i];
+      if (!M::in_support(zb.data(), par_)) return;
+    }
     // A pre-image where the flow of `from` grazes S_g: the forward guard fires at a tangency.
     const double ratio = grazing<M>(g, gi.from, z, par_, opt_.graze_tol,
                                     [this](double) { return graze_delta(times_.back()); });

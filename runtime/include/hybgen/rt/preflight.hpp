@@ -42,6 +42,8 @@
 #include <limits>
 #include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "hybgen/rt/characteristics.hpp"
 #include "hybgen/rt/model.hpp"
@@ -62,6 +64,7 @@ enum class PreflightError {
   zero_jacobian,          ///< J(x*) = 0 or not finite.
   inverse_failed,         ///< Newton for Δ⁻¹ at Δ(x*) did not converge.
   grazing,                ///< The flow is tangent to the guard where the orbit crosses it.
+  several_preimages,      ///< Δ(x*) has a second pre-image on S_g (numeric inverse only).
 };
 
 /// Human-readable name of a `PreflightError`.
@@ -91,6 +94,8 @@ inline const char* preflight_error_name(PreflightError e) {
       return "Newton iteration for the inverse reset did not converge";
     case PreflightError::grazing:
       return "grazing: the flow is tangent to the guard at a crossing";
+    case PreflightError::several_preimages:
+      return "the reset is not injective on its guard";
   }
   return "?";
 }
@@ -105,6 +110,12 @@ struct PreflightOptions {
   double surface_tol = 1e-9;
   int newton_max_iter = 50;   ///< As CharacteristicsOptions::newton_max_iter.
   double newton_tol = 1e-14;  ///< As CharacteristicsOptions::newton_tol.
+  /// Count pre-images of every guard with a numeric inverse (see `check_preimages`): the
+  /// backward characteristics follow ONE pre-image, so a second one is a failure for them;
+  /// the forward methods (transfer, invariant, particles) need no inverse and skip this.
+  bool check_preimages = false;
+  /// Crossing points per guard used by `check_preimages` (evenly spaced among those found).
+  int preimage_points = 64;
 };
 
 /// The first failure of the pre-flight scan, with where it happened.
@@ -116,6 +127,7 @@ struct PreflightFailure {
   int other_guard = -1;           ///< The re-triggered guard (reset_retriggers), else −1.
   std::array<double, N> state{};  ///< The grid node or the crossing point x*.
   std::array<double, N> image{};  ///< Δ(x*) (reset errors), else unused.
+  std::array<double, N> other{};  ///< The second pre-image (several_preimages), else unused.
   double value = 0.0;             ///< u0, J or |∇s·X|/(|∇s||X|), whichever applies.
   std::size_t node = 0;           ///< Flat index of the grid node (the edge's first node).
   /// Whether nothing failed.
@@ -247,9 +259,13 @@ PreflightFailure<state_dim_v<M>> check_initial_density(const TensorGrid<state_di
 
 /// Scan guard g's crossing points on the grid edges (see the file comment). Returns the
 /// failure at the smallest node index (the edge's first node; per node, axes in order).
+/// `crossings`, if given, receives the bisected crossing points that passed every check, each
+/// with its edge index (node·N + axis), in no particular order.
 template <HybridModel M>
-PreflightFailure<state_dim_v<M>> check_guard(int g, const TensorGrid<state_dim_v<M>>& grid,
-                                             const double* par, const PreflightOptions& opt = {}) {
+PreflightFailure<state_dim_v<M>> check_guard(
+    int g, const TensorGrid<state_dim_v<M>>& grid, const double* par,
+    const PreflightOptions& opt = {},
+    std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>>* crossings = nullptr) {
   constexpr std::size_t N = state_dim_v<M>;
   std::array<double, N> lo{}, hi{};
   std::array<std::size_t, N> stride{}, count{};
@@ -290,6 +306,10 @@ PreflightFailure<state_dim_v<M>> check_guard(int g, const TensorGrid<state_dim_v
         first.offer(i, f);
         continue;
       }
+      if (crossings != nullptr) {
+#pragma omp critical(hybgen_rt_preflight_crossings)
+        crossings->emplace_back(i * N, y);
+      }
     }
     if (!std::isfinite(sy) || sy == 0.0) continue;
     for (std::size_t a = 0; a < N; ++a) {
@@ -326,9 +346,68 @@ PreflightFailure<state_dim_v<M>> check_guard(int g, const TensorGrid<state_dim_v
         first.offer(i, f);
         break;
       }
+      if (crossings != nullptr) {
+#pragma omp critical(hybgen_rt_preflight_crossings)
+        crossings->emplace_back(i * N + a, x);
+      }
     }
   }
   return first.failure;
+}
+
+/// Pre-images of a guard g with a numeric inverse, counted by multi-start Newton: among the
+/// crossing points of S_g found by `check_guard` (in the support, where g fires), take up to
+/// opt.preimage_points evenly spaced ones p_i; for each image y_i = Δ_g(p_i), start Newton on
+/// Δ_g(z) = y_i from every other p_j. A converged z that lies on S_g (|s_g| ≤ surface_tol·
+/// |∇s_g|·diam), in the support, where g fires, and farther than 1e-6·diam from p_i is a
+/// second pre-image: the reset is not injective on its guard, and a method that follows one
+/// pre-image (the backward characteristics) would lose the others' mass. Returns that failure.
+/// This is a search, not a proof: pre-images that no start reaches are not seen (folds are,
+/// since the crossing points cover the guard on both sides of the fold).
+template <HybridModel M>
+PreflightFailure<state_dim_v<M>> check_preimages(
+    int g, std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>> crossings,
+    double diam, const double* par, const PreflightOptions& opt) {
+  constexpr std::size_t N = state_dim_v<M>;
+  PreflightFailure<N> f;
+  const GuardInfo gi = detail::guard_info<M>(static_cast<std::size_t>(g));
+  if (gi.has_inverse || crossings.size() < 2) return f;
+  std::sort(crossings.begin(), crossings.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });  // thread order
+  std::vector<std::array<double, N>> pts;
+  const std::size_t want = static_cast<std::size_t>(std::max(2, opt.preimage_points));
+  for (std::size_t k = 0; k < std::min(want, crossings.size()); ++k)
+    pts.push_back(crossings[k * crossings.size() / std::min(want, crossings.size())].second);
+  auto fires = [&](const std::array<double, N>& z) {
+    std::array<double, N> grad{}, X{};
+    M::guard_gradient(g, z.data(), par, grad.data());
+    M::flow(gi.from, z.data(), par, X.data());
+    const double gn = std::sqrt(detail::dot<N>(grad.data(), grad.data()));
+    return M::in_support(z.data(), par) &&
+           detail::dot<N>(grad.data(), X.data()) * gi.direction > 0.0 &&
+           std::fabs(M::guard_surface(g, z.data(), par)) <= opt.surface_tol * gn * diam;
+  };
+  for (const auto& p : pts) {
+    std::array<double, N> y{};
+    M::reset(g, p.data(), par, y.data());
+    for (const auto& start : pts) {
+      std::array<double, N> z{};
+      if (!detail::newton_reset_solve<M>(g, y.data(), start.data(), par, opt.newton_max_iter,
+                                         opt.newton_tol, z))
+        continue;
+      double dist = 0.0;
+      for (std::size_t a = 0; a < N; ++a) dist = std::max(dist, std::fabs(z[a] - p[a]));
+      if (dist <= 1e-6 * diam || !fires(z)) continue;
+      f.error = PreflightError::several_preimages;
+      f.guard = g;
+      f.mode = gi.from;
+      f.state = p;
+      f.image = y;
+      f.other = z;
+      return f;
+    }
+  }
+  return f;
 }
 
 /// The whole pre-flight scan: the initial density, then every guard in order. Returns the
@@ -337,7 +416,15 @@ template <HybridModel M>
 PreflightFailure<state_dim_v<M>> preflight(const TensorGrid<state_dim_v<M>>& grid,
                                            const double* par, const PreflightOptions& opt = {}) {
   PreflightFailure<state_dim_v<M>> f = check_initial_density<M>(grid, par);
-  for (int g = 0; g < M::n_guard && f.ok(); ++g) f = check_guard<M>(g, grid, par, opt);
+  double diam = 0.0;
+  for (const GridAxis& a : grid.axes) diam = std::max(diam, a.max - a.min);
+  for (int g = 0; g < M::n_guard && f.ok(); ++g) {
+    const bool count =
+        opt.check_preimages && !detail::guard_info<M>(static_cast<std::size_t>(g)).has_inverse;
+    std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>> crossings;
+    f = check_guard<M>(g, grid, par, opt, count ? &crossings : nullptr);
+    if (f.ok() && count) f = check_preimages<M>(g, std::move(crossings), diam, par, opt);
+  }
   return f;
 }
 
@@ -379,6 +466,14 @@ std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
     case PreflightError::inverse_failed:
       os << ": Delta = ";
       point(f.image);
+      break;
+    case PreflightError::several_preimages:
+      os << ": Delta = ";
+      point(f.image);
+      os << " is also the image of ";
+      point(f.other);
+      os << ", and the characteristics method follows one pre-image only; use method=transfer, "
+            "invariant or particles (they push mass forward and need no inverse)";
       break;
     case PreflightError::reset_retriggers: {
       const auto to = detail::guard_info<M>(static_cast<std::size_t>(f.guard)).to;
