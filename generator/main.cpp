@@ -358,6 +358,17 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
   if (!m.sim.present)
     throw ModelError(m.path, {1, 1},
                      "the model has no simulation block, so there is nothing to run");
+  // The backward characteristics need the inverse of every reset; a reset injective on its
+  // guard only has none (derive.cpp): refuse before building, at the reset, with the methods
+  // that apply.
+  if (m.sim.method == "characteristics")
+    for (std::size_t gi = 0; gi < fe.sys.guards.size(); ++gi)
+      if (fe.sys.guards[gi].inverse_on_guard_only)
+        throw fe.src.error(m.guards[gi].reset_loc,
+                           "the reset of guard '" + m.guards[gi].name +
+                               "' has no inverse in the whole state space (it is injective on "
+                               "its guard only), which the characteristics method needs; use "
+                               "--set method=transfer, invariant or particles");
   if (out.empty()) out = "out/" + m.name;
   // OUT as an absolute path without a trailing separator; its siblings share its name.
   fs::path target = fs::absolute(fs::path(out)).lexically_normal();

@@ -374,9 +374,46 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
           if (!is_identically_zero(
                   g.reset_jacobian[i * n + a].diff(GiNaC::ex_to<GiNaC::symbol>(X[b])), all_symbols))
             affine = false;
+    // What the hybrid flow needs is the reset RESTRICTED TO ITS GUARD S: injective there when
+    // DΔ is injective on the tangent spaces of S, i.e. det(DΔᵀDΔ + ∇s∇sᵀ) ≠ 0 (a v with DΔv = 0
+    // and ∇s·v = 0 makes the matrix singular; conversely vᵀ(DΔᵀDΔ + ∇s∇sᵀ)v = |DΔv|² + (∇s·v)²
+    // = 0 forces both). A reset with a constant component (the sawtooth x ↦ 0 at x = 1, the
+    // integrate-and-fire (v, w) ↦ (v_r, w + b) at v = v_th) has det DΔ ≡ 0 but passes: it has
+    // no inverse in the whole space (so none for the backward characteristics), and the forward
+    // methods need none.
+    auto injective_on_guard = [&] {
+      matrix G(static_cast<unsigned>(n), static_cast<unsigned>(n));
+      for (unsigned i = 0; i < n; ++i)
+        for (unsigned j = 0; j < n; ++j) {
+          ex e = g.gradient[i] * g.gradient[j];
+          for (unsigned k = 0; k < n; ++k)
+            e += g.reset_jacobian[k * n + i] * g.reset_jacobian[k * n + j];
+          G(i, j) = e;
+        }
+      LimitScope::check_time();
+      return !is_identically_zero(simplify(G.determinant()), all_symbols);
+    };
+    auto singular_everywhere = [&] {
+      matrix D(static_cast<unsigned>(n), static_cast<unsigned>(n));
+      for (std::size_t i = 0; i < n * n; ++i)
+        D(static_cast<unsigned>(i / n), static_cast<unsigned>(i % n)) = g.reset_jacobian[i];
+      LimitScope::check_time();
+      return is_identically_zero(simplify(D.determinant()), all_symbols);
+    };
+    auto on_guard_only = [&] {
+      if (!injective_on_guard())
+        throw src.error(gs.reset_loc,
+                        "the reset of " + where +
+                            " is not injective on its guard (its Jacobian is singular along the "
+                            "guard surface): two states of the guard reach the same point");
+      g.has_inverse = false;
+      g.inverse_on_guard_only = true;
+    };
     if (changed.empty()) {
       g.has_inverse = true;
       g.reset_inverse = X;
+    } else if (affine && singular_everywhere()) {
+      on_guard_only();
     } else if (affine) {
       const auto c = static_cast<unsigned>(changed.size());
       matrix A(c, c), rhs(c, 1), unknowns(c, 1);
@@ -389,11 +426,6 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         rhs(i, 0) = X[changed[i]] - simplify(b);
         unknowns(i, 0) = GiNaC::realsymbol("hybgen_u" + std::to_string(i));
       }
-      ex detA = simplify(A.determinant());
-      if (is_identically_zero(detA, all_symbols))
-        throw src.error(gs.reset_loc, "the reset of " + where +
-                                          " is not invertible (its Jacobian is singular); hybgen "
-                                          "needs an invertible reset");
       matrix sol = A.solve(unknowns, rhs, GiNaC::solve_algo::gauss);
       g.reset_inverse = X;
       for (unsigned i = 0; i < c; ++i) g.reset_inverse[changed[i]] = simplify(sol(i, 0));
@@ -403,6 +435,8 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
       for (std::size_t i = 0; i < n; ++i)
         if (!is_identically_zero(round_trip[i] - X[i], all_symbols))
           throw InternalError("inverse reset of " + where + " failed verification");
+    } else if (singular_everywhere()) {
+      on_guard_only();
     } else {
       g.has_inverse = false;
       sys.warnings.push_back(where +

@@ -560,6 +560,9 @@ std::string derive_text(const HybridSystem& sys) {
     if (g.has_inverse)
       os << "  inverse reset    Delta^-1" << tuple_text(pr, m.state_symbols) << " = "
          << tuple_text(pr, g.reset_inverse) << "\n";
+    else if (g.inverse_on_guard_only)
+      os << "  inverse reset    none: injective on the guard only (methods transfer, invariant, "
+            "particles)\n";
     else
       os << "  inverse reset    numeric (Newton at run time)\n";
     os << "  hybrid Jacobian  J = " << pr.ginac(g.hybrid_jacobian_on_surface) << "   (on s = 0)\n";
@@ -697,7 +700,8 @@ nlohmann::ordered_json derive_json(const HybridSystem& sys) {
     } else {
       gj["reset_inverse"] = nullptr;
     }
-    gj["reset_inverse_kind"] = g.has_inverse ? "symbolic" : "numeric";
+    gj["reset_inverse_kind"] =
+        g.has_inverse ? "symbolic" : (g.inverse_on_guard_only ? "none" : "numeric");
     gj["hybrid_jacobian"] = pr.ginac(g.hybrid_jacobian_on_surface);
     gj["hybrid_jacobian_general"] = pr.ginac(g.hybrid_jacobian);
     guards.push_back(gj);

@@ -327,11 +327,12 @@ mode b { x' = 0; y' = 1 }
 guard g { from a to b; when x = 0 decreasing; reset identity }
 )",
                       4, 47, "identically zero");
-  // A reset that cannot be inverted.
+  // A reset that is not injective on its guard: every (0, p) of S = {x = 0} goes to (0, 1)
+  // (det(DΔᵀDΔ + ∇s∇sᵀ) = det diag(2, 0) = 0).
   expect_derive_error(
       "state x, p\nmode a { x' = p; p' = -1 }\nguard g { when x = 0 decreasing; reset (x, 0*p + 1) "
       "}\n",
-      3, 34, "not invertible");
+      3, 34, "not injective on its guard");
   // H.5: the identity reset of the ball lands on the guard with p < 0: beating.
   expect_derive_error(R"(state x, p
 mode a { x' = p; p' = -1 }
@@ -376,6 +377,27 @@ TEST(Derive, WarnsWhenTheFlowLeavesTheSupportWhereTheGuardDoesNotFire) {
   EXPECT_NE(w.find("did you mean 'decreasing'?"), std::string::npos) << w;
   Derived ok(good);
   EXPECT_TRUE(ok.sys.warnings.empty());
+}
+
+TEST(Derive, ConstantComponentIsJudgedOnTheGuard) {
+  // (x, y) ↦ (0, y) at x = 1: det DΔ ≡ 0, so no inverse in the plane, but on S = {x = 1} the
+  // tangent e_y goes to e_y: injective there (det(DΔᵀDΔ + ∇s∇sᵀ) = det I = 1). Accepted, with
+  // no inverse, and J = X⁺_x(Δx)/X⁻_x(x) = (1 + 0)/(1 + 1) = 1/2 for x' = 1 + x.
+  Derived d(R"(state x, y
+mode a { x' = 1 + x; y' = -y }
+guard g { when x = 1 increasing; reset (0, y) }
+)");
+  const IrGuard& g = d.sys.guards[0];
+  EXPECT_FALSE(g.has_inverse);
+  EXPECT_TRUE(g.inverse_on_guard_only);
+  EXPECT_TRUE(d.same(g.hybrid_jacobian_on_surface, ex(1) / 2));
+  // An invertible reset is not flagged.
+  Derived e(R"(state x, y
+mode a { x' = 1 + x; y' = -y }
+guard g { when x = 1 increasing; reset (x - 1, y) }
+)");
+  EXPECT_TRUE(e.sys.guards[0].has_inverse);
+  EXPECT_FALSE(e.sys.guards[0].inverse_on_guard_only);
 }
 
 TEST(Derive, NonAffineResetHasNumericInverse) {

@@ -28,8 +28,9 @@ namespace {
 namespace fs = std::filesystem;
 using GiNaC::ex;
 
-const std::vector<std::string> kModels = {"bouncing_ball", "sir", "sir_3d", "filippov",
-                                          "chaplygin_energy"};
+const std::vector<std::string> kModels = {
+    "bouncing_ball",     "sir", "sir_3d", "filippov", "chaplygin_energy", "sawtooth",
+    "integrate_and_fire"};
 
 struct Derived {
   SourceText src;

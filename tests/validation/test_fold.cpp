@@ -105,8 +105,9 @@ TEST(Fold, CharacteristicsRefuseASecondPreImage) {
   // not tell them apart. (40 nodes in y: no node at y = 0, where J = 0.)
   const auto grid = box(21, 40);
   rt::PreflightOptions opt;
+  opt.backward = false;  // what `hybgen run` sets for the forward methods
   EXPECT_TRUE(rt::preflight<Fold>(grid, nullptr, opt).ok());
-  opt.check_preimages = true;
+  opt.backward = true;  // the default, and the characteristics
   const auto f = rt::preflight<Fold>(grid, nullptr, opt);
   ASSERT_EQ(f.error, rt::PreflightError::several_preimages);
   EXPECT_NEAR(f.state[0], 1.0, 1e-12);

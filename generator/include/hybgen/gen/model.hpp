@@ -150,10 +150,13 @@ struct IrGuard {
   std::vector<GiNaC::ex> reset;                 ///< Δ(x).
   std::vector<GiNaC::ex> reset_jacobian;        ///< DΔ(x), row-major N×N.
   bool has_inverse = false;                     ///< Whether `reset_inverse` is symbolic.
-  std::vector<GiNaC::ex> reset_inverse;         ///< Δ⁻¹(y) in the state symbols.
-  GiNaC::ex hybrid_jacobian;                    ///< J(x) for x ∈ S (general formula).
-  GiNaC::ex hybrid_jacobian_on_surface;         ///< J with s = 0 substituted when possible.
-  std::string surface_note;                     ///< How J was restricted to S (for reports).
+  /// No inverse at all: DΔ is singular everywhere, but Δ is injective on the guard (a
+  /// constant component). Only the forward methods (transfer, invariant, particles) apply.
+  bool inverse_on_guard_only = false;
+  std::vector<GiNaC::ex> reset_inverse;  ///< Δ⁻¹(y) in the state symbols.
+  GiNaC::ex hybrid_jacobian;             ///< J(x) for x ∈ S (general formula).
+  GiNaC::ex hybrid_jacobian_on_surface;  ///< J with s = 0 substituted when possible.
+  std::string surface_note;              ///< How J was restricted to S (for reports).
 };
 
 /// The HybridSystem IR (output of `derive`).

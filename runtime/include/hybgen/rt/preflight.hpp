@@ -17,8 +17,9 @@
 ///         (|s_h(Δx*)| ≤ surface_tol·|∇s_h|·diam and sign(∇s_h·X_to(Δx*)) = direction_h:
 ///         an instantaneous re-trigger, the paper's H.5);
 ///       - J_g(x*) is finite and ≠ 0;
-///       - for a numeric inverse (Newton), Newton from Δ(x*) — started at Δ(x*) itself, as the
-///         characteristics do — converges.
+///       - for a numeric inverse (Newton) and the backward characteristics (`backward`), Newton
+///         from Δ(x*) — started at Δ(x*) itself, as the characteristics do — converges, and
+///         (`check_preimages`) no other crossing point is a second pre-image of Δ(x*).
 ///     Grazing: at any point x* of S_g found in the support (firing or not) where the flow is
 ///     tangent to the guard, |∇s·X| ≤ graze_tol·|∇s||X|, the orbit through x* is followed a
 ///     short time δ both ways (RK4, δ|X| = 1e-3·diam); if it passes from the pre-firing side of
@@ -110,10 +111,11 @@ struct PreflightOptions {
   double surface_tol = 1e-9;
   int newton_max_iter = 50;   ///< As CharacteristicsOptions::newton_max_iter.
   double newton_tol = 1e-14;  ///< As CharacteristicsOptions::newton_tol.
-  /// Count pre-images of every guard with a numeric inverse (see `check_preimages`): the
-  /// backward characteristics follow ONE pre-image, so a second one is a failure for them;
-  /// the forward methods (transfer, invariant, particles) need no inverse and skip this.
-  bool check_preimages = false;
+  /// The method inverts resets (the backward characteristics): check that a numeric inverse
+  /// converges at every crossing and count its pre-images (`check_preimages`: the tracer
+  /// follows ONE pre-image, so a second one is a failure). The forward methods (transfer,
+  /// invariant, particles) need no inverse and skip both.
+  bool backward = true;
   /// Crossing points per guard used by `check_preimages` (evenly spaced among those found).
   int preimage_points = 64;
 };
@@ -220,7 +222,7 @@ PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, 
       return fail(PreflightError::reset_retriggers, 0.0);
     }
   }
-  if (!gi.has_inverse && !newton_converges<M>(g, y, par, opt))
+  if (opt.backward && !gi.has_inverse && !newton_converges<M>(g, y, par, opt))
     return fail(PreflightError::inverse_failed, 0.0);
   return f;
 }
@@ -420,7 +422,7 @@ PreflightFailure<state_dim_v<M>> preflight(const TensorGrid<state_dim_v<M>>& gri
   for (const GridAxis& a : grid.axes) diam = std::max(diam, a.max - a.min);
   for (int g = 0; g < M::n_guard && f.ok(); ++g) {
     const bool count =
-        opt.check_preimages && !detail::guard_info<M>(static_cast<std::size_t>(g)).has_inverse;
+        opt.backward && !detail::guard_info<M>(static_cast<std::size_t>(g)).has_inverse;
     std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>> crossings;
     f = check_guard<M>(g, grid, par, opt, count ? &crossings : nullptr);
     if (f.ok() && count) f = check_preimages<M>(g, std::move(crossings), diam, par, opt);

@@ -189,7 +189,7 @@ int run_model(const RunConfig& c) {
     PreflightOptions popt;
     popt.newton_max_iter = opt.newton_max_iter;
     popt.newton_tol = opt.newton_tol;
-    popt.check_preimages = c.method == "characteristics";  // the one method that inverts Δ
+    popt.backward = c.method == "characteristics";  // the one method that inverts Δ
     const PreflightFailure<N> pf = preflight<M>(grid, par, popt);
     if (!pf.ok()) {
       std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
