@@ -217,6 +217,27 @@ struct filippov {
     return true;
   }
 
+  /// Whether x lies in the closure of mode k's region (its `where` relations, < read as <=
+  /// and > as >=).
+  static bool in_region(int k, const double* x, const double* par) {
+    (void)x;
+    (void)par;
+    switch (k) {
+      case 0: {
+        double w0 = 0.0;
+        w0 = x[0]*x[1];
+        return w0 >= 0.0;
+      }
+      case 1: {
+        double w0 = 0.0;
+        w0 = x[0]*x[1];
+        return w0 <= 0.0;
+      }
+      default:
+        return false;
+    }
+  }
+
   /// Initial density of mode k at x (0 outside the support and the mode's region).
   static double initial_density(int k, const double* x, const double* par) {
     (void)x;

@@ -154,6 +154,28 @@ class HeaderBuilder {
     os << "    (void)x;\n    (void)par;\n";
     std::string test = conditions(os, sim.support, "    ", "c");
     os << "    return " << test << ";\n  }\n\n";
+    // The modes' regions (`where`), for the forward methods to keep each mode's mass inside
+    // its own region (runtime/include/hybgen/rt/transfer.hpp); only for models that have any.
+    bool any_region = false;
+    for (const auto& md : sys_.modes) any_region = any_region || !md.where.empty();
+    if (any_region) {
+      os << "  /// Whether x lies in the closure of mode k's region (its `where` relations, < read "
+            "as"
+            " <=\n  /// and > as >=).\n";
+      os << "  static bool in_region(int k, const double* x, const double* par) {\n";
+      os << "    (void)x;\n    (void)par;\n    switch (k) {\n";
+      for (std::size_t c = 0; c < sys_.modes.size(); ++c) {
+        std::vector<Condition> closed = sys_.modes[c].where;
+        for (auto& cond : closed) {
+          if (cond.op == "<") cond.op = "<=";
+          if (cond.op == ">") cond.op = ">=";
+        }
+        os << "      case " << c << ": {\n";
+        std::string region = conditions(os, closed, "        ", "w");
+        os << "        return " << region << ";\n      }\n";
+      }
+      os << "      default:\n        return false;\n    }\n  }\n\n";
+    }
     os << "  /// Initial density of mode k at x (0 outside the support and the mode's region).\n";
     os << "  static double initial_density(int k, const double* x, const double* par) {\n";
     os << "    (void)x;\n    (void)par;\n";

@@ -62,4 +62,17 @@ concept HybridModel = requires(int i, const double* x, const double* par, double
   { M::in_support(x, par) } -> std::same_as<bool>;
 };
 
+/// Whether x lies in (the closure of) mode m's region: M::in_region(m, x, par) where the model
+/// has modes restricted by `where` relations (the generator emits it only then), else true.
+/// The forward methods keep a mode's mass inside its region with it (transfer.hpp).
+template <HybridModel M>
+bool in_mode_region(int m, const double* x, const double* par) {
+  if constexpr (requires {
+                  { M::in_region(m, x, par) } -> std::same_as<bool>;
+                })
+    return M::in_region(m, x, par);
+  else
+    return true;
+}
+
 }  // namespace hybgen::rt

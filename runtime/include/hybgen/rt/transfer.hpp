@@ -10,10 +10,15 @@
 /// (half cells at the box faces; their volumes are exactly the trapezoid weights w), taken
 /// uniformly distributed over the cell (Ulam's ansatz) and represented by K =
 /// samples_per_axis^N sample points on the midpoint tensor pattern of the cell, each
-/// carrying the fraction 1/K (of the cell's part inside the support). Every sample is pushed
+/// carrying the fraction 1/K (of the cell's part inside the support and the mode's region).
+/// Every sample is pushed
 /// FORWARD by h with the hybrid flow (forward.hpp: event location, resets, Zeno detection) and
 /// its fraction is booked where it ends:
-///   * in the box and the support, in mode m': deposited on nodes of mode m' —
+///   * in the box and the support, in mode m': deposited on nodes of mode m' that lie in the
+///     support and in the closure of mode m''s region (`where`, `in_mode_region`; without it the
+///     smoothing of the deposit would carry a mode's mass across its switching surface, where
+///     that mode's guard never fires again: measured on models/filippov.model,
+///     tests/validation/test_moments.cpp) —
 ///       `hat` (default): on the 2^N corners of the grid cell containing the end point with
 ///         the multilinear hat weights φ_j (cloud-in-cell), renormalised over the corners
 ///         inside the support (the fraction never goes to a node that holds no state);
@@ -283,15 +288,21 @@ TransferOperator<N> empty_operator(const TensorGrid<N>& grid, int n_mode, double
   return op;
 }
 
-/// Whether every node (C order) is inside `M::in_support`.
+/// With `regions`, per state index r = m·n_node + i: whether node i is inside `M::in_support`
+/// and inside the closure of mode m's region (`in_mode_region`); without, per node i: whether
+/// it is inside `M::in_support`.
 template <HybridModel M>
-std::vector<char> node_support(const TensorGrid<state_dim_v<M>>& grid, const double* par) {
-  std::vector<char> in(grid.size());
-  const auto n = static_cast<std::int64_t>(grid.size());
+std::vector<char> node_support(const TensorGrid<state_dim_v<M>>& grid, const double* par,
+                               bool regions) {
+  const std::size_t nn = grid.size();
+  std::vector<char> in(nn * static_cast<std::size_t>(regions ? M::n_mode : 1));
+  const auto n = static_cast<std::int64_t>(in.size());
 #pragma omp parallel for schedule(static)
-  for (std::int64_t i = 0; i < n; ++i) {
-    const auto y = grid.node(static_cast<std::size_t>(i));
-    in[static_cast<std::size_t>(i)] = M::in_support(y.data(), par) ? 1 : 0;
+  for (std::int64_t r = 0; r < n; ++r) {
+    const auto ru = static_cast<std::size_t>(r);
+    const auto y = grid.node(ru % nn);
+    const int m = static_cast<int>(ru / nn);
+    in[ru] = M::in_support(y.data(), par) && (!regions || in_mode_region<M>(m, y.data(), par));
   }
   return in;
 }
@@ -347,7 +358,7 @@ inline void axis_box_weights(const GridAxis& ax, double dx, double c, double del
 /// invariant density 1.0e-2, 7.7e-3, 7.3e-3, 6.1e-3 at 51 … 401 nodes with points.)
 template <std::size_t N>
 bool deposit(TransferScheme scheme, const TensorGrid<N>& grid, const std::array<double, N>& dx,
-             const std::array<double, N>& delta, const std::vector<char>& in_support,
+             const std::array<double, N>& delta, const char* in_support,
              const std::array<double, N>& x, std::vector<std::pair<std::size_t, double>>& out) {
   for (std::size_t a = 0; a < N; ++a) {
     const GridAxis& ax = grid.axes[a];
@@ -465,7 +476,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   std::array<double, N> dx{};
   for (std::size_t a = 0; a < N; ++a)
     dx[a] = (grid.axes[a].max - grid.axes[a].min) / static_cast<double>(grid.axes[a].n - 1);
-  const std::vector<char> in_support = node_support<M>(grid, par);
+  const std::vector<char> in_region = node_support<M>(grid, par, true);    // per (mode, node)
+  const std::vector<char> in_support = node_support<M>(grid, par, false);  // per node
   struct Triplet {
     int row, col;
     double frac;
@@ -517,8 +529,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         }
         valid[q] = 0;
         flowed[q] = 0;
-        if (!M::in_support(x0.data(), par)) {
-          ++n_void;  // no state there: the cell's mass lives on cell ∩ support
+        if (!M::in_support(x0.data(), par) || !in_mode_region<M>(m, x0.data(), par)) {
+          ++n_void;  // no state there: the cell's mass lives on cell ∩ support ∩ region
           continue;
         }
         end[q] = flow.run(m, x0, opt.step);
@@ -596,7 +608,12 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
           }
         }
         const std::size_t before = dest.size();
-        if (valid[q] && deposit<N>(opt.scheme, grid, dx, width, in_support, res.x, dest)) {
+        // On the nodes of the end mode inside the support and the mode's region; where none
+        // of the stencil is (a region thinner than a cell), on those inside the support.
+        const std::size_t mo = static_cast<std::size_t>(res.mode) * static_cast<std::size_t>(nn);
+        if (valid[q] &&
+            (deposit<N>(opt.scheme, grid, dx, width, in_region.data() + mo, res.x, dest) ||
+             deposit<N>(opt.scheme, grid, dx, width, in_support.data(), res.x, dest))) {
           const std::size_t off = static_cast<std::size_t>(res.mode) * static_cast<std::size_t>(nn);
           for (std::size_t k = before; k < dest.size(); ++k) dest[k].first += off;
         } else {
