@@ -133,6 +133,54 @@ class DigitsScope {
 
 }  // namespace
 
+/// Whether the n×n matrix `entries` (row-major) is singular at every sampled point: its entries
+/// are evaluated at up to 4 random rational points (as in `is_identically_zero`) and the
+/// determinant of each numeric matrix is taken. A point where an entry cannot be evaluated
+/// decides nothing. Never forms a symbolic determinant (n! terms for a dense n×n matrix).
+bool singular_at_sampled_points(const std::vector<ex>& entries, std::size_t n,
+                                const std::vector<ex>& symbols) {
+  GiNaC::exset syms(symbols.begin(), symbols.end());
+  for (const auto& e : entries) collect_symbols(e, syms);
+  std::mt19937_64 rng(0x5eed);
+  std::uniform_int_distribution<int> num(-97, 97), den(1, 89);
+  int evaluated = 0;
+  for (int trial = 0; trial < 4; ++trial) {
+    LimitScope::check_time();
+    GiNaC::exmap at;
+    for (const auto& sym : syms) {
+      int k = num(rng);
+      if (k == 0) k = 13;
+      at[sym] = GiNaC::numeric(k, den(rng));
+    }
+    try {
+      const DigitsScope digits(40);
+      ApproximateHugePowers approximate(at);
+      matrix A(static_cast<unsigned>(n), static_cast<unsigned>(n));
+      bool exact = true;
+      for (std::size_t i = 0; i < n * n; ++i) {
+        ex v = approximate(entries[i]).subs(at);
+        if (!(GiNaC::is_a<GiNaC::numeric>(v) && v.info(GiNaC::info_flags::crational))) {
+          v = GiNaC::evalf(v);
+          exact = false;
+        }
+        if (!GiNaC::is_a<GiNaC::numeric>(v)) return false;
+        A(static_cast<unsigned>(i / n), static_cast<unsigned>(i % n)) = v;
+      }
+      const ex d = A.determinant();
+      if (!GiNaC::is_a<GiNaC::numeric>(d)) return false;
+      if (exact && !approximate.approximated()) {
+        if (!d.is_zero()) return false;
+      } else if (GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(d)) > GiNaC::numeric(1, 1000000000)) {
+        return false;
+      }
+      ++evaluated;
+    } catch (const std::exception&) {
+      continue;  // a pole at this point: try another
+    }
+  }
+  return evaluated > 0;
+}
+
 bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
   if (e.is_zero()) return true;
   GiNaC::exset syms(symbols.begin(), symbols.end());
@@ -382,23 +430,39 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
     // no inverse in the whole space (so none for the backward characteristics), and the forward
     // methods need none.
     auto injective_on_guard = [&] {
-      matrix G(static_cast<unsigned>(n), static_cast<unsigned>(n));
-      for (unsigned i = 0; i < n; ++i)
-        for (unsigned j = 0; j < n; ++j) {
+      std::vector<ex> G(n * n);
+      for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t j = 0; j < n; ++j) {
           ex e = g.gradient[i] * g.gradient[j];
-          for (unsigned k = 0; k < n; ++k)
+          for (std::size_t k = 0; k < n; ++k)
             e += g.reset_jacobian[k * n + i] * g.reset_jacobian[k * n + j];
-          G(i, j) = e;
+          G[i * n + j] = e;
         }
-      LimitScope::check_time();
-      return !is_identically_zero(simplify(G.determinant()), all_symbols);
+      // On S where s can be solved for a state x_k (a state-free coefficient of x_k in ∇s),
+      // else at points of the whole space.
+      for (std::size_t k = 0; k < n; ++k) {
+        const ex c = g.gradient[k];
+        bool state_free = true;
+        for (const auto& xi : X)
+          if (c.has(xi)) state_free = false;
+        if (!state_free || is_identically_zero(c, all_symbols)) continue;
+        const ex solution = simplify(X[k] - g.surface / c);
+        if (solution.has(X[k])) continue;
+        try {
+          std::vector<ex> on_s(G);
+          for (auto& e : on_s) e = e.subs(GiNaC::exmap{{X[k], solution}});
+          G = std::move(on_s);
+        } catch (const LimitExceeded&) {
+          throw;
+        } catch (const std::exception&) {
+          // A pole on S (GiNaC's pole_error): judge G in the whole space instead.
+        }
+        break;
+      }
+      return !singular_at_sampled_points(G, n, all_symbols);
     };
     auto singular_everywhere = [&] {
-      matrix D(static_cast<unsigned>(n), static_cast<unsigned>(n));
-      for (std::size_t i = 0; i < n * n; ++i)
-        D(static_cast<unsigned>(i / n), static_cast<unsigned>(i % n)) = g.reset_jacobian[i];
-      LimitScope::check_time();
-      return is_identically_zero(simplify(D.determinant()), all_symbols);
+      return singular_at_sampled_points(g.reset_jacobian, n, all_symbols);
     };
     auto on_guard_only = [&] {
       if (!injective_on_guard())

@@ -391,6 +391,18 @@ guard g { when x = 1 increasing; reset (0, y) }
   EXPECT_FALSE(g.has_inverse);
   EXPECT_TRUE(g.inverse_on_guard_only);
   EXPECT_TRUE(d.same(g.hybrid_jacobian_on_surface, ex(1) / 2));
+  // Not affine, det DΔ = 0·(1 + 3y²) ≡ 0, injective on S: the same, through the numeric branch.
+  Derived f(R"(state x, y
+mode a { x' = 1 + x; y' = -y }
+guard g { when x = 1 increasing; reset (0, y + y^3) }
+)");
+  EXPECT_TRUE(f.sys.guards[0].inverse_on_guard_only);
+  // Not injective on S: every point of x = 1 goes to (0, 1).
+  expect_derive_error(R"(state x, y
+mode a { x' = 1 + x; y' = -y }
+guard g { when x = 1 increasing; reset (0, 1 + 0*y^3) }
+)",
+                      3, 34, "not injective on its guard");
   // An invertible reset is not flagged.
   Derived e(R"(state x, y
 mode a { x' = 1 + x; y' = -y }
