@@ -590,7 +590,7 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
       const IrMode& after = sys.modes[static_cast<std::size_t>(g.to)];
       ex lie = 0;
       for (std::size_t i = 0; i < n; ++i) lie += g.gradient[i] * before.flow[i];
-      int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0, leaks = 0;
+      int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0, leaks = 0, wall = 0;
       std::vector<double> leak_point;
       // The rate of change of each support condition along the flow of `before`: where the
       // surface lies on the support's boundary and the guard does not fire, a negative
@@ -686,6 +686,12 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         ++crossing;
         std::vector<double> y(n);
         for (std::size_t i = 0; i < n; ++i) y[i] = eval(g.reset[i], x);
+        {
+          // A wall: the reset maps the crossing back onto the surface, into the same mode.
+          double scale = 1;
+          for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(y[i]));
+          if (g.to == g.from && std::fabs(eval(g.surface, y)) <= 1e-9 * scale) ++wall;
+        }
         double J = eval(g.hybrid_jacobian, x);
         if (std::isfinite(J) && std::fabs(J) < 1e-300) ++jzero;
         // H.5: does Δ(x) lie on a guard of the target mode that fires at once?
@@ -704,6 +710,48 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
             ++retrigger;
             break;
           }
+        }
+      }
+      // Behind a wall: if every sampled crossing is a wall's, states on its far side (where s
+      // has the sign the guard fires into) are never reached from the front; a domain that
+      // holds such states (in the support and the mode's region) is most likely a mistake.
+      // (Not when the flow leaks through the surface: the declared direction is then in doubt,
+      // and with it which side is behind; that warning comes below.)
+      if (crossing > 0 && wall == crossing && leaks == 0) {
+        std::vector<double> behind;
+        for (int trial = 0; trial < 400 && behind.empty(); ++trial) {
+          LimitScope::check_time();
+          std::vector<double> x(n);
+          double scale = 1;
+          for (std::size_t i = 0; i < n; ++i) {
+            x[i] = std::uniform_real_distribution<double>(m.sim.lo[i], m.sim.hi[i])(rng);
+            scale = std::max(scale, std::fabs(x[i]));
+          }
+          const double sv = eval(g.surface, x);
+          if (!(g.direction == Direction::Decreasing ? sv < -1e-9 * scale : sv > 1e-9 * scale))
+            continue;
+          bool inside = true;
+          for (const auto& c : m.sim.support)
+            if (!holds_closure(c, eval(c.expr, x))) inside = false;
+          for (const auto& c : before.where)
+            if (!holds_closure(c, eval(c.expr, x))) inside = false;
+          if (inside) behind = x;
+        }
+        if (!behind.empty()) {
+          std::string point;
+          for (std::size_t i = 0; i < n; ++i) {
+            char b[64];
+            std::snprintf(b, sizeof b, "%.6g", behind[i]);
+            point += (i ? ", " : "") + m.state[i] + " = " + b;
+          }
+          sys.warnings.push_back(
+              where +
+              " is a wall (its reset maps the surface onto itself), and the domain "
+              "reaches behind it, e.g. (" +
+              point +
+              "): no state there is reached from the "
+              "front of the wall, so mass placed there is not a state of the system; bound the "
+              "domain at the wall or add a `support` relation");
         }
       }
       if (leaks > 0) {

@@ -379,6 +379,23 @@ TEST(Derive, WarnsWhenTheFlowLeavesTheSupportWhereTheGuardDoesNotFire) {
   EXPECT_TRUE(ok.sys.warnings.empty());
 }
 
+TEST(Derive, WarnsWhenTheDomainReachesBehindAWall) {
+  // The ball with its domain widened to x ∈ [−1, 2] and no support: the ground is a wall
+  // (restitution maps x = 0 onto itself), and the states at x < 0 are never reached from the
+  // front. With `support x >= 0` (as shipped) the same domain is fine.
+  std::string text = read_model("bouncing_ball.model");
+  text.replace(text.find("domain x in [0, 2]"), 18, "domain x in [-1, 2]");
+  std::string bare = text;
+  bare.replace(bare.find("support x >= 0"), 14, "");
+  Derived d(bare);
+  ASSERT_EQ(d.sys.warnings.size(), 1u);
+  const std::string& w = d.sys.warnings[0];
+  EXPECT_NE(w.find("guard 'ground' is a wall"), std::string::npos) << w;
+  EXPECT_NE(w.find("reaches behind it, e.g. (x = -"), std::string::npos) << w;
+  Derived ok(text);
+  EXPECT_TRUE(ok.sys.warnings.empty());
+}
+
 TEST(Derive, ConstantComponentIsJudgedOnTheGuard) {
   // (x, y) ↦ (0, y) at x = 1: det DΔ ≡ 0, so no inverse in the plane, but on S = {x = 1} the
   // tangent e_y goes to e_y: injective there (det(DΔᵀDΔ + ∇s∇sᵀ) = det I = 1). Accepted, with
