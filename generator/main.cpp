@@ -366,8 +366,9 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
       if (fe.sys.guards[gi].inverse_on_guard_only)
         throw fe.src.error(m.guards[gi].reset_loc,
                            "the reset of guard '" + m.guards[gi].name +
-                               "' has no inverse in the whole state space (it is injective on "
-                               "its guard only), which the characteristics method needs; use "
+                               "' has no inverse in the whole state space (it is locally "
+                               "injective on its guard only), which the characteristics method "
+                               "needs; use "
                                "--set method=transfer, invariant or particles");
   if (out.empty()) out = "out/" + m.name;
   // OUT as an absolute path without a trailing separator; its siblings share its name.

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <new>
 #include <random>
 #include <string>
@@ -133,12 +134,17 @@ class DigitsScope {
 
 }  // namespace
 
-/// Whether the n×n matrix `entries` (row-major) is singular at every sampled point: its entries
-/// are evaluated at up to 4 random rational points (as in `is_identically_zero`) and the
-/// determinant of each numeric matrix is taken. A point where an entry cannot be evaluated
-/// decides nothing. Never forms a symbolic determinant (n! terms for a dense n×n matrix).
-bool singular_at_sampled_points(const std::vector<ex>& entries, std::size_t n,
-                                const std::vector<ex>& symbols) {
+/// Whether a matrix built from `entries` is singular at every sampled point. The entries are
+/// evaluated at up to 4 random rational points (as in `is_identically_zero`) in 40-digit
+/// floating point; `build` turns their values into an n×n matrix; a point counts as singular
+/// when |det| ≤ 1e-24·Π_i ‖row_i‖₂ (Hadamard's bound times a relative tolerance far above
+/// 40-digit rounding: a scale-free test, so exp(−12)·I is regular and a singular matrix with
+/// entries of size exp(60) is singular). A point where an entry cannot be evaluated decides
+/// nothing. Never forms a symbolic determinant (n! terms for a dense n×n matrix), and floating
+/// values keep the determinant cheap whatever the size of exact values.
+bool singular_at_sampled_points(
+    const std::vector<ex>& entries, std::size_t n, const std::vector<ex>& symbols,
+    const std::function<matrix(const std::vector<GiNaC::numeric>&)>& build) {
   GiNaC::exset syms(symbols.begin(), symbols.end());
   for (const auto& e : entries) collect_symbols(e, syms);
   std::mt19937_64 rng(0x5eed);
@@ -155,24 +161,27 @@ bool singular_at_sampled_points(const std::vector<ex>& entries, std::size_t n,
     try {
       const DigitsScope digits(40);
       ApproximateHugePowers approximate(at);
-      matrix A(static_cast<unsigned>(n), static_cast<unsigned>(n));
-      bool exact = true;
-      for (std::size_t i = 0; i < n * n; ++i) {
-        ex v = approximate(entries[i]).subs(at);
-        if (!(GiNaC::is_a<GiNaC::numeric>(v) && v.info(GiNaC::info_flags::crational))) {
-          v = GiNaC::evalf(v);
-          exact = false;
+      std::vector<GiNaC::numeric> values;
+      for (const auto& e : entries) {
+        const ex v = GiNaC::evalf(approximate(e).subs(at));
+        if (!GiNaC::is_a<GiNaC::numeric>(v) || !v.info(GiNaC::info_flags::real)) return false;
+        values.push_back(GiNaC::ex_to<GiNaC::numeric>(v));
+      }
+      const matrix A = build(values);
+      GiNaC::numeric bound = 1;
+      for (unsigned i = 0; i < n; ++i) {
+        GiNaC::numeric row = 0;
+        for (unsigned j = 0; j < n; ++j) {
+          const GiNaC::numeric x = GiNaC::ex_to<GiNaC::numeric>(A(i, j));
+          row += x * x;
         }
-        if (!GiNaC::is_a<GiNaC::numeric>(v)) return false;
-        A(static_cast<unsigned>(i / n), static_cast<unsigned>(i % n)) = v;
+        bound *= GiNaC::sqrt(row);
       }
-      const ex d = A.determinant();
+      const ex d = GiNaC::evalf(A.determinant());
       if (!GiNaC::is_a<GiNaC::numeric>(d)) return false;
-      if (exact && !approximate.approximated()) {
-        if (!d.is_zero()) return false;
-      } else if (GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(d)) > GiNaC::numeric(1, 1000000000)) {
+      if (GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(d)) >
+          GiNaC::numeric(1, 1000000000000) * GiNaC::numeric(1, 1000000000000) * bound)
         return false;
-      }
       ++evaluated;
     } catch (const std::exception&) {
       continue;  // a pole at this point: try another
@@ -429,17 +438,11 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
     // integrate-and-fire (v, w) ↦ (v_r, w + b) at v = v_th) has det DΔ ≡ 0 but passes: it has
     // no inverse in the whole space (so none for the backward characteristics), and the forward
     // methods need none.
+    // The n² entries of DΔ then the n of ∇s (on S where s can be solved for a state x_k with a
+    // state-free coefficient, else in the whole space).
     auto injective_on_guard = [&] {
-      std::vector<ex> G(n * n);
-      for (std::size_t i = 0; i < n; ++i)
-        for (std::size_t j = 0; j < n; ++j) {
-          ex e = g.gradient[i] * g.gradient[j];
-          for (std::size_t k = 0; k < n; ++k)
-            e += g.reset_jacobian[k * n + i] * g.reset_jacobian[k * n + j];
-          G[i * n + j] = e;
-        }
-      // On S where s can be solved for a state x_k (a state-free coefficient of x_k in ∇s),
-      // else at points of the whole space.
+      std::vector<ex> E(g.reset_jacobian);
+      E.insert(E.end(), g.gradient.begin(), g.gradient.end());
       for (std::size_t k = 0; k < n; ++k) {
         const ex c = g.gradient[k];
         bool state_free = true;
@@ -449,27 +452,47 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         const ex solution = simplify(X[k] - g.surface / c);
         if (solution.has(X[k])) continue;
         try {
-          std::vector<ex> on_s(G);
+          std::vector<ex> on_s(E);
           for (auto& e : on_s) e = e.subs(GiNaC::exmap{{X[k], solution}});
-          G = std::move(on_s);
+          E = std::move(on_s);
         } catch (const LimitExceeded&) {
           throw;
         } catch (const std::exception&) {
-          // A pole on S (GiNaC's pole_error): judge G in the whole space instead.
+          // A pole on S (GiNaC's pole_error): judge in the whole space instead.
         }
         break;
       }
-      return !singular_at_sampled_points(G, n, all_symbols);
+      // G = DΔᵀDΔ + σ²∇s∇sᵀ, σ = ‖DΔ‖_F/‖∇s‖: the two terms on one scale.
+      return !singular_at_sampled_points(E, n, all_symbols, [n](const auto& v) {
+        GiNaC::numeric fd = 0, fg = 0;
+        for (std::size_t i = 0; i < n * n; ++i) fd += v[i] * v[i];
+        for (std::size_t i = 0; i < n; ++i) fg += v[n * n + i] * v[n * n + i];
+        const GiNaC::numeric sigma2 =
+            fg.is_zero() ? GiNaC::numeric(1) : (fd.is_zero() ? GiNaC::numeric(1) : fd / fg);
+        matrix G(static_cast<unsigned>(n), static_cast<unsigned>(n));
+        for (std::size_t i = 0; i < n; ++i)
+          for (std::size_t j = 0; j < n; ++j) {
+            GiNaC::numeric e = sigma2 * v[n * n + i] * v[n * n + j];
+            for (std::size_t k = 0; k < n; ++k) e += v[k * n + i] * v[k * n + j];
+            G(static_cast<unsigned>(i), static_cast<unsigned>(j)) = e;
+          }
+        return G;
+      });
     };
     auto singular_everywhere = [&] {
-      return singular_at_sampled_points(g.reset_jacobian, n, all_symbols);
+      return singular_at_sampled_points(g.reset_jacobian, n, all_symbols, [n](const auto& v) {
+        matrix D(static_cast<unsigned>(n), static_cast<unsigned>(n));
+        for (std::size_t i = 0; i < n * n; ++i)
+          D(static_cast<unsigned>(i / n), static_cast<unsigned>(i % n)) = v[i];
+        return D;
+      });
     };
     auto on_guard_only = [&] {
       if (!injective_on_guard())
         throw src.error(gs.reset_loc,
                         "the reset of " + where +
-                            " is not injective on its guard (its Jacobian is singular along the "
-                            "guard surface): two states of the guard reach the same point");
+                            " collapses its guard (its Jacobian is singular along the guard "
+                            "surface: the reset is not locally injective there)");
       g.has_inverse = false;
       g.inverse_on_guard_only = true;
     };
@@ -490,7 +513,17 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         rhs(i, 0) = X[changed[i]] - simplify(b);
         unknowns(i, 0) = GiNaC::realsymbol("hybgen_u" + std::to_string(i));
       }
-      matrix sol = A.solve(unknowns, rhs, GiNaC::solve_algo::gauss);
+      matrix sol;
+      try {
+        sol = A.solve(unknowns, rhs, GiNaC::solve_algo::gauss);
+      } catch (const LimitExceeded&) {
+        throw;
+      } catch (const std::exception& e) {
+        // Singular after all (the sampled determinant missed it), or GiNaC could not solve.
+        throw src.error(gs.reset_loc, "the reset of " + where +
+                                          " could not be inverted symbolically (" + e.what() +
+                                          "); its Jacobian may be singular");
+      }
       g.reset_inverse = X;
       for (unsigned i = 0; i < c; ++i) g.reset_inverse[changed[i]] = simplify(sol(i, 0));
       g.has_inverse = true;
@@ -575,6 +608,16 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
     }
     sys.guards.push_back(std::move(g));
   }
+
+  // A reset without an inverse cannot run by characteristics (main.cpp refuses it there):
+  // say so at `check` too when that is the model's method.
+  if (m.sim.present && m.sim.method == "characteristics")
+    for (const auto& g : sys.guards)
+      if (g.inverse_on_guard_only)
+        sys.warnings.push_back("guard '" + g.name +
+                               "': its reset has no inverse, so `run` will refuse the method "
+                               "characteristics; set `method transfer`, `invariant` or "
+                               "`particles`");
 
   // Numerical checks on sampled points of each guard surface (parameters at
   // their defaults, inside the simulation domain).
@@ -717,7 +760,10 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
       // holds such states (in the support and the mode's region) is most likely a mistake.
       // (Not when the flow leaks through the surface: the declared direction is then in doubt,
       // and with it which side is behind; that warning comes below.)
-      if (crossing > 0 && wall == crossing && leaks == 0) {
+      bool other_entry = false;  // another guard's reset leads into this mode
+      for (std::size_t hj = 0; hj < sys.guards.size(); ++hj)
+        if (hj != gi && sys.guards[hj].to == g.from) other_entry = true;
+      if (crossing > 0 && wall == crossing && leaks == 0 && !other_entry) {
         std::vector<double> behind;
         for (int trial = 0; trial < 400 && behind.empty(); ++trial) {
           LimitScope::check_time();

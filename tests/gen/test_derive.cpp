@@ -332,7 +332,7 @@ guard g { from a to b; when x = 0 decreasing; reset identity }
   expect_derive_error(
       "state x, p\nmode a { x' = p; p' = -1 }\nguard g { when x = 0 decreasing; reset (x, 0*p + 1) "
       "}\n",
-      3, 34, "not injective on its guard");
+      3, 34, "collapses its guard");
   // H.5: the identity reset of the ball lands on the guard with p < 0: beating.
   expect_derive_error(R"(state x, p
 mode a { x' = p; p' = -1 }
@@ -419,7 +419,7 @@ guard g { when x = 1 increasing; reset (0, y + y^3) }
 mode a { x' = 1 + x; y' = -y }
 guard g { when x = 1 increasing; reset (0, 1 + 0*y^3) }
 )",
-                      3, 34, "not injective on its guard");
+                      3, 34, "collapses its guard");
   // An invertible reset is not flagged.
   Derived e(R"(state x, y
 mode a { x' = 1 + x; y' = -y }

@@ -518,8 +518,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       dest.clear();
       std::size_t n_out = 0, n_atom = 0, n_void = 0;
       bool failed = false;
-      // Pass 1: the forward flow of every sample (kept: pass 2 reads its neighbours).
-      for (std::size_t q = 0; q < K && !failed; ++q) {
+      auto sample = [&](std::size_t q) {
         State x0{};
         std::size_t rem = q;
         for (std::size_t a = N; a-- > 0;) {
@@ -527,10 +526,24 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
           rem /= static_cast<std::size_t>(Ka);
           x0[a] = lo[a] + (j + 0.5) * (hi[a] - lo[a]) / static_cast<double>(Ka);
         }
+        return x0;
+      };
+      // The cell's mass of mode m lives on cell ∩ support ∩ the mode's region; where no sample
+      // lies in the region (a node that took mass by the deposit's support-only fallback),
+      // on cell ∩ support, so that such mass moves on instead of being booked as outflow.
+      bool use_region = false;
+      for (std::size_t q = 0; q < K && !use_region; ++q) {
+        const State x0 = sample(q);
+        use_region = M::in_support(x0.data(), par) && in_mode_region<M>(m, x0.data(), par);
+      }
+      // Pass 1: the forward flow of every sample (kept: pass 2 reads its neighbours).
+      for (std::size_t q = 0; q < K && !failed; ++q) {
+        const State x0 = sample(q);
         valid[q] = 0;
         flowed[q] = 0;
-        if (!M::in_support(x0.data(), par) || !in_mode_region<M>(m, x0.data(), par)) {
-          ++n_void;  // no state there: the cell's mass lives on cell ∩ support ∩ region
+        if (!M::in_support(x0.data(), par) ||
+            (use_region && !in_mode_region<M>(m, x0.data(), par))) {
+          ++n_void;  // no state there
           continue;
         }
         end[q] = flow.run(m, x0, opt.step);
