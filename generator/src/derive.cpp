@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <functional>
 #include <new>
+#include <optional>
 #include <random>
 #include <string>
 #include <utility>
@@ -233,6 +234,39 @@ bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
 
 namespace {
 
+/// The guard surface s = 0 solved for one state: the first x_k whose coefficient in ∇s is
+/// state-free and not zero and for which x_k − s/c no longer contains x_k (s linear in x_k),
+/// as (k, that solution); nullopt if there is none.
+std::optional<std::pair<std::size_t, ex>> solve_surface(const IrGuard& g, const std::vector<ex>& X,
+                                                        const std::vector<ex>& symbols) {
+  for (std::size_t k = 0; k < X.size(); ++k) {
+    const ex c = g.gradient[k];
+    bool state_free = true;
+    for (const auto& xi : X)
+      if (c.has(xi)) state_free = false;
+    if (!state_free || is_identically_zero(c, symbols)) continue;
+    ex solution = simplify(X[k] - g.surface / c);
+    if (solution.has(X[k])) continue;
+    return std::make_pair(k, solution);
+  }
+  return std::nullopt;
+}
+
+/// "x = 0, p = -1.5": a sampled point with the state names, for warnings.
+std::string point_text(const std::vector<std::string>& names, const std::vector<double>& x) {
+  std::string text;
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.6g", x[i]);
+    text += (i ? ", " : "") + names[i] + " = " + b;
+  }
+  return text;
+}
+
+}  // namespace
+
+namespace {
+
 std::vector<ex> jacobian(const std::vector<ex>& f, const std::vector<ex>& x) {
   std::vector<ex> J;
   J.reserve(f.size() * x.size());
@@ -443,24 +477,16 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
     auto injective_on_guard = [&] {
       std::vector<ex> E(g.reset_jacobian);
       E.insert(E.end(), g.gradient.begin(), g.gradient.end());
-      for (std::size_t k = 0; k < n; ++k) {
-        const ex c = g.gradient[k];
-        bool state_free = true;
-        for (const auto& xi : X)
-          if (c.has(xi)) state_free = false;
-        if (!state_free || is_identically_zero(c, all_symbols)) continue;
-        const ex solution = simplify(X[k] - g.surface / c);
-        if (solution.has(X[k])) continue;
+      if (const auto on_s = solve_surface(g, X, all_symbols)) {
         try {
-          std::vector<ex> on_s(E);
-          for (auto& e : on_s) e = e.subs(GiNaC::exmap{{X[k], solution}});
-          E = std::move(on_s);
+          std::vector<ex> at_s(E);
+          for (auto& e : at_s) e = e.subs(GiNaC::exmap{{X[on_s->first], on_s->second}});
+          E = std::move(at_s);
         } catch (const LimitExceeded&) {
           throw;
         } catch (const std::exception&) {
           // A pole on S (GiNaC's pole_error): judge in the whole space instead.
         }
-        break;
       }
       // G = DΔᵀDΔ + σ²∇s∇sᵀ, σ = ‖DΔ‖_F/‖∇s‖: the two terms on one scale.
       return !singular_at_sampled_points(E, n, all_symbols, [n](const auto& v) {
@@ -584,27 +610,18 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
 
     // Restrict J to S when s is linear in some x_k with a state-free coefficient.
     g.hybrid_jacobian_on_surface = g.hybrid_jacobian;
-    for (std::size_t k = 0; k < n; ++k) {
-      ex c = g.gradient[k];
-      bool state_free = true;
-      for (const auto& xi : X)
-        if (c.has(xi)) state_free = false;
-      if (!state_free || is_identically_zero(c, all_symbols)) continue;
-      ex solution = simplify(X[k] - g.surface / c);
-      if (solution.has(X[k])) continue;
+    if (const auto on_s = solve_surface(g, X, all_symbols)) {
       // J can have a pole on S (where the flow before the reset is tangent to
       // it: ∇s·X⁻ = 0, e.g. y' = −y on the guard y = 0): GiNaC then throws
       // "division by zero" and J keeps its general form (fuzz finding F9).
       try {
         g.hybrid_jacobian_on_surface =
-            simplify(g.hybrid_jacobian.subs(GiNaC::exmap{{X[k], solution}}));
+            simplify(g.hybrid_jacobian.subs(GiNaC::exmap{{X[on_s->first], on_s->second}}));
+        g.surface_note = m.state[on_s->first] + " = " + "(solved from s = 0)";
       } catch (const LimitExceeded&) {
         throw;
       } catch (const std::exception&) {
-        break;
       }
-      g.surface_note = m.state[k] + " = " + "(solved from s = 0)";
-      break;
     }
     sys.guards.push_back(std::move(g));
   }
@@ -784,12 +801,7 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
           if (inside) behind = x;
         }
         if (!behind.empty()) {
-          std::string point;
-          for (std::size_t i = 0; i < n; ++i) {
-            char b[64];
-            std::snprintf(b, sizeof b, "%.6g", behind[i]);
-            point += (i ? ", " : "") + m.state[i] + " = " + b;
-          }
+          const std::string point = point_text(m.state, behind);
           sys.warnings.push_back(
               where +
               " is a wall (its reset maps the surface onto itself), and the domain "
@@ -801,12 +813,7 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         }
       }
       if (leaks > 0) {
-        std::string point;
-        for (std::size_t i = 0; i < n; ++i) {
-          char b[64];
-          std::snprintf(b, sizeof b, "%.6g", leak_point[i]);
-          point += (i ? ", " : "") + m.state[i] + " = " + b;
-        }
+        const std::string point = point_text(m.state, leak_point);
         const bool dec = g.direction == Direction::Decreasing;
         sys.warnings.push_back(
             where + ": at (" + point + ") and " + std::to_string(leaks - 1) +

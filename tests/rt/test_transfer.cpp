@@ -106,29 +106,50 @@ double rel_l1(const rt::TensorGrid<N>& grid, const rt::Solution<N>& sol, std::si
 
 // ---------------------------------------------------------------------------------------
 
-TEST(Transfer, HatWeightsReproduceLinearFunctions) {
-  // Multilinear interpolation is exact for affine functions and its weights are a partition
-  // of unity with non-negative entries; points outside the box are rejected. (The `hat`
-  // deposit relies on both: mass is split without loss, and its centre is kept.)
-  const auto grid = ball_grid(9);
-  std::array<std::size_t, 4> idx{};
-  std::array<double, 4> wt{};
-  for (const auto& x : std::vector<std::array<double, 2>>{
-           {0.3, -1.1}, {0.0, -2.0}, {2.0, 2.0}, {1.75, 0.5}, {1.0, 0.0}}) {
-    ASSERT_TRUE(rt::detail::hat_weights<2>(grid, x.data(), idx, wt));
-    double s = 0.0, f = 0.0;
-    for (std::size_t c = 0; c < 4; ++c) {
-      EXPECT_GE(wt[c], 0.0);
-      const auto y = grid.node(idx[c]);
-      s += wt[c];
-      f += wt[c] * (3.0 * y[0] - 2.0 * y[1] + 1.0);
+TEST(Transfer, HatDepositIsAPartitionOfUnityThatKeepsTheCentre) {
+  // The `hat` deposit of a sample's box [c − δ/2, c + δ/2] (per axis: axis_box_weights, exact
+  // integrals of the hats; a tensor product in `deposit`): weights ≥ 0 summing to 1 (no mass
+  // lost or made), and Σ_j w_j x_j = the centre of the box clipped to the grid (the hats
+  // reproduce linear functions, so ∫_I Σ φ_j x_j = ∫_I x), for boxes inside, at the faces,
+  // wider than a cell, and points (δ = 0). A point outside the box is refused.
+  const auto grid = ball_grid(9);  // [0, 2] × [−2, 2], Δ = 0.25, 0.5
+  const std::array<double, 2> dx{0.25, 0.5};
+  const std::vector<char> all(grid.size(), 1);
+  std::vector<std::pair<std::size_t, double>> out;
+  for (const auto& [x, delta] :
+       std::vector<std::pair<std::array<double, 2>, std::array<double, 2>>>{
+           {{0.3, -1.1}, {0.1, 0.2}},
+           {{0.0, -2.0}, {0.0625, 0.125}},
+           {{2.0, 2.0}, {0.0, 0.0}},
+           {{1.75, 0.5}, {0.6, 1.3}},
+           {{1.0, 0.0}, {0.25, 0.5}},
+           {{0.05, 1.97}, {0.2, 0.2}}}) {
+    out.clear();
+    ASSERT_TRUE(
+        rt::detail::deposit<2>(rt::TransferScheme::hat, grid, dx, delta, all.data(), x, out));
+    double sum = 0.0;
+    std::array<double, 2> centre{}, mean{};
+    for (std::size_t a = 0; a < 2; ++a) {
+      const double lo = std::max(grid.axes[a].min, x[a] - 0.5 * delta[a]);
+      const double hi = std::min(grid.axes[a].max, x[a] + 0.5 * delta[a]);
+      centre[a] = 0.5 * (lo + hi);
     }
-    EXPECT_NEAR(s, 1.0, 1e-15);
-    EXPECT_NEAR(f, 3.0 * x[0] - 2.0 * x[1] + 1.0, 1e-13);
+    for (const auto& [node, w] : out) {
+      EXPECT_GE(w, 0.0);
+      sum += w;
+      const auto y = grid.node(node);
+      for (std::size_t a = 0; a < 2; ++a) mean[a] += w * y[a];
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-15);
+    EXPECT_NEAR(mean[0], centre[0], 1e-13);
+    EXPECT_NEAR(mean[1], centre[1], 1e-13);
   }
-  const std::array<double, 2> out{2.01, 0.0}, out2{1.0, -2.5};
-  EXPECT_FALSE(rt::detail::hat_weights<2>(grid, out.data(), idx, wt));
-  EXPECT_FALSE(rt::detail::hat_weights<2>(grid, out2.data(), idx, wt));
+  for (const auto& x : std::vector<std::array<double, 2>>{{2.01, 0.0}, {1.0, -2.5}}) {
+    out.clear();
+    EXPECT_FALSE(
+        rt::detail::deposit<2>(rt::TransferScheme::hat, grid, dx, {0.1, 0.1}, all.data(), x, out));
+    EXPECT_TRUE(out.empty());
+  }
 }
 
 /// Column sums of P computed here from the CSR arrays (independently of check_columns).

@@ -19,9 +19,9 @@
 ///     smoothing of the deposit would carry a mode's mass across its switching surface, where
 ///     that mode's guard never fires again: measured on models/filippov.model,
 ///     tests/validation/test_moments.cpp) —
-///       `hat` (default): on the 2^N corners of the grid cell containing the end point with
-///         the multilinear hat weights φ_j (cloud-in-cell), renormalised over the corners
-///         inside the support (the fraction never goes to a node that holds no state);
+///       `hat` (default): on the hat functions φ_j, by their exact integrals over the image
+///         of the sample's sub-cell (`deposit`), renormalised over the nodes that may hold the
+///         mass (the fraction never goes to a node that holds no state);
 ///       `cell` (Ulam): all of it on the node whose dual cell contains the end point;
 ///   * outside the box or the support: outflow_i;
 ///   * at a Zeno point within h (mass concentrated on a point, which no density holds): atom_i.
@@ -214,38 +214,6 @@ std::vector<double> trapezoid_weights(const TensorGrid<N>& grid, std::size_t n_m
     for (std::size_t m = 0; m < n_mode; ++m) w[m * n + i] = wi;
   }
   return w;
-}
-
-/// The multilinear hat functions at x: flat node indices and weights of the 2^N corners of
-/// the cell containing x; false if x is outside the box (beyond 1e-12 of a side, rounding).
-template <std::size_t N>
-bool hat_weights(const TensorGrid<N>& grid, const double* x,
-                 std::array<std::size_t, (std::size_t{1} << N)>& idx,
-                 std::array<double, (std::size_t{1} << N)>& wt) {
-  std::array<std::size_t, N> base{};
-  std::array<double, N> t{};
-  for (std::size_t a = 0; a < N; ++a) {
-    const GridAxis& ax = grid.axes[a];
-    const double cells = static_cast<double>(ax.n - 1);
-    const double s = (x[a] - ax.min) / (ax.max - ax.min) * cells;
-    if (!(s >= -1e-12 * cells && s <= cells * (1.0 + 1e-12))) return false;
-    const double f = std::clamp(std::floor(s), 0.0, cells - 1.0);
-    base[a] = static_cast<std::size_t>(f);
-    t[a] = std::clamp(s - f, 0.0, 1.0);
-  }
-  constexpr std::size_t C = std::size_t{1} << N;
-  for (std::size_t c = 0; c < C; ++c) {
-    std::size_t flat = 0;
-    double w = 1.0;
-    for (std::size_t a = 0; a < N; ++a) {
-      const std::size_t bit = (c >> (N - 1 - a)) & 1U;
-      flat = flat * static_cast<std::size_t>(grid.axes[a].n) + base[a] + bit;
-      w *= bit ? t[a] : 1.0 - t[a];
-    }
-    idx[c] = flat;
-    wt[c] = w;
-  }
-  return true;
 }
 
 /// Options with the ODE's first trial step = h unless set: every trace spans exactly h, and
@@ -627,8 +595,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         if (valid[q] &&
             (deposit<N>(opt.scheme, grid, dx, width, in_region.data() + mo, res.x, dest) ||
              deposit<N>(opt.scheme, grid, dx, width, in_support.data(), res.x, dest))) {
-          const std::size_t off = static_cast<std::size_t>(res.mode) * static_cast<std::size_t>(nn);
-          for (std::size_t k = before; k < dest.size(); ++k) dest[k].first += off;
+          for (std::size_t k = before; k < dest.size(); ++k) dest[k].first += mo;
         } else {
           ++n_out;
         }
@@ -851,7 +818,7 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
       os << "the transfer operator broke the mass budget at step " << n + 1
          << " (t = " << static_cast<double>(n + 1) * op.step
          << "): mass + outflow + atom changed by " << defect << " of the initial mass (tolerance "
-         << kStepBudgetTol << "); the largest gain is at node " << worst % op.n_node << " of mode "
+         << tol << "); the largest gain is at node " << worst % op.n_node << " of mode "
          << worst / op.n_node;
       run.failure = os.str();
       break;
