@@ -457,6 +457,8 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
   cfg["scheme"] = m.sim.scheme;
   cfg["samples"] = m.sim.samples;
   cfg["eigenvalues"] = m.sim.eigenvalues;
+  cfg["budget"] = m.sim.budget;
+  cfg["budget_tol"] = m.sim.budget_tol;
   cfg["quiet"] = quiet;
   cfg["seconds"] = {{"derive", fe.seconds}, {"build", b.seconds}};
   const std::string config = (staging / "config.json").string();

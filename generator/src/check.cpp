@@ -663,6 +663,8 @@ const std::vector<std::string>& setting_names() {
                                                  "scheme",
                                                  "samples",
                                                  "eigenvalues",
+                                                 "budget",
+                                                 "budget_tol",
                                                  "max_expr_nodes",
                                                  "max_expand_terms",
                                                  "derive_seconds",
@@ -732,9 +734,9 @@ double parse_override_number(const std::string& key, const std::string& value) {
 
 bool is_simulation_setting(const std::string& key) {
   static const std::set<std::string> keys = {
-      "t_end",          "dt",     "tol",    "max_events",  "method",         "particles",
-      "seed",           "step",   "scheme", "eigenvalues", "max_expr_nodes", "max_expand_terms",
-      "derive_seconds", "samples"};
+      "t_end",          "dt",      "tol",    "max_events",  "method",         "particles",
+      "seed",           "step",    "scheme", "eigenvalues", "max_expr_nodes", "max_expand_terms",
+      "derive_seconds", "samples", "budget", "budget_tol"};
   return keys.count(key) > 0;
 }
 
@@ -770,6 +772,9 @@ std::string set_simulation_setting(Model& model, const std::string& key, const S
              "deposited on hat functions) or 'cell' (Ulam); both conserve mass";
     return word({"hat", "cell"}, sim.scheme);
   }
+  if (key == "budget") return word({"full", "fast", "off"}, sim.budget);
+  if (key == "budget_tol")
+    return num(1e-12, 0.1, false, "in [1e-12, 0.1]", [&](double x) { sim.budget_tol = x; });
   if (key == "samples")
     return num(0, 64, true, "an integer in [0, 64] (0: 4 per axis up to 2-D, 3 in 3-D, 2 above)",
                [&](double x) { sim.samples = static_cast<int>(x); });

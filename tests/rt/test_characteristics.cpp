@@ -352,7 +352,7 @@ TEST(Characteristics, TwoModeGridLayoutAndBudget) {
   // internal. u jumps where a history is cut (e.g. A right of 1 + t), so the Gauss rule
   // converges like its panel width only: 4000 panels.
   const std::array<rt::AxisRule, 1> rules{rt::gauss_legendre_rule(-2.0, 2.0, 4000, 2)};
-  const auto res = rt::mass_budget<TwoMode1D>(grid, rules, rules, times, nullptr, opt, 6);
+  const auto res = rt::mass_budget<TwoMode1D>(grid, rules, rules, times, nullptr, opt);
   ASSERT_TRUE(res.ok());
   const auto& b = res.budget;
   std::printf("[ budget two-mode ] mass0 %.10f mass(4) %.10f outflow(4) %.10f max|atom| %.3g\n",
@@ -495,8 +495,8 @@ TEST(MassBudget, SmoothFlowClosesTightly) {
   const std::array<double, 1> par{0.15};
   const auto times = output_times(13, 0.25);
   const rt::AxisRule r = rt::gauss_legendre_rule(-1.0, 1.0, 8, 8);
-  const auto res = rt::mass_budget<Spiral2D>(box, {r, r}, {r, r}, times, par.data(),
-                                             tolerances(1e-12, 1e-14), 6);
+  const auto res =
+      rt::mass_budget<Spiral2D>(box, {r, r}, {r, r}, times, par.data(), tolerances(1e-12, 1e-14));
   ASSERT_TRUE(res.ok());
   const auto& b = res.budget;
   std::printf("[ budget spiral ] mass0 %.12f mass(3) %.12f outflow(3) %.12f max|atom| %.3g\n",
@@ -514,7 +514,7 @@ TEST(MassBudget, ElasticBallPaperGrid) {
   const auto sol = rt::solve_grid<Ball>(grid, times, par.data(), opt);
   ASSERT_TRUE(sol.ok());
   const auto t0 = std::chrono::steady_clock::now();
-  const auto res = rt::mass_budget<Ball>(grid, sol, times, par.data(), opt, 4);
+  const auto res = rt::mass_budget<Ball>(grid, sol, times, par.data(), opt);
   const double secs = seconds_since(t0);
   ASSERT_TRUE(res.ok());
   const auto& b = res.budget;
@@ -536,7 +536,7 @@ TEST(MassBudget, ElasticBallGaussConverges) {
     const std::array<rt::AxisRule, 2> rules{rt::gauss_legendre_rule(0.0, 2.0, panels, 6),
                                             rt::gauss_legendre_rule(-2.0, 2.0, 2 * panels, 6)};
     const auto t0 = std::chrono::steady_clock::now();
-    const auto res = rt::mass_budget<Ball>(grid, rules, rules, times, par.data(), opt, 4);
+    const auto res = rt::mass_budget<Ball>(grid, rules, rules, times, par.data(), opt);
     const double secs = seconds_since(t0);
     ASSERT_TRUE(res.ok()) << rt::describe<Ball>(res.failure);
     const auto& b = res.budget;
@@ -579,7 +579,7 @@ TEST(MassBudget, ZenoAtomIsTheZenoMass) {
                                           rt::gauss_legendre_rule(bp, 6)};
   const auto t0 = std::chrono::steady_clock::now();
   const auto res =
-      rt::mass_budget<Ball>(box, rules, rules, times, par.data(), tolerances(1e-10, 1e-12), 16);
+      rt::mass_budget<Ball>(box, rules, rules, times, par.data(), tolerances(1e-10, 1e-12));
   const double secs = seconds_since(t0);
   ASSERT_TRUE(res.ok()) << rt::describe<Ball>(res.failure);
   const auto& b = res.budget;

@@ -81,6 +81,8 @@ struct Simulation {
   std::string scheme = "hat";              ///< Transfer operator: hat | cell.
   int samples = 0;      ///< Transfer operator: sample points per axis and cell (0: default).
   int eigenvalues = 6;  ///< Eigenvalues reported by method invariant.
+  std::string budget = "full";  ///< characteristics: mass budget full | fast | off.
+  double budget_tol = 3e-4;     ///< characteristics: relative tolerance of the full budget.
 };
 
 /// What the reduce stage derived for a Lie-group model (paper §3.2): carried by

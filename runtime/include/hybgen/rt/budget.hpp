@@ -51,22 +51,33 @@
 ///    batch of ≤ 2²¹ (point, time, mode) values.
 ///
 /// Faces: one cubature over all 2N faces together (cells tagged with their face), of the
-/// cumulative outflow density at each output time (see `detail::FaceValues`); in time a
-/// fixed `time_order`-point Gauss–Legendre rule per output interval, whose error (~1e-5 of
-/// the mass for the ball with dt = 0.5, order 3) is not part of the estimate. A face point
-/// costs one characteristic for all time nodes, so the faces are cheap (hundreds of points).
+/// cumulative outflow density at each output time (see `detail::FaceValues`); in time the
+/// integral ∫₀^{t_k} u dt is taken along each face point's characteristic by adaptive
+/// Gauss–Legendre on the ODE's dense output (CharacteristicsOptions::cumulative_tol), so a
+/// flux that starts or stops inside an output interval costs a few more panels, not accuracy.
+/// A face point costs one characteristic for all times, so the faces are cheap.
+///
+/// Atom: a third cubature, over the box, of the initial density of the points whose FORWARD
+/// flow (forward.hpp) comes to rest at a Zeno point by each output time (`adaptive_atom`).
+/// The three terms are measured independently, so mass0 − mass − outflow − atom (the defect)
+/// tests them: within the sum of their estimates it says the budget is closed; beyond, it
+/// is mass no term measures (a reset carrying mass across the box boundary, or an error
+/// the estimates missed).
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <limits>
 #include <queue>
 #include <span>
+#include <string>
 #include <utility>
 #include <vector>
 
 #include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/forward.hpp"
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/ode.hpp"
 
@@ -121,6 +132,10 @@ void collect(const Cubature& cub, bool ok, std::size_t first, std::size_t n,
   stats.cells = cub.cells();
   stats.iterations = cub.iterations();
   stats.converged = ok && cub.converged();
+  // Stopped by the point cap: a feature no node has seen yet at one time (the Zeno basin at
+  // early times) has no estimate of its own, so every time gets the largest estimate of any.
+  if (!stats.converged)
+    for (double& e : stats.error) e = std::max(e, stats.error_estimate);
 }
 
 }  // namespace detail
@@ -129,6 +144,7 @@ void collect(const Cubature& cub, bool ok, std::size_t first, std::size_t n,
 struct AdaptiveBudgetInfo {
   AdaptiveMass volume;      ///< The volume integral (masses).
   AdaptiveOutflow surface;  ///< The face integral (outflow).
+  AdaptiveOutflow atom;     ///< The atom's integral (`outflow` holds the atom).
 };
 
 namespace detail {
@@ -599,23 +615,25 @@ struct VolumeValues {
 };
 
 /// Face integrand: the cumulative net outflow density at a face point,
-///   g_k(y) = Σ_{time nodes t_j ≤ t_k} w_j Σ_m fw_m(y) u(t_j, m, y),
-/// with u the limit from inside the box (FaceContext) and the flux weight fw_m = X_m·n_out,
-/// except at a point of a guard surface S_h where h fires: the mass crossing there is reset
-/// to Δ_h(y) and counts only if it leaves the box (outwards, Δ_h(y) outside) or enters it
-/// (inwards, Δ_h(y) inside) — the rule of `detail::outflow`. Face f = 2a + side is normal to
-/// axis a at lo[a] (side 0) or hi[a] (side 1); its D = N − 1 coordinates are the other axes
-/// in order; a cell's tag indexes `face`.
+///   g_k(y) = Σ_m fw_m(y) ∫₀^{t_k} u(t, m, y) dt,
+/// the time integral taken along the characteristic from y to the tolerance `time_tol`
+/// (CharacteristicsOptions::cumulative_tol: adaptive in time, so a flux that starts or stops
+/// inside an output interval is integrated as accurately as one that does not), u the limit
+/// from inside the box (FaceContext) and the flux weight fw_m = X_m·n_out, except at a point
+/// of a guard surface S_h where h fires: the mass crossing there is reset to Δ_h(y) and
+/// counts only if it leaves the box (outwards, Δ_h(y) outside) or enters it (inwards, Δ_h(y)
+/// inside) — the rule of `detail::outflow`. Face f = 2a + side is normal to axis a at lo[a]
+/// (side 0) or hi[a] (side 1); its D = N − 1 coordinates are the other axes in order; a
+/// cell's tag indexes `face`.
 template <HybridModel M>
 struct FaceValues {
   static constexpr std::size_t N = state_dim_v<M>;  ///< State dimension.
   static constexpr std::size_t D = N - 1;           ///< Face dimension.
   std::span<const double> times;                    ///< Output times.
-  std::vector<double> tq, wq;                       ///< Time nodes and weights.
   std::array<double, N> lo{}, hi{};                 ///< The box.
   double diam = 0.0;                                ///< Largest box side.
   const double* par = nullptr;                      ///< Parameters.
-  const CharacteristicsOptions* opt = nullptr;      ///< Characteristics options.
+  CharacteristicsOptions opt{};                     ///< Options, cumulative_tol > 0.
   TraceFailure<N> failure{};                        ///< First failure.
   std::vector<std::size_t> face;                    ///< Face 2a + side of each root box.
   std::vector<std::array<double, N>> y;             ///< Work: the points in ℝᴺ.
@@ -639,7 +657,7 @@ struct FaceValues {
       ctx[i].lo = lo;
       ctx[i].hi = hi;
     }
-    const Solution<N> sol = evaluate<M>(std::span<const std::array<double, N>>(y), tq, par, *opt,
+    const Solution<N> sol = evaluate<M>(std::span<const std::array<double, N>>(y), times, par, opt,
                                         std::span<const FaceContext<N>>(ctx));
     if (!sol.ok()) {
       failure = sol.failure;
@@ -653,12 +671,7 @@ struct FaceValues {
       for (std::size_t m = 0; m < sol.n_mode; ++m) {
         const double xn = face_flux<M>(static_cast<int>(m), yi, a, sign, lo, hi, diam, par);
         if (xn == 0.0) continue;
-        double acc = 0.0;
-        std::size_t j = 0;
-        for (std::size_t k = 0; k < K; ++k) {
-          for (; j < tq.size() && tq[j] <= times[k]; ++j) acc += wq[j] * xn * sol.at(j, m, i);
-          U[i * K + k] += acc;
-        }
+        for (std::size_t k = 0; k < K; ++k) U[i * K + k] += xn * sol.at(k, m, i);
       }
     }
     return true;
@@ -701,14 +714,15 @@ AdaptiveMass adaptive_mass(const TensorGrid<state_dim_v<M>>& box, std::span<cons
 }
 
 /// Adaptive cubature of the cumulative net outflow through the faces of `box` (the rule of
-/// `detail::outflow`, see `detail::FaceValues`), all faces in one cubature; in time
-/// `time_order`-point Gauss–Legendre on each output interval (and from 0). The target is
-/// rel_tol·scale per output time (scale: e.g. the box mass; ≤ 0: the largest |outflow|).
+/// `detail::outflow`, see `detail::FaceValues`), all faces in one cubature; in time the
+/// integral along each face point's characteristic to the relative tolerance `time_tol`. The
+/// target is rel_tol·scale per output time (scale: e.g. the box mass; ≤ 0: the largest
+/// |outflow|).
 template <HybridModel M>
 AdaptiveOutflow adaptive_outflow(const TensorGrid<state_dim_v<M>>& box,
                                  std::span<const double> times, const double* par,
                                  const CharacteristicsOptions& opt, const AdaptiveOptions& aopt,
-                                 double scale, int time_order,
+                                 double scale, double time_tol,
                                  TraceFailure<state_dim_v<M>>& failure) {
   constexpr std::size_t N = state_dim_v<M>;
   constexpr std::size_t D = N - 1;
@@ -719,18 +733,9 @@ AdaptiveOutflow adaptive_outflow(const TensorGrid<state_dim_v<M>>& box,
   detail::FaceValues<M> values;
   values.times = times;
   values.par = par;
-  values.opt = &opt;
-  const AxisRule gl = gauss_legendre(time_order);
-  double t_left = 0.0;
-  for (const double b : times) {
-    if (b > t_left)
-      for (std::size_t j = 0; j < gl.nodes.size(); ++j) {
-        values.tq.push_back(0.5 * (t_left + b) + 0.5 * (b - t_left) * gl.nodes[j]);
-        values.wq.push_back(0.5 * (b - t_left) * gl.weights[j]);
-      }
-    t_left = b;
-  }
-  if (values.tq.empty()) {
+  values.opt = opt;
+  values.opt.cumulative_tol = time_tol > 0.0 ? time_tol : detail::kFluxTimeTol;
+  if (times.empty() || times.back() <= 0.0) {
     res.converged = true;
     return res;
   }
@@ -755,8 +760,7 @@ AdaptiveOutflow adaptive_outflow(const TensorGrid<state_dim_v<M>>& box,
       values.face.push_back(2 * a + side);
     }
   }
-  const std::size_t per_point =
-      times.size() + values.tq.size() * static_cast<std::size_t>(M::n_mode);
+  const std::size_t per_point = times.size() * (1 + static_cast<std::size_t>(M::n_mode));
   detail::AdaptiveCubature<D, detail::FaceValues<M>> cub(faces, times.size(), per_point, aopt,
                                                          scale, values);
   const bool ok = cub.run();
@@ -765,18 +769,139 @@ AdaptiveOutflow adaptive_outflow(const TensorGrid<state_dim_v<M>>& box,
   return res;
 }
 
-/// The mass budget by adaptive cubature: mass and mass0 from `adaptive_mass` (estimated
-/// errors in `MassBudget::mass_error`), the outflow from `adaptive_outflow` with the target
-/// rel_tol·max(mass0, max_k mass_k) and `time_order`-point Gauss–Legendre in time, and
-/// atom = mass0 − mass − outflow; the atom's estimated error is mass_error[k] + (that of
-/// mass0) + the outflow's (in `info`). A failed characteristic is reported in `failure`
-/// (volume first). `grid` only gives the box: the result does not depend on its nodes.
+namespace detail {
+
+/// Atom integrand: the initial density of the points whose FORWARD flow has come to rest at a
+/// Zeno accumulation point by each output time (forward.hpp's Zeno signature),
+///   U[i·K + k] = Σ_m u0(m, x_i)·[t_Z(m, x_i) ≤ t_k].
+/// The atom is thereby MEASURED where resets accumulate, independently of the backward
+/// characteristics that give the mass and the outflow, so mass0 − mass − outflow − atom is a
+/// real check of the budget. A forward flow that hits its event cap without the Zeno
+/// signature (chattering) or fails numerically is a failure of the budget (`failure`).
+template <HybridModel M>
+struct ZenoValues {
+  static constexpr std::size_t N = state_dim_v<M>;  ///< State dimension.
+  std::span<const double> times;                    ///< Output times.
+  const double* par = nullptr;                      ///< Parameters.
+  ForwardOptions fopt{};                            ///< Options of the forward flows.
+  std::string failure;                              ///< First failure (describe), or empty.
+
+  /// U[i·K + k] as above, OpenMP over the points.
+  bool operator()(std::span<const Cell<N>>, std::span<const std::array<double, N>> pts, std::size_t,
+                  std::vector<double>& U) {
+    const std::size_t K = times.size();
+    const auto P = static_cast<long long>(pts.size());
+    std::atomic<long long> first_fail{P};
+    std::string msg;
+#pragma omp parallel
+    {
+      ForwardFlow<M> flow(par, fopt);
+#pragma omp for schedule(dynamic, 8)
+      for (long long ii = 0; ii < P; ++ii) {
+        if (ii > first_fail.load(std::memory_order_relaxed)) continue;
+        const auto i = static_cast<std::size_t>(ii);
+        const std::array<double, N>& x = pts[i];
+        if (!M::in_support(x.data(), par)) continue;
+        for (int m = 0; m < M::n_mode; ++m) {
+          const double u0 = M::initial_density(m, x.data(), par);
+          if (u0 == 0.0) continue;  // no mass: its fate does not matter
+          const ForwardResult<N> r =
+              flow.run(m, x, times, [](std::size_t, int, const std::array<double, N>&) {});
+          if (r.status == ForwardStatus::event_cap || r.status == ForwardStatus::failed) {
+#pragma omp critical(hybgen_rt_budget_zeno_failure)
+            {
+              if (ii < first_fail.load()) {
+                first_fail.store(ii);
+                msg = describe<M>(r, m, x);
+              }
+            }
+            break;
+          }
+          if (r.status != ForwardStatus::zeno) continue;
+          for (std::size_t k = 0; k < K; ++k)
+            if (times[k] >= r.t_stop) U[i * K + k] += u0;
+        }
+      }
+    }
+    if (first_fail.load() < P) {
+      failure = msg;
+      return false;
+    }
+    return true;
+  }
+};
+
+/// Root cells per axis of the atom's cubature (each cut into 4 per axis by the cubature, with
+/// 4 Gauss nodes per axis per cell): 32 nodes per axis up to 2-D, so that a small basin of
+/// Zeno points is not missed by the first level of nodes; 16 above.
+inline constexpr std::size_t zeno_roots_per_axis(std::size_t n) {
+  return n <= 2 ? 2 : 1;
+}
+
+}  // namespace detail
+
+/// Adaptive cubature of the Zeno atom: atom[k] = Σ_m ∫_box u0·[t_Z ≤ t_k] (see
+/// `detail::ZenoValues`), all times at once, target rel_tol·scale. Models without guards
+/// have no atom (0, exactly, without a flow). On a failed forward flow `failure` is set.
+template <HybridModel M>
+AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<const double> times,
+                              const double* par, const CharacteristicsOptions& opt,
+                              const AdaptiveOptions& aopt, double scale, std::string& failure) {
+  constexpr std::size_t N = state_dim_v<M>;
+  detail::validate_times(times);
+  AdaptiveOutflow res;  // `outflow` holds the atom
+  res.outflow.assign(times.size(), 0.0);
+  res.error.assign(times.size(), 0.0);
+  if (M::n_guard == 0 || times.empty() || times.back() <= 0.0) {
+    res.converged = true;
+    return res;
+  }
+  detail::ZenoValues<M> values;
+  values.times = times;
+  values.par = par;
+  values.fopt.ode = opt.ode;
+  values.fopt.graze_tol = opt.graze_tol;
+  const std::size_t R = detail::zeno_roots_per_axis(N);
+  std::vector<detail::Cell<N>> roots;
+  std::size_t total = 1;
+  for (std::size_t a = 0; a < N; ++a) total *= R;
+  for (std::size_t flat = 0; flat < total; ++flat) {
+    detail::Cell<N> c;
+    std::size_t rem = flat;
+    for (std::size_t a = 0; a < N; ++a) {
+      const std::size_t j = rem % R;
+      rem /= R;
+      const double lo = box.axes[a].min, hi = box.axes[a].max;
+      c.lo[a] = lo + (hi - lo) * static_cast<double>(j) / static_cast<double>(R);
+      c.hi[a] =
+          j + 1 == R ? hi : lo + (hi - lo) * static_cast<double>(j + 1) / static_cast<double>(R);
+    }
+    roots.push_back(c);
+  }
+  detail::AdaptiveCubature<N, detail::ZenoValues<M>> cub(std::move(roots), times.size(),
+                                                         times.size(), aopt, scale, values);
+  const bool ok = cub.run();
+  if (!ok) failure = values.failure;
+  detail::collect(cub, ok, 0, times.size(), res.outflow, res);
+  return res;
+}
+
+/// The mass budget by adaptive cubature, every term measured on its own:
+///  * mass and mass0: `adaptive_mass` (backward characteristics in the box);
+///  * outflow: `adaptive_outflow` (backward characteristics on the faces, integrated in time
+///    along each to rel_tol/10), target rel_tol·max(mass0, max_k mass_k);
+///  * atom: `adaptive_atom` (forward flows from the box to their Zeno points), same target.
+/// Each has its estimated error (mass_error, outflow_error, atom_error); the DEFECT
+/// mass0 − mass − outflow − atom (`budget_defect`) checks them against each other: it is what
+/// no term accounts for (inflow of mass that started outside the box, mass reset out of the
+/// box from inside it, or an error the estimates missed). `grid` only gives the box.
+/// A failed characteristic is reported in `failure` (volume first), a failed forward flow in
+/// `message`.
 template <HybridModel M>
 BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M>>& grid,
                                                   std::span<const double> times, const double* par,
                                                   const CharacteristicsOptions& opt,
                                                   const AdaptiveOptions& aopt = {},
-                                                  int time_order = 3,
                                                   AdaptiveBudgetInfo* info = nullptr) {
   constexpr std::size_t N = state_dim_v<M>;
   BudgetResult<N> res;
@@ -786,18 +911,27 @@ BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M
   double scale = std::fabs(am.mass0);
   for (const double m : am.mass) scale = std::max(scale, std::fabs(m));
   TraceFailure<N> flux_failure;
+  const double time_tol = 0.1 * aopt.rel_tol;
   AdaptiveOutflow ao =
-      adaptive_outflow<M>(grid, times, par, opt, aopt, scale, time_order, flux_failure);
+      adaptive_outflow<M>(grid, times, par, opt, aopt, scale, time_tol, flux_failure);
   if (res.failure.ok()) res.failure = flux_failure;
+  AdaptiveOutflow az = adaptive_atom<M>(grid, times, par, opt, aopt, scale, res.message);
   mb.mass0 = am.mass0;
   mb.mass = am.mass;
   mb.mass_error = am.error;
+  mb.mass0_error = am.mass0_error;
   mb.outflow = ao.outflow;
-  mb.atom.resize(times.size());
-  for (std::size_t k = 0; k < times.size(); ++k) mb.atom[k] = mb.mass0 - mb.mass[k] - mb.outflow[k];
+  mb.atom = az.outflow;
+  mb.outflow_error.resize(times.size());
+  mb.atom_error = az.error;
+  // The time integral's tolerance is relative to max|u| along each face characteristic:
+  // ≤ time_tol·scale over the run (scale ≥ the mass that can cross).
+  for (std::size_t k = 0; k < times.size(); ++k)
+    mb.outflow_error[k] = ao.error[k] + time_tol * scale;
   if (info != nullptr) {
     info->volume = std::move(am);
     info->surface = std::move(ao);
+    info->atom = std::move(az);
   }
   return res;
 }

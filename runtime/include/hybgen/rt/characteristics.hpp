@@ -92,6 +92,42 @@ void write_state(std::ostream& os, const std::array<double, state_dim_v<M>>& x) 
   os << ')';
 }
 
+/// A 1-D quadrature rule: ∫ f ≈ Σ weights[i]·f(nodes[i]).
+struct AxisRule {
+  std::vector<double> nodes;    ///< Abscissae.
+  std::vector<double> weights;  ///< Weights.
+};
+
+/// Gauss–Legendre nodes and weights on [−1, 1] (Newton on P_n; exact for degree ≤ 2n−1).
+inline AxisRule gauss_legendre(int n) {
+  AxisRule r;
+  const auto un = static_cast<std::size_t>(std::max(n, 1));
+  n = static_cast<int>(un);
+  r.nodes.assign(un, 0.0);
+  r.weights.assign(un, 0.0);
+  for (int i = 0; i < (n + 1) / 2; ++i) {
+    double z = std::cos(std::numbers::pi * (i + 0.75) / (n + 0.5));
+    double pp = 1.0;
+    for (int it = 0; it < 100; ++it) {
+      double p1 = 1.0, p2 = 0.0;
+      for (int j = 0; j < n; ++j) {
+        const double p3 = p2;
+        p2 = p1;
+        p1 = ((2.0 * j + 1.0) * z * p2 - j * p3) / (j + 1.0);
+      }
+      pp = n * (z * p1 - p2) / (z * z - 1.0);
+      const double z1 = z;
+      z = z1 - p1 / pp;
+      if (std::fabs(z - z1) <= 1e-16) break;
+    }
+    const auto lo = static_cast<std::size_t>(i), hi = un - 1 - lo;
+    r.nodes[lo] = -z;
+    r.nodes[hi] = z;
+    r.weights[lo] = r.weights[hi] = 2.0 / ((1.0 - z * z) * pp * pp);
+  }
+  return r;
+}
+
 /// One axis of a tensor grid: n nodes at linspace(min, max, n), both ends included.
 struct GridAxis {
   double min = 0.0;  ///< First node.
@@ -146,6 +182,10 @@ struct CharacteristicsOptions {
   double newton_tol = 1e-14;     ///< Newton stop: ‖δz‖∞ ≤ tol·(1 + ‖z‖∞).
   double graze_tol = kGrazeTol;  ///< Grazing test at crossings (see `detail::grazing`).
   Progress* progress = nullptr;  ///< Advanced once per traced (mode, point) when set.
+  /// When > 0, each output is the time integral ∫₀^{t_k} u(t, y) dt instead of u(t_k, y), to
+  /// this relative tolerance (adaptive Gauss–Legendre in time along every branch; see
+  /// `detail::Tracer::accumulate`). The boundary flux of the mass budget uses it.
+  double cumulative_tol = 0.0;
 };
 
 /// What went wrong on a characteristic.
@@ -425,7 +465,8 @@ class Tracer {
   Tracer(const double* par, const CharacteristicsOptions& opt)
       : par_(par), opt_(opt), ode_(opt.ode) {}
 
-  /// u(t_k, mode, y) into out[k] (see `trace`); `times` is assumed valid.
+  /// u(t_k, mode, y) into out[k] (see `trace`), or ∫₀^{t_k} u(t, mode, y) dt when
+  /// opt.cumulative_tol > 0; `times` is assumed valid.
   TraceStatus<N> run(const State& y, int mode, std::span<const double> times, std::span<double> out,
                      const FaceContext<N>* face) {
     std::fill(out.begin(), out.end(), 0.0);
@@ -434,6 +475,7 @@ class Tracer {
     npend_ = 0;
     times_ = times;
     out_ = out;
+    cmax_ = 0.0;
     if (times.empty() || !M::in_support(y.data(), par_)) return status_;
     Branch root{};
     for (std::size_t i = 0; i < N; ++i) root.x[i] = y[i];
@@ -665,15 +707,83 @@ class Tracer {
     }
   }
 
+  /// Gauss–Legendre rule of kPanelOrder nodes on [−1, 1] for `accumulate`.
+  static const AxisRule& panel_rule() {
+    static const AxisRule rule = gauss_legendre(kPanelOrder);
+    return rule;
+  }
+
+  /// ∫_a^b c(σ) dσ on the current step's interpolant ([a, b] inside it), c(σ) = the current
+  /// branch's contribution at backward time σ, by the kPanelOrder-point Gauss–Legendre rule.
+  double panel(double a, double b) {
+    const AxisRule& r = panel_rule();
+    double s = 0.0;
+    for (std::size_t q = 0; q < r.nodes.size(); ++q) {
+      const double sig = 0.5 * (a + b) + 0.5 * (b - a) * r.nodes[q];
+      Vec x;
+      ode_.dense(sig, x);
+      const double c = contribution(x, mode_, weight_, sig);
+      cmax_ = std::max(cmax_, std::fabs(c));
+      s += r.weights[q] * c;
+    }
+    return 0.5 * (b - a) * s;
+  }
+
+  /// acc_ += ∫_{cursor_}^{b} c(σ) dσ, cursor_ ← b, for b inside the current step. Panels of
+  /// at most 1/kMinPanels of the horizon (a flux pulse narrower than all panels' nodes could
+  /// otherwise be missed); each is accepted when its two halves' rules agree with the
+  /// whole's, |I_L + I_R − I| ≤ tol·max(|I_L + I_R|, cmax·(panel length)), else halved (to
+  /// depth kMaxDepth: a jump of u0 along the path converges linearly). cmax is the largest
+  /// |c| seen on this characteristic, so the error per unit time is ≲ tol·max|u|.
+  void accumulate(double b) {
+    const double a0 = cursor_;
+    cursor_ = std::max(cursor_, b);
+    if (!(b > a0)) return;
+    const double tol = opt_.cumulative_tol;
+    const double hmax = times_.back() / kMinPanels;
+    const int n = std::max(1, static_cast<int>(std::ceil((b - a0) / hmax)));
+    for (int j = 0; j < n && status_.ok(); ++j) {
+      const double pa = a0 + (b - a0) * j / n, pb = j + 1 == n ? b : a0 + (b - a0) * (j + 1) / n;
+      struct Piece {
+        double a, b, whole;
+        int depth;
+      };
+      std::array<Piece, kMaxDepth + 2> stack{};
+      std::size_t top = 0;
+      stack[top++] = Piece{pa, pb, panel(pa, pb), 0};
+      while (top > 0 && status_.ok()) {
+        const Piece p = stack[--top];
+        const double m = 0.5 * (p.a + p.b);
+        const double L = panel(p.a, m), R = panel(m, p.b);
+        const double err = std::fabs(L + R - p.whole);
+        if (p.depth >= kMaxDepth || err <= tol * std::max(std::fabs(L + R), cmax_ * (p.b - p.a))) {
+          acc_ += L + R;
+          continue;
+        }
+        stack[top++] = Piece{m, p.b, R, p.depth + 1};
+        stack[top++] = Piece{p.a, m, L, p.depth + 1};
+      }
+    }
+  }
+
+  /// Cumulative mode: the branch ends at σ; every later output gets its whole integral.
+  void finish_cumulative(std::size_t k) {
+    for (; k < times_.size(); ++k) out_[k] += acc_;
+  }
+
   void process(const Branch& b, const FaceContext<N>* face) {
     const std::size_t K = times_.size();
     const double t_end = times_[K - 1];
+    const bool cumulative = opt_.cumulative_tol > 0.0;
     std::size_t k = b.k_begin;
     while (k < K && times_[k] <= b.tau) {
-      out_[k] += contribution(b.x, b.mode, b.weight, b.tau);
+      // Cumulative outputs before the branch starts get nothing from it (∫ over σ ≤ τ_b).
+      if (!cumulative) out_[k] += contribution(b.x, b.mode, b.weight, b.tau);
       if (!status_.ok()) return;
       ++k;
     }
+    acc_ = 0.0;
+    cursor_ = b.tau;
     if (k >= K) return;
     mode_ = b.mode;
     weight_ = b.weight;
@@ -743,15 +853,28 @@ class Tracer {
       loc_.scan(ode_, gfun, on_root, t_stop);
       if (!status_.ok()) return;
       while (k < K && times_[k] <= t_stop) {
-        Vec x;
-        dense_at(k, x);
-        out_[k] += contribution(x, mode_, weight_, times_[k]);
+        if (cumulative) {
+          accumulate(times_[k]);
+          out_[k] += acc_;
+        } else {
+          Vec x;
+          dense_at(k, x);
+          out_[k] += contribution(x, mode_, weight_, times_[k]);
+        }
         if (!status_.ok()) return;
         ++k;
         k_cur_ = k;
       }
-      if (killed || k >= K) return;
-      if (!M::in_support(ode_.y().data(), par_)) return;  // no history outside the state space
+      if (cumulative && k < K) {
+        accumulate(t_stop);
+        if (!status_.ok()) return;
+      }
+      // The branch ends (killed, or no history outside the state space): cumulative outputs
+      // after its end keep its integral.
+      if (killed || k >= K || !M::in_support(ode_.y().data(), par_)) {
+        if (cumulative) finish_cumulative(k);
+        return;
+      }
     }
   }
 
@@ -774,6 +897,14 @@ class Tracer {
   std::array<Vec, 8> dense_x_{};          // their states (dense_at)
   std::size_t n_dense_ = 0;
   std::size_t npend_ = 0;
+  // Cumulative mode (opt_.cumulative_tol > 0): the current branch's ∫ c dσ from its start to
+  // cursor_, and the largest |c| met on this characteristic.
+  static constexpr int kPanelOrder = 5;  // Gauss–Legendre nodes per panel
+  static constexpr int kMinPanels = 64;  // panels per horizon, at least
+  static constexpr int kMaxDepth = 40;   // halvings of a panel
+  double acc_ = 0.0;
+  double cursor_ = 0.0;
+  double cmax_ = 0.0;
 };
 
 }  // namespace detail
@@ -919,42 +1050,6 @@ std::string describe(const TraceFailure<state_dim_v<M>>& f) {
 // ---------------------------------------------------------------------------------------
 // Mass budget.
 
-/// A 1-D quadrature rule: ∫ f ≈ Σ weights[i]·f(nodes[i]).
-struct AxisRule {
-  std::vector<double> nodes;    ///< Abscissae.
-  std::vector<double> weights;  ///< Weights.
-};
-
-/// Gauss–Legendre nodes and weights on [−1, 1] (Newton on P_n; exact for degree ≤ 2n−1).
-inline AxisRule gauss_legendre(int n) {
-  AxisRule r;
-  const auto un = static_cast<std::size_t>(std::max(n, 1));
-  n = static_cast<int>(un);
-  r.nodes.assign(un, 0.0);
-  r.weights.assign(un, 0.0);
-  for (int i = 0; i < (n + 1) / 2; ++i) {
-    double z = std::cos(std::numbers::pi * (i + 0.75) / (n + 0.5));
-    double pp = 1.0;
-    for (int it = 0; it < 100; ++it) {
-      double p1 = 1.0, p2 = 0.0;
-      for (int j = 0; j < n; ++j) {
-        const double p3 = p2;
-        p2 = p1;
-        p1 = ((2.0 * j + 1.0) * z * p2 - j * p3) / (j + 1.0);
-      }
-      pp = n * (z * p1 - p2) / (z * z - 1.0);
-      const double z1 = z;
-      z = z1 - p1 / pp;
-      if (std::fabs(z - z1) <= 1e-16) break;
-    }
-    const auto lo = static_cast<std::size_t>(i), hi = un - 1 - lo;
-    r.nodes[lo] = -z;
-    r.nodes[hi] = z;
-    r.weights[lo] = r.weights[hi] = 2.0 / ((1.0 - z * z) * pp * pp);
-  }
-  return r;
-}
-
 /// Composite Gauss–Legendre rule of `order` points on each panel [b_j, b_{j+1}] of the
 /// ascending `breakpoints` (use graded breakpoints near singularities).
 inline AxisRule gauss_legendre_rule(std::span<const double> breakpoints, int order) {
@@ -1001,18 +1096,41 @@ struct MassBudget {
   double mass0 = 0.0;           ///< Σ_modes ∫_box u0.
   std::vector<double> mass;     ///< Mass in the box at each output time.
   std::vector<double> outflow;  ///< Net outflow through the box faces during [0, t_k].
-  std::vector<double> atom;     ///< mass0 − mass − outflow.
+  /// Mass at atoms: measured at Zeno points by `adaptive_mass_budget` (budget.hpp); for the
+  /// fixed-rule budgets below, the remainder mass0 − mass − outflow.
+  std::vector<double> atom;
   /// Estimated |error| of mass[k] (`adaptive_mass_budget`, budget.hpp); empty for fixed rules.
   std::vector<double> mass_error;
+  double mass0_error = 0.0;           ///< Estimated |error| of mass0 (adaptive only).
+  std::vector<double> outflow_error;  ///< Estimated |error| of outflow[k] (adaptive only).
+  std::vector<double> atom_error;     ///< Estimated |error| of atom[k] (adaptive only).
 };
+
+/// mass0 − mass[k] − outflow[k] − atom[k]: what no term of the budget accounts for.
+inline std::vector<double> budget_defect(const MassBudget& b) {
+  std::vector<double> d(b.mass.size(), 0.0);
+  for (std::size_t k = 0; k < d.size() && k < b.outflow.size() && k < b.atom.size(); ++k)
+    d[k] = b.mass0 - b.mass[k] - b.outflow[k] - b.atom[k];
+  return d;
+}
+
+/// Estimated |error| of budget_defect(b)[k]: the sum of its terms' estimates.
+inline std::vector<double> budget_defect_error(const MassBudget& b) {
+  std::vector<double> e(b.mass.size(), 0.0);
+  auto at = [](const std::vector<double>& v, std::size_t k) { return k < v.size() ? v[k] : 0.0; };
+  for (std::size_t k = 0; k < e.size(); ++k)
+    e[k] = at(b.mass_error, k) + b.mass0_error + at(b.outflow_error, k) + at(b.atom_error, k);
+  return e;
+}
 
 /// A mass budget and the first failed characteristic, if any.
 template <std::size_t N>
 struct BudgetResult {
   MassBudget budget;          ///< The budget (partial if a trace failed).
-  TraceFailure<N> failure{};  ///< First failure.
-  /// Whether every characteristic succeeded.
-  bool ok() const { return failure.ok(); }
+  TraceFailure<N> failure{};  ///< First failed characteristic.
+  std::string message;        ///< Another failure (a forward flow of the atom), or empty.
+  /// Whether every characteristic and flow succeeded.
+  bool ok() const { return failure.ok() && message.empty(); }
 };
 
 namespace detail {
@@ -1077,9 +1195,20 @@ double face_flux(int m, const double* y, std::size_t axis, double sign,
   return counts ? xn : 0.0;
 }
 
+/// Default relative tolerance of the time integral of the boundary flux
+/// (CharacteristicsOptions::cumulative_tol) when the caller sets none.
+inline constexpr double kFluxTimeTol = 1e-8;
+
+/// `opt` with the time integral of the flux switched on (its own tolerance, or kFluxTimeTol).
+inline CharacteristicsOptions cumulative_options(const CharacteristicsOptions& opt) {
+  CharacteristicsOptions o = opt;
+  if (!(o.cumulative_tol > 0.0)) o.cumulative_tol = kFluxTimeTol;
+  return o;
+}
+
 /// Cumulative net outflow through the faces of `box` at the output times, with the tensor
-/// rules `face` (rule of axis b used along b on every face normal to another axis) and
-/// Gauss–Legendre of `time_order` nodes between consecutive output times (and from 0).
+/// rules `face` (rule of axis b used along b on every face normal to another axis); in time,
+/// ∫₀^{t_k} u dt at each face point adaptively along its characteristic (`cumulative_tol`).
 /// Resets on the faces are accounted for: at a face point on a guard surface S_h where h fires,
 /// the crossing mass counts as outflow only if Δ_h(y) lies outside the box (and as inflow,
 /// when it arrives from outside, only if Δ_h(y) lies inside); on a reset image the part of
@@ -1090,28 +1219,12 @@ template <HybridModel M>
 std::vector<double> outflow(const TensorGrid<state_dim_v<M>>& box,
                             const std::array<AxisRule, state_dim_v<M>>& face,
                             std::span<const double> times, const double* par,
-                            const CharacteristicsOptions& opt, int time_order,
+                            const CharacteristicsOptions& opt,
                             TraceFailure<state_dim_v<M>>& failure) {
   constexpr std::size_t N = state_dim_v<M>;
   const std::size_t K = times.size();
   std::vector<double> result(K, 0.0);
-  if (K == 0) return result;
-  // Quadrature times.
-  const AxisRule gl = gauss_legendre(time_order);
-  const std::size_t q = gl.nodes.size();
-  std::vector<double> tq, wq;
-  double t_left = 0.0;
-  for (std::size_t k = 0; k < K; ++k) {
-    const double a = t_left, b = times[k];
-    if (b > a) {
-      for (std::size_t j = 0; j < q; ++j) {
-        tq.push_back(0.5 * (a + b) + 0.5 * (b - a) * gl.nodes[j]);
-        wq.push_back(0.5 * (b - a) * gl.weights[j]);
-      }
-    }
-    t_left = b;
-  }
-  if (tq.empty()) return result;
+  if (K == 0 || times.back() <= 0.0) return result;
   // Face points.
   std::array<double, N> lo{}, hi{};
   double diam = 0.0;
@@ -1155,8 +1268,9 @@ std::vector<double> outflow(const TensorGrid<state_dim_v<M>>& box,
       }
     }
   }
-  const Solution<N> sol = evaluate<M>(std::span<const std::array<double, N>>(pts), tq, par, opt,
-                                      std::span<const FaceContext<N>>(ctx));
+  const Solution<N> sol =
+      evaluate<M>(std::span<const std::array<double, N>>(pts), times, par, cumulative_options(opt),
+                  std::span<const FaceContext<N>>(ctx));
   if (!sol.ok()) {
     failure = sol.failure;
     return result;
@@ -1172,19 +1286,10 @@ std::vector<double> outflow(const TensorGrid<state_dim_v<M>>& box,
                                                      sign_of_face[i], lo, hi, diam, par);
     }
   }
-  // Flux at the quadrature times, accumulated per output interval.
-  double acc = 0.0;
-  std::size_t j = 0;
-  for (std::size_t k = 0; k < K; ++k) {
-    while (j < tq.size() && tq[j] <= times[k]) {
-      double F = 0.0;
-      for (std::size_t m = 0; m < nm; ++m)
-        for (std::size_t i = 0; i < pts.size(); ++i) F += fw[m * pts.size() + i] * sol.at(j, m, i);
-      acc += wq[j] * F;
-      ++j;
-    }
-    result[k] = acc;
-  }
+  for (std::size_t k = 0; k < K; ++k)
+    for (std::size_t m = 0; m < nm; ++m)
+      for (std::size_t i = 0; i < pts.size(); ++i)
+        result[k] += fw[m * pts.size() + i] * sol.at(k, m, i);
   return result;
 }
 
@@ -1204,12 +1309,12 @@ double initial_mass(const std::array<const AxisRule*, state_dim_v<M>>& rules, co
 
 /// Mass budget of a grid solution (the runner's default): masses by the tensor trapezoid rule
 /// on the grid nodes (from `sol`), outflow through the faces of the grid box by the trapezoid
-/// rule on the face nodes and `time_order`-point Gauss–Legendre in time between output times.
+/// rule on the face nodes and adaptively in time (`detail::outflow`).
 template <HybridModel M>
 BudgetResult<state_dim_v<M>> mass_budget(const TensorGrid<state_dim_v<M>>& grid,
                                          const Solution<state_dim_v<M>>& sol,
                                          std::span<const double> times, const double* par,
-                                         const CharacteristicsOptions& opt, int time_order = 3) {
+                                         const CharacteristicsOptions& opt) {
   constexpr std::size_t N = state_dim_v<M>;
   BudgetResult<N> res;
   std::array<AxisRule, N> rules;
@@ -1225,7 +1330,7 @@ BudgetResult<state_dim_v<M>> mass_budget(const TensorGrid<state_dim_v<M>>& grid,
   for (std::size_t k = 0; k < times.size() && k < sol.n_time; ++k)
     for (std::size_t m = 0; m < sol.n_mode; ++m)
       mb.mass[k] += detail::tensor_sum<N>(rp, [&](std::size_t i) { return sol.at(k, m, i); });
-  mb.outflow = detail::outflow<M>(grid, rules, times, par, opt, time_order, res.failure);
+  mb.outflow = detail::outflow<M>(grid, rules, times, par, opt, res.failure);
   mb.atom.resize(times.size());
   for (std::size_t k = 0; k < times.size(); ++k) mb.atom[k] = mb.mass0 - mb.mass[k] - mb.outflow[k];
   return res;
@@ -1239,7 +1344,7 @@ BudgetResult<state_dim_v<M>> mass_budget(const TensorGrid<state_dim_v<M>>& box,
                                          const std::array<AxisRule, state_dim_v<M>>& volume,
                                          const std::array<AxisRule, state_dim_v<M>>& face,
                                          std::span<const double> times, const double* par,
-                                         const CharacteristicsOptions& opt, int time_order = 3) {
+                                         const CharacteristicsOptions& opt) {
   constexpr std::size_t N = state_dim_v<M>;
   BudgetResult<N> res;
   std::array<const AxisRule*, N> rp{};
@@ -1260,7 +1365,7 @@ BudgetResult<state_dim_v<M>> mass_budget(const TensorGrid<state_dim_v<M>>& box,
     for (std::size_t m = 0; m < sol.n_mode; ++m)
       mb.mass[k] += detail::tensor_sum<N>(rp, [&](std::size_t i) { return sol.at(k, m, i); });
   TraceFailure<N> flux_failure;
-  mb.outflow = detail::outflow<M>(box, face, times, par, opt, time_order, flux_failure);
+  mb.outflow = detail::outflow<M>(box, face, times, par, opt, flux_failure);
   if (res.failure.ok()) res.failure = flux_failure;
   mb.atom.resize(times.size());
   for (std::size_t k = 0; k < times.size(); ++k) mb.atom[k] = mb.mass0 - mb.mass[k] - mb.outflow[k];
