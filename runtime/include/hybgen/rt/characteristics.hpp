@@ -14,7 +14,9 @@
 ///    Δ_g(z) = x from z = x). At a root y*, z = Δ_g⁻¹(y*) is a true pre-image only if the guard
 ///    fires there: sign(∇s_g(z)·X_from(z)) = guards[g].direction. Then a REVERSED-RESET BRANCH
 ///    (state z, mode `from`, weight/|J_g(z)|, same I) is spawned; it serves the output times
-///    after τ*.
+///    after τ*. A reset with SEVERAL pre-images on S_g (a fold; the pre-flight finds them and
+///    passes seeds, CharacteristicsOptions::preimage_seeds) spawns one branch per pre-image,
+///    all enumerated by Newton from the seeds: the paper's general theorem sums over them.
 ///  * outgoing guards h (from = m): if the backward path crosses S_h the way the forward flow
 ///    would make h fire (direction −guards[h].direction in τ), no forward history can continue
 ///    in mode m beyond it: the branch ends there (contributes nothing further).
@@ -186,6 +188,12 @@ struct CharacteristicsOptions {
   /// this relative tolerance (adaptive Gauss–Legendre in time along every branch; see
   /// `detail::Tracer::accumulate`). The boundary flux of the mass budget uses it.
   double cumulative_tol = 0.0;
+  /// Guards whose reset has SEVERAL pre-images on the guard (the pre-flight's
+  /// `find_preimage_seeds`): (*preimage_seeds)[g] holds start points on S_g, N doubles each,
+  /// from which every incoming crossing enumerates all pre-images by Newton (each spawns a
+  /// branch, weight 1/|J|, as the paper's general theorem sums them). Empty or null for a
+  /// guard: its reset is taken as injective on S_g (one pre-image: Δ⁻¹ or Newton from y).
+  const std::vector<std::vector<double>>* preimage_seeds = nullptr;
 };
 
 /// What went wrong on a characteristic.
@@ -458,6 +466,7 @@ class Tracer {
   static constexpr std::size_t kGuards = M::n_guard > 0 ? static_cast<std::size_t>(M::n_guard) : 1;
   static constexpr std::size_t kMaxEv = 2 * kGuards;  ///< Events per mode: incoming + outgoing.
   static constexpr std::size_t kMaxPending = 64;      ///< Pending reversed-reset branches.
+  static constexpr std::size_t kMaxPreimages = 16;    ///< Pre-images of one crossing.
   using State = std::array<double, N>;                ///< A state.
   using Vec = std::array<double, D>;                  ///< A state with I appended.
 
@@ -539,7 +548,15 @@ class Tracer {
     const int g = guard_[ei];
     if (incoming_[ei]) {
       State z;
-      if (!reset_inverse(g, x.data(), z)) {
+      bool ok = reset_inverse(g, x.data(), z);
+      // Several pre-images: s_g is the same on every branch of Δ_g⁻¹ near the image (they
+      // meet S_g together), so any branch that converges serves; Newton from x may not (at a
+      // fold, where DΔ is singular), the seeds then do.
+      const std::span<const double> sd = seeds(g);
+      for (std::size_t j = 0; !ok && j < sd.size() / N; ++j)
+        ok = newton_reset_solve<M>(g, x.data(), sd.data() + j * N, par_, opt_.newton_max_iter,
+                                   opt_.newton_tol, z);
+      if (!ok) {
         fail(TraceError::inverse_failed, x.data(), mode_, g, ode_.t());
         return std::numeric_limits<double>::quiet_NaN();
       }
@@ -584,15 +601,85 @@ class Tracer {
 
   /// Try the reversed reset through guard g at (τ, x) found by event e; `dir` is the sign
   /// b_g takes after the crossing (0 for a root at the branch start).
+  /// The seed points of guard g for enumerating its pre-images (N doubles each), or none.
+  std::span<const double> seeds(int g) const {
+    if (opt_.preimage_seeds == nullptr ||
+        static_cast<std::size_t>(g) >= opt_.preimage_seeds->size())
+      return {};
+    return (*opt_.preimage_seeds)[static_cast<std::size_t>(g)];
+  }
+
+  /// Try the reversed reset through guard g at (τ, x) found by event e: one branch per
+  /// pre-image. For a guard with seeds, every pre-image is enumerated by Newton on Δ_g(z) = x
+  /// from z = x and from every seed; converged roots on S_g (after projection) closer than
+  /// 1e-8·(1 + ‖z‖∞) are one. (A multi-start: the pre-flight checks at sampled image points
+  /// that its seeds find as many pre-images as starts from every crossing point it met.)
   void try_spawn(int e, double tau, const Vec& x, const FaceContext<N>* face, bool at_start,
                  int dir) {
     const int g = guard_[static_cast<std::size_t>(e)];
-    const GuardInfo gi = guard_info<M>(static_cast<std::size_t>(g));
-    State z;
-    if (!reset_inverse(g, x.data(), z)) {
-      fail(TraceError::inverse_failed, x.data(), mode_, g, tau);
+    const std::span<const double> sd = seeds(g);
+    if (sd.empty()) {
+      State z;
+      if (!reset_inverse(g, x.data(), z)) {
+        fail(TraceError::inverse_failed, x.data(), mode_, g, tau);
+        return;
+      }
+      spawn_from(e, z, tau, x, face, at_start, dir);
       return;
     }
+    std::array<State, kMaxPreimages> found{};
+    std::size_t nfound = 0;
+    const std::size_t ns = sd.size() / N;
+    for (std::size_t j = 0; j <= ns && status_.ok(); ++j) {
+      State start, z;
+      for (std::size_t i = 0; i < N; ++i) start[i] = j == 0 ? x[i] : sd[(j - 1) * N + i];
+      if (!newton_reset_solve<M>(g, x.data(), start.data(), par_, opt_.newton_max_iter,
+                                 opt_.newton_tol, z) ||
+          !all_finite(z))
+        continue;
+      project_onto_guard(g, z);
+      const double s = M::guard_surface(g, z.data(), par_);
+      State grad;
+      M::guard_gradient(g, z.data(), par_, grad.data());
+      double zn = 0.0;
+      for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
+      if (!(std::fabs(s) <= 1e-9 * (1.0 + zn) * std::sqrt(dot<N>(grad.data(), grad.data()))))
+        continue;  // a solution of Δ(z) = x off the guard is no pre-image
+      bool dup = false;
+      for (std::size_t q = 0; q < nfound && !dup; ++q) {
+        double d = 0.0;
+        for (std::size_t i = 0; i < N; ++i) d = std::max(d, std::fabs(found[q][i] - z[i]));
+        dup = d <= 1e-8 * (1.0 + zn);
+      }
+      if (dup) continue;
+      if (nfound == kMaxPreimages) {
+        fail(TraceError::branch_cap, x.data(), mode_, g, tau);
+        return;
+      }
+      found[nfound++] = z;
+    }
+    for (std::size_t q = 0; q < nfound && status_.ok(); ++q)
+      spawn_from(e, found[q], tau, x, face, at_start, dir);
+  }
+
+  /// Two Newton steps along ∇s_g moving z onto S_g (see spawn_from).
+  void project_onto_guard(int g, State& z) const {
+    State grad;
+    for (int it = 0; it < 2; ++it) {
+      M::guard_gradient(g, z.data(), par_, grad.data());
+      const double gg = dot<N>(grad.data(), grad.data());
+      const double s = M::guard_surface(g, z.data(), par_);
+      if (!(gg > 0.0) || !std::isfinite(gg) || !std::isfinite(s) || s == 0.0) break;
+      for (std::size_t i = 0; i < N; ++i) z[i] -= s * grad[i] / gg;
+    }
+  }
+
+  /// Spawn the reversed-reset branch of the pre-image z of x through the guard of event e
+  /// (if it is one: on the support's side, where the guard fires; see try_spawn).
+  void spawn_from(int e, State z, double tau, const Vec& x, const FaceContext<N>* face,
+                  bool at_start, int dir) {
+    const int g = guard_[static_cast<std::size_t>(e)];
+    const GuardInfo gi = guard_info<M>(static_cast<std::size_t>(g));
     if (!all_finite(z)) {
       fail(TraceError::non_finite_reset, x.data(), mode_, g, tau);
       return;
@@ -601,13 +688,7 @@ class Tracer {
     // onto S_g (Newton steps along ∇s_g) so that a support bounded by S_g (x ≥ 0 for the
     // ball) contains it and u0(z) is not cut off by rounding.
     State grad, X;
-    for (int it = 0; it < 2; ++it) {
-      M::guard_gradient(g, z.data(), par_, grad.data());
-      const double gg = dot<N>(grad.data(), grad.data());
-      const double s = M::guard_surface(g, z.data(), par_);
-      if (!(gg > 0.0) || !std::isfinite(gg) || !std::isfinite(s) || s == 0.0) break;
-      for (std::size_t i = 0; i < N; ++i) z[i] -= s * grad[i] / gg;
-    }
+    project_onto_guard(g, z);
     // A pre-image outside the state space has no history: the branch would contribute
     // nothing, and from there its own reversed resets could spawn pre-images without end
     // (tests/validation/test_support_pruning.cpp). Tested just BEFORE the crossing, at

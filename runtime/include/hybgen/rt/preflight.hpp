@@ -19,7 +19,8 @@
 ///       - J_g(x*) is finite and ≠ 0;
 ///       - for a numeric inverse (Newton) and the backward characteristics (`backward`), Newton
 ///         from Δ(x*) — started at Δ(x*) itself, as the characteristics do — converges, and
-///         (`check_preimages`) no other crossing point is a second pre-image of Δ(x*).
+///         (`check_preimages`) the pre-images of Δ(x*) are counted: several give the tracer
+///         seeds to enumerate them all, after a check that a wider search finds no more.
 ///     Grazing: at any point x* of S_g found in the support (firing or not) where the flow is
 ///     tangent to the guard, |∇s·X| ≤ graze_tol·|∇s||X|, the orbit through x* is followed a
 ///     short time δ both ways (RK4, δ|X| = 1e-3·diam); if it passes from the pre-firing side of
@@ -66,6 +67,7 @@ enum class PreflightError {
   inverse_failed,         ///< Newton for Δ⁻¹ at Δ(x*) did not converge.
   grazing,                ///< The flow is tangent to the guard where the orbit crosses it.
   several_preimages,      ///< Δ(x*) has a second pre-image on S_g (numeric inverse only).
+  preimages_missed,       ///< The tracer's multi-start misses a pre-image that a wider one finds.
 };
 
 /// Human-readable name of a `PreflightError`.
@@ -97,6 +99,8 @@ inline const char* preflight_error_name(PreflightError e) {
       return "grazing: the flow is tangent to the guard at a crossing";
     case PreflightError::several_preimages:
       return "the reset is not injective on its guard";
+    case PreflightError::preimages_missed:
+      return "the reset is not injective on its guard and its pre-images cannot be enumerated";
   }
   return "?";
 }
@@ -116,8 +120,11 @@ struct PreflightOptions {
   /// follows ONE pre-image, so a second one is a failure). The forward methods (transfer,
   /// invariant, particles) need no inverse and skip both.
   bool backward = true;
-  /// Crossing points per guard used by `check_preimages` (evenly spaced among those found).
+  /// Crossing points per guard used by `check_preimages` (evenly spaced among those found):
+  /// the starts of the pre-image search, and the tracer's seeds.
   int preimage_points = 64;
+  /// Starts of the wider search that checks the seeds' count (`check_preimages`).
+  int preimage_check_points = 1024;
 };
 
 /// The first failure of the pre-flight scan, with where it happened.
@@ -360,28 +367,41 @@ PreflightFailure<state_dim_v<M>> check_guard(
 /// Pre-images of a guard g with a numeric inverse, counted by multi-start Newton: among the
 /// crossing points of S_g found by `check_guard` (in the support, where g fires), take up to
 /// opt.preimage_points evenly spaced ones p_i; for each image y_i = Δ_g(p_i), start Newton on
-/// Δ_g(z) = y_i from every other p_j. A converged z that lies on S_g (|s_g| ≤ surface_tol·
-/// |∇s_g|·diam), in the support, where g fires, and farther than 1e-6·diam from p_i is a
-/// second pre-image: the reset is not injective on its guard, and a method that follows one
-/// pre-image (the backward characteristics) would lose the others' mass. Returns that failure.
-/// This is a search, not a proof: pre-images that no start reaches are not seen (folds are,
-/// since the crossing points cover the guard on both sides of the fold).
+/// Δ_g(z) = y_i from every p_j. The distinct converged z (farther apart than 1e-6·diam) that
+/// lie on S_g (|s_g| ≤ surface_tol·|∇s_g|·diam), in the support, where g fires, are the
+/// pre-images of y_i found.
+///
+/// One everywhere: the reset is injective on its guard as far as the search sees; nothing to
+/// do. Two or more somewhere (a fold): with `seeds` null the failure `several_preimages`
+/// names a second one; otherwise the p_i become the tracer's seeds (*seeds, N doubles each,
+/// CharacteristicsOptions::preimage_seeds), from which it enumerates every pre-image at each
+/// crossing, after a COUNT CHECK: at every y_i, starts from up to opt.preimage_check_points
+/// crossing points must find no more pre-images than the seeds do (else `preimages_missed`,
+/// naming y_i and the pre-image the seeds miss). This is a search with a check, not a proof:
+/// pre-images that no crossing point leads Newton to are not seen.
 template <HybridModel M>
 PreflightFailure<state_dim_v<M>> check_preimages(
     int g, std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>> crossings,
-    double diam, const double* par, const PreflightOptions& opt) {
+    double diam, const double* par, const PreflightOptions& opt,
+    std::vector<double>* seeds = nullptr) {
   constexpr std::size_t N = state_dim_v<M>;
+  using State = std::array<double, N>;
   PreflightFailure<N> f;
   const GuardInfo gi = detail::guard_info<M>(static_cast<std::size_t>(g));
   if (gi.has_inverse || crossings.size() < 2) return f;
   std::sort(crossings.begin(), crossings.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });  // thread order
-  std::vector<std::array<double, N>> pts;
-  const std::size_t want = static_cast<std::size_t>(std::max(2, opt.preimage_points));
-  for (std::size_t k = 0; k < std::min(want, crossings.size()); ++k)
-    pts.push_back(crossings[k * crossings.size() / std::min(want, crossings.size())].second);
-  auto fires = [&](const std::array<double, N>& z) {
-    std::array<double, N> grad{}, X{};
+  auto spread = [&crossings](int count) {
+    std::vector<State> pts;
+    const std::size_t want =
+        std::min(static_cast<std::size_t>(std::max(2, count)), crossings.size());
+    for (std::size_t k = 0; k < want; ++k)
+      pts.push_back(crossings[k * crossings.size() / want].second);
+    return pts;
+  };
+  const std::vector<State> pts = spread(opt.preimage_points);
+  auto fires = [&](const State& z) {
+    State grad{}, X{};
     M::guard_gradient(g, z.data(), par, grad.data());
     M::flow(gi.from, z.data(), par, X.data());
     const double gn = std::sqrt(detail::dot<N>(grad.data(), grad.data()));
@@ -389,43 +409,93 @@ PreflightFailure<state_dim_v<M>> check_preimages(
            detail::dot<N>(grad.data(), X.data()) * gi.direction > 0.0 &&
            std::fabs(M::guard_surface(g, z.data(), par)) <= opt.surface_tol * gn * diam;
   };
-  for (const auto& p : pts) {
-    std::array<double, N> y{};
-    M::reset(g, p.data(), par, y.data());
-    for (const auto& start : pts) {
-      std::array<double, N> z{};
+  // The distinct pre-images of y found from `starts`.
+  auto preimages = [&](const State& y, const std::vector<State>& starts) {
+    std::vector<State> found;
+    for (const State& start : starts) {
+      State z{};
       if (!detail::newton_reset_solve<M>(g, y.data(), start.data(), par, opt.newton_max_iter,
-                                         opt.newton_tol, z))
+                                         opt.newton_tol, z) ||
+          !fires(z))
         continue;
-      double dist = 0.0;
-      for (std::size_t a = 0; a < N; ++a) dist = std::max(dist, std::fabs(z[a] - p[a]));
-      if (dist <= 1e-6 * diam || !fires(z)) continue;
+      bool dup = false;
+      for (const State& q : found) {
+        double dist = 0.0;
+        for (std::size_t a = 0; a < N; ++a) dist = std::max(dist, std::fabs(z[a] - q[a]));
+        dup = dup || dist <= 1e-6 * diam;
+      }
+      if (!dup) found.push_back(z);
+    }
+    return found;
+  };
+  std::vector<std::vector<State>> found(pts.size());
+  bool several = false;
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    State y{};
+    M::reset(g, pts[i].data(), par, y.data());
+    found[i] = preimages(y, pts);
+    if (found[i].size() < 2) continue;
+    several = true;
+    if (seeds == nullptr) {
       f.error = PreflightError::several_preimages;
       f.guard = g;
       f.mode = gi.from;
-      f.state = p;
+      f.state = found[i][0];
       f.image = y;
-      f.other = z;
+      f.other = found[i][1];
       return f;
     }
   }
+  if (!several || seeds == nullptr) return f;
+  // The count check: a wider multi-start must not find more.
+  const std::vector<State> wide = spread(opt.preimage_check_points);
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    State y{};
+    M::reset(g, pts[i].data(), par, y.data());
+    const std::vector<State> more = preimages(y, wide);
+    if (more.size() <= found[i].size()) continue;
+    f.error = PreflightError::preimages_missed;
+    f.guard = g;
+    f.mode = gi.from;
+    f.state = pts[i];
+    f.image = y;
+    for (const State& z : more) {  // one the seeds did not find
+      bool seen = false;
+      for (const State& q : found[i]) {
+        double dist = 0.0;
+        for (std::size_t a = 0; a < N; ++a) dist = std::max(dist, std::fabs(z[a] - q[a]));
+        seen = seen || dist <= 1e-6 * diam;
+      }
+      if (!seen) f.other = z;
+    }
+    return f;
+  }
+  seeds->clear();
+  for (const State& p : pts) seeds->insert(seeds->end(), p.begin(), p.end());
   return f;
 }
 
 /// The whole pre-flight scan: the initial density, then every guard in order. Returns the
 /// first failure (ok() if none).
+/// With `seeds` (the characteristics method), a guard whose reset has several pre-images
+/// gets the tracer's seeds in (*seeds)[g] (`check_preimages`; empty for the others);
+/// without, it is the failure `several_preimages`.
 template <HybridModel M>
 PreflightFailure<state_dim_v<M>> preflight(const TensorGrid<state_dim_v<M>>& grid,
-                                           const double* par, const PreflightOptions& opt = {}) {
+                                           const double* par, const PreflightOptions& opt = {},
+                                           std::vector<std::vector<double>>* seeds = nullptr) {
   PreflightFailure<state_dim_v<M>> f = check_initial_density<M>(grid, par);
   double diam = 0.0;
   for (const GridAxis& a : grid.axes) diam = std::max(diam, a.max - a.min);
+  if (seeds != nullptr) seeds->assign(static_cast<std::size_t>(M::n_guard), {});
   for (int g = 0; g < M::n_guard && f.ok(); ++g) {
     const bool count =
         opt.backward && !detail::guard_info<M>(static_cast<std::size_t>(g)).has_inverse;
     std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>> crossings;
     f = check_guard<M>(g, grid, par, opt, count ? &crossings : nullptr);
-    if (f.ok() && count) f = check_preimages<M>(g, std::move(crossings), diam, par, opt);
+    if (f.ok() && count)
+      f = check_preimages<M>(g, std::move(crossings), diam, par, opt,
+                             seeds != nullptr ? &(*seeds)[static_cast<std::size_t>(g)] : nullptr);
   }
   return f;
 }
@@ -474,8 +544,18 @@ std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
       point(f.image);
       os << " is also the image of ";
       point(f.other);
-      os << ", and the characteristics method follows one pre-image only; use method=transfer, "
-            "invariant or particles (they push mass forward and need no inverse)";
+      os << " (a caller that cannot sum over pre-images; the characteristics method enumerates "
+            "them)";
+      break;
+    case PreflightError::preimages_missed:
+      os << ": Delta = ";
+      point(f.image);
+      os << " has the pre-image ";
+      point(f.other);
+      os << ", which a multi-start from " << PreflightOptions{}.preimage_points
+         << " points of the guard misses, so the characteristics method cannot sum over all "
+            "pre-images; use method=transfer, invariant or particles (they push mass forward "
+            "and need no inverse)";
       break;
     case PreflightError::reset_retriggers: {
       const auto to = detail::guard_info<M>(static_cast<std::size_t>(f.guard)).to;

@@ -187,18 +187,21 @@ int run_model(const RunConfig& c) {
   }
   // Pre-flight (t = 0): u0 ≥ 0 and finite on the grid; at every crossing point of every guard
   // in the box, a finite reset landing in the support and the box, not on a guard that fires
-  // at once, J finite and ≠ 0, no grazing, a converging numeric inverse (preflight.hpp).
+  // at once, J finite and ≠ 0, no grazing, a converging numeric inverse, and for the
+  // characteristics the seeds that enumerate a reset's several pre-images (preflight.hpp).
+  std::vector<std::vector<double>> seeds;
   {
     PreflightOptions popt;
     popt.newton_max_iter = opt.newton_max_iter;
     popt.newton_tol = opt.newton_tol;
     popt.backward = c.method == "characteristics";  // the one method that inverts Δ
-    const PreflightFailure<N> pf = preflight<M>(grid, par, popt);
+    const PreflightFailure<N> pf = preflight<M>(grid, par, popt, &seeds);
     if (!pf.ok()) {
       std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
       return 3;
     }
   }
+  ms.preimage_seeds = &seeds;
   MethodResult<N> res;
   try {
     res = solve_method<M>(grid, times, c.dt, par, ms);
