@@ -195,13 +195,18 @@ int run_process(const std::string& exe, const std::string& config, const Interru
   return 70;
 }
 
-int cmd_check(const Request& req) {
+int run_preflight(Frontend& fe, const std::string& cache, bool quiet);
+
+/// `hybgen check`: parse, check and derive; with `preflight`, also the run's pre-flight scan.
+int cmd_check(const Request& req, bool preflight, const std::string& cache, bool quiet) {
   Frontend fe(req);
   fe.print_warnings();
   std::cout << fe.src.path() << ": ok: model '" << fe.model.name << "', " << fe.model.state.size()
             << " states, " << fe.sys.modes.size() << " modes, " << fe.sys.guards.size()
             << " guards\n";
-  return 0;
+  if (!preflight) return 0;
+  std::cout.flush();
+  return run_preflight(fe, cache, quiet);
 }
 
 int cmd_derive(const Request& req, const std::string& format) {
@@ -345,6 +350,73 @@ SwapResult swap_into_place(const fs::path& staging, const fs::path& target, cons
   return {};
 }
 
+/// The runner's configuration for model m (the run contract read by `read_config`,
+/// runtime/include/hybgen/rt/runner.hpp): the runner writes into `out_dir`; `final_out_dir`
+/// is where the outputs end up (its messages name it).
+nlohmann::json run_config(const Model& m, const std::string& out_dir,
+                          const std::string& final_out_dir, bool quiet) {
+  nlohmann::json cfg;
+  cfg["model"] = m.name;
+  cfg["method"] = m.sim.method;
+  cfg["out_dir"] = out_dir;
+  cfg["final_out_dir"] = final_out_dir;
+  std::vector<double> params;
+  for (const auto& p : m.params) params.push_back(p.value_d);
+  cfg["params"] = params;
+  nlohmann::json axes = nlohmann::json::array();
+  for (std::size_t i = 0; i < m.state.size(); ++i)
+    axes.push_back(
+        {{"name", m.state[i]}, {"min", m.sim.lo[i]}, {"max", m.sim.hi[i]}, {"n", m.sim.grid[i]}});
+  cfg["axes"] = axes;
+  cfg["t_end"] = m.sim.t_end;
+  cfg["dt"] = m.sim.dt;
+  cfg["tol"] = m.sim.tol;
+  cfg["max_events"] = m.sim.max_events;
+  cfg["particles"] = m.sim.particles;
+  cfg["seed"] = m.sim.seed;
+  cfg["step"] = m.sim.step > 0 ? m.sim.step : m.sim.dt;
+  cfg["scheme"] = m.sim.scheme;
+  cfg["samples"] = m.sim.samples;
+  cfg["eigenvalues"] = m.sim.eigenvalues;
+  cfg["budget"] = m.sim.budget;
+  cfg["budget_tol"] = m.sim.budget_tol;
+  cfg["quiet"] = quiet;
+  return cfg;
+}
+
+/// `hybgen check --preflight`: build the runner (cached) and run only its pre-flight scan
+/// (the checks `run` makes at t = 0, preflight.hpp) on the model's grid and method, so that
+/// `check` and `run` agree. Nothing is written but a config file in a fresh temporary
+/// directory, removed afterwards. Exit 0, or 3 with the scan's failure.
+int run_preflight(Frontend& fe, const std::string& cache, bool quiet) {
+  const Model& m = fe.model;
+  if (!m.sim.present)
+    throw ModelError(m.path, {1, 1},
+                     "the model has no simulation block, so there is no grid "
+                     "for the pre-flight scan");
+  BuildResult b = do_build(fe, cache, false, quiet);
+  const InterruptGuard interrupt_guard;
+  std::string tmpl = (fs::temp_directory_path() / "hybgen-preflight-XXXXXX").string();
+  if (::mkdtemp(tmpl.data()) == nullptr)
+    throw UsageError(std::string("cannot create a temporary directory: ") + std::strerror(errno));
+  const fs::path dir = tmpl;
+  nlohmann::json cfg = run_config(m, dir.string(), dir.string(), quiet);
+  cfg["preflight_only"] = true;
+  const std::string config = (dir / "config.json").string();
+  int rc = 70;
+  std::error_code ec;
+  try {
+    write_file_atomic(config, cfg.dump(2) + "\n");
+    rc = run_process(b.executable, config, interrupt_guard);
+  } catch (...) {
+    fs::remove_all(dir, ec);
+    throw;
+  }
+  fs::remove_all(dir, ec);
+  if (rc > 128) die_by_signal(rc - 128);
+  return rc;
+}
+
 /// `hybgen run`: the runner writes into a fresh staging directory `OUT.partial-<pid>` next
 /// to OUT; only when it succeeds is the staging directory swapped into place
 /// (swap_into_place), and the old outputs removed. A failed run removes the staging
@@ -434,32 +506,7 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
                        : "nothing was written to '" + out + "'";
   };
 
-  nlohmann::json cfg;
-  cfg["model"] = m.name;
-  cfg["method"] = m.sim.method;
-  cfg["out_dir"] = staging.string();  // where the runner writes
-  cfg["final_out_dir"] = out;         // where the outputs end up (for its messages)
-  std::vector<double> params;
-  for (const auto& p : m.params) params.push_back(p.value_d);
-  cfg["params"] = params;
-  nlohmann::json axes = nlohmann::json::array();
-  for (std::size_t i = 0; i < m.state.size(); ++i)
-    axes.push_back(
-        {{"name", m.state[i]}, {"min", m.sim.lo[i]}, {"max", m.sim.hi[i]}, {"n", m.sim.grid[i]}});
-  cfg["axes"] = axes;
-  cfg["t_end"] = m.sim.t_end;
-  cfg["dt"] = m.sim.dt;
-  cfg["tol"] = m.sim.tol;
-  cfg["max_events"] = m.sim.max_events;
-  cfg["particles"] = m.sim.particles;
-  cfg["seed"] = m.sim.seed;
-  cfg["step"] = m.sim.step > 0 ? m.sim.step : m.sim.dt;
-  cfg["scheme"] = m.sim.scheme;
-  cfg["samples"] = m.sim.samples;
-  cfg["eigenvalues"] = m.sim.eigenvalues;
-  cfg["budget"] = m.sim.budget;
-  cfg["budget_tol"] = m.sim.budget_tol;
-  cfg["quiet"] = quiet;
+  nlohmann::json cfg = run_config(m, staging.string(), out, quiet);
   cfg["seconds"] = {{"derive", fe.seconds}, {"build", b.seconds}};
   const std::string config = (staging / "config.json").string();
   try {
@@ -538,8 +585,14 @@ int main(int argc, char** argv) {
     sub->add_option("--set", sets, "override a parameter or setting: KEY=VALUE (repeatable)")
         ->type_name("KEY=VALUE");
   };
+  bool preflight = false;
   auto* check = app.add_subcommand("check", "parse the model and verify its hypotheses");
   add_model(check);
+  check->add_flag("--preflight", preflight,
+                  "also build the runner (cached) and run the pre-flight scan that `run` makes "
+                  "at t = 0 on the model's grid and method");
+  check->add_option("--cache", cache, "build cache directory (with --preflight)");
+  check->add_flag("-q,--quiet", quiet, "no progress output (with --preflight)");
   auto* derive = app.add_subcommand("derive", "print the derived equations");
   add_model(derive);
   derive->add_option("--format", format, "text, latex or json")
@@ -572,7 +625,7 @@ int main(int argc, char** argv) {
   }
   const Request req{model, sets, unreduced ? ReduceTarget::Unreduced : ReduceTarget::Reduced};
   try {
-    if (*check) return cmd_check(req);
+    if (*check) return cmd_check(req, preflight, cache, quiet);
     if (*derive) return cmd_derive(req, format);
     if (*generate) return cmd_generate(req, out);
     if (*build) return cmd_build(req, cache, verbose);

@@ -326,6 +326,96 @@ TEST(Preflight, ResetBackOnItsGuard) {
             std::string::npos);
 }
 
+/// Two water tanks (levels x1, x2 on [0, 1]², inflow w = 1 to one tank, outflows v = 0.6):
+/// fill1: (0.4, −0.6), fill2: (−0.6, 0.4); `to2` fill1 → fill2 when x2 = 1/2 decreasing,
+/// `to1` fill2 → fill1 when x1 = 1/2 decreasing; identity resets (J = X⁺·∇s/X⁻·∇s: 0.4/(−0.6)
+/// or the mirror, ≠ 0). Only at the corner (1/2, 1/2) does a reset land on the other guard,
+/// which fires there at once: a re-trigger at one isolated point.
+struct WaterTank {
+  static constexpr int n_state = 2, n_param = 0, n_mode = 2, n_guard = 2;    ///< Sizes.
+  static constexpr const char* name = "water_tank";                          ///< Name.
+  static constexpr std::array<const char*, 2> state_names{"x1", "x2"};       ///< States.
+  static constexpr std::array<const char*, 0> param_names{};                 ///< None.
+  static constexpr std::array<double, 0> param_defaults{};                   ///< None.
+  static constexpr std::array<const char*, 2> mode_names{"fill1", "fill2"};  ///< Modes.
+  static constexpr std::array<const char*, 2> guard_names{"to2", "to1"};     ///< Guards.
+  /// to2: fill1 → fill2 decreasing; to1: fill2 → fill1 decreasing.
+  static constexpr std::array<rt::GuardInfo, 2> guards{rt::GuardInfo{0, 1, -1, true},
+                                                       rt::GuardInfo{1, 0, -1, true}};
+  static constexpr double r1 = 0.5, r2 = 0.5;  ///< The levels of the guards.
+  /// X_m.
+  static void flow(int m, const double*, const double*, double* out) {
+    out[0] = m == 0 ? 0.4 : -0.6;
+    out[1] = m == 0 ? -0.6 : 0.4;
+  }
+  /// div X = 0.
+  static double divergence(int, const double*, const double*) { return 0.0; }
+  /// s_to2 = x2 − r2, s_to1 = x1 − r1.
+  static double guard_surface(int g, const double* x, const double*) {
+    return g == 0 ? x[1] - r2 : x[0] - r1;
+  }
+  /// ∇s.
+  static void guard_gradient(int g, const double*, const double*, double* out) {
+    out[0] = g == 0 ? 0.0 : 1.0;
+    out[1] = g == 0 ? 1.0 : 0.0;
+  }
+  /// Identity.
+  static void reset(int, const double* x, const double*, double* out) {
+    out[0] = x[0];
+    out[1] = x[1];
+  }
+  /// Identity.
+  static void reset_inverse(int, const double* x, const double*, double* out) {
+    out[0] = x[0];
+    out[1] = x[1];
+  }
+  /// Identity.
+  static void reset_jacobian(int, const double*, const double*, double* out) {
+    out[0] = out[3] = 1.0;
+    out[1] = out[2] = 0.0;
+  }
+  /// ∇s·X_to / ∇s·X_from.
+  static double hybrid_jacobian(int g, const double*, const double*) {
+    (void)g;  // to2: 0.4/(−0.6); to1: the same by symmetry
+    return 0.4 / -0.6;
+  }
+  /// u0 = 1 in fill1.
+  static double initial_density(int m, const double*, const double*) { return m == 0 ? 1.0 : 0.0; }
+  /// The unit square.
+  static bool in_support(const double* x, const double*) {
+    return x[0] >= 0.0 && x[0] <= 1.0 && x[1] >= 0.0 && x[1] <= 1.0;
+  }
+};
+
+/// HalfBall's re-trigger is a stretch (−1 < p < 0 of the ground), a failure; the water tank's
+/// is one point (the corner of the two guards, a grid node for odd n, else a few bisected
+/// crossings next to it): a note, and the scan passes.
+TEST(Preflight, ReTriggerAtAnIsolatedPointIsANote) {
+  for (const int n : {21, 20}) {
+    rt::TensorGrid<2> g;
+    g.axes = {rt::GridAxis{0.0, 1.0, n}, rt::GridAxis{0.0, 1.0, n}};
+    std::vector<rt::PreflightFailure<2>> notes;
+    const auto f = rt::preflight<WaterTank>(g, nullptr, rt::PreflightOptions{}, nullptr, &notes);
+    EXPECT_TRUE(f.ok()) << rt::describe_preflight<WaterTank>(f);
+    if (n % 2 == 1) {
+      ASSERT_EQ(notes.size(), 2u) << n;  // both guards, at the corner node
+      for (const auto& note : notes) {
+        EXPECT_EQ(note.error, E::reset_retriggers);
+        EXPECT_EQ(note.state, (P2{0.5, 0.5}));
+      }
+      EXPECT_NE(rt::describe_preflight<WaterTank>(notes[0]).find("is on guard 'to1'"),
+                std::string::npos);
+    } else {
+      EXPECT_TRUE(notes.empty());  // no grid point at the corner: nothing re-triggers
+    }
+  }
+  std::vector<rt::PreflightFailure<2>> notes;
+  const auto f = rt::preflight<HalfBall>(box(20, 20), kElastic.data(), rt::PreflightOptions{},
+                                         nullptr, &notes);
+  EXPECT_EQ(f.error, E::reset_retriggers);
+  EXPECT_TRUE(notes.empty());
+}
+
 TEST(Preflight, ZeroAndNonFiniteHybridJacobian) {
   // 21 nodes: p = −1 is a ground node, where J = (p + 1)/(2p) = 0; the nodes before it
   // (p ≤ −1.2) have p⁺ = −p/2 − 1/2 > 0, J > 0 and no re-trigger.

@@ -36,7 +36,11 @@
 ///    in 99.8 % of the pairs (median ratio 0.09, largest 1.03). Weak spot: a point
 ///    singularity with one-signed errors decaying slowly between levels (ratio r; r = 2^{−1/2}
 ///    for |x − c|^{−1/2} in 1-D): the leaf's error is ≈ r/(1 − r) times its last
-///    discrepancy, so E_k can be low by that factor (measured up to 3.1×).
+///    discrepancy, so E_k can be low by that factor (measured up to 3.1×). Blind spot: a
+///    jump of the density that crosses a cell between its Gauss nodes, all on one side, is
+///    not seen: tests/validation/test_shear_reset.cpp measures a mass low by 4.6e-5 with an
+///    estimate of 1.5e-5 at rel_tol 1e-4. The budget's closure check (the defect against the
+///    sum of the estimates, methods.hpp) flags it when the other terms are right.
 ///  * Refinement: Dörfler marking — the leaves with the largest indicators e = max_k(|d_k| +
 ///    o_k) whose sum reaches half of the live total are split together and all their
 ///    halves' nodes traced in one `evaluate` call (OpenMP over the points). Stop when

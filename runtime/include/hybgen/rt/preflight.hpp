@@ -143,6 +143,10 @@ struct PreflightFailure {
   bool ok() const { return error == PreflightError::none; }
 };
 
+/// Re-triggers within this many grid cells of each other are one isolated point
+/// (`check_guard`).
+inline constexpr double kIsolatedCells = 2.0;
+
 /// Grids smaller than this are scanned by one thread: the scan costs ~40–60 ns per node and
 /// guard (0.2 ms for 75×75), less than starting a thread team on a busy machine.
 inline constexpr std::size_t kPreflightParallelMin = std::size_t{1} << 18;
@@ -270,12 +274,30 @@ PreflightFailure<state_dim_v<M>> check_initial_density(const TensorGrid<state_di
 /// failure at the smallest node index (the edge's first node; per node, axes in order).
 /// `crossings`, if given, receives the bisected crossing points that passed every check, each
 /// with its edge index (node·N + axis), in no particular order.
+///
+/// Re-triggers at ISOLATED points: when every crossing whose reset lands on a guard that
+/// fires at once lies within kIsolatedCells grid cells (the largest spacing) of the first
+/// one — a corner where two guards' surfaces meet, as in a water-tank model at (r1, r2) — the
+/// set has measure zero on S_g: no mass is there, the point is excluded, and the re-trigger is
+/// a note in `notes` (the runner prints it as a warning) instead of the failure. A re-trigger
+/// on a stretch of S_g (several cells apart) stays the failure.
 template <HybridModel M>
 PreflightFailure<state_dim_v<M>> check_guard(
     int g, const TensorGrid<state_dim_v<M>>& grid, const double* par,
     const PreflightOptions& opt = {},
-    std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>>* crossings = nullptr) {
+    std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>>* crossings = nullptr,
+    std::vector<PreflightFailure<state_dim_v<M>>>* notes = nullptr) {
   constexpr std::size_t N = state_dim_v<M>;
+  std::vector<std::pair<std::size_t, PreflightFailure<N>>> retriggers;
+  // A failure at edge/node index i: re-triggers are held back (see above).
+  auto offer = [&](detail::FirstFailure<N>& first, std::size_t i, const PreflightFailure<N>& f) {
+    if (f.error == PreflightError::reset_retriggers) {
+#pragma omp critical(hybgen_rt_preflight_retriggers)
+      retriggers.emplace_back(i, f);
+      return;
+    }
+    first.offer(i, f);
+  };
   std::array<double, N> lo{}, hi{};
   std::array<std::size_t, N> stride{}, count{};
   double diam = 0.0;
@@ -312,7 +334,7 @@ PreflightFailure<state_dim_v<M>> check_guard(
       PreflightFailure<N> f = detail::check_crossing<M>(g, y, lo, hi, diam, par, opt);
       if (!f.ok()) {
         f.node = i;
-        first.offer(i, f);
+        offer(first, i, f);
         continue;
       }
       if (crossings != nullptr) {
@@ -352,8 +374,9 @@ PreflightFailure<state_dim_v<M>> check_guard(
       PreflightFailure<N> f = detail::check_crossing<M>(g, x, lo, hi, diam, par, opt);
       if (!f.ok()) {
         f.node = i;
-        first.offer(i, f);
-        break;
+        offer(first, i, f);
+        if (f.error != PreflightError::reset_retriggers) break;
+        continue;
       }
       if (crossings != nullptr) {
 #pragma omp critical(hybgen_rt_preflight_crossings)
@@ -361,6 +384,24 @@ PreflightFailure<state_dim_v<M>> check_guard(
       }
     }
   }
+  if (retriggers.empty()) return first.failure;
+  std::sort(retriggers.begin(), retriggers.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });  // thread order
+  double h = 0.0;
+  for (std::size_t a = 0; a < N; ++a)
+    if (count[a] > 1) h = std::max(h, (hi[a] - lo[a]) / static_cast<double>(count[a] - 1));
+  const PreflightFailure<N>& r0 = retriggers.front().second;
+  bool isolated = true;
+  for (const auto& [i, f] : retriggers) {
+    double d = 0.0;
+    for (std::size_t a = 0; a < N; ++a) d = std::max(d, std::fabs(f.state[a] - r0.state[a]));
+    isolated = isolated && d <= kIsolatedCells * h;
+  }
+  if (!isolated) {
+    if (first.wanted(retriggers.front().first)) return r0;
+    return first.failure;
+  }
+  if (notes != nullptr) notes->push_back(r0);
   return first.failure;
 }
 
@@ -480,10 +521,12 @@ PreflightFailure<state_dim_v<M>> check_preimages(
 /// With `seeds` (the characteristics method), a guard whose reset has several pre-images
 /// gets the tracer's seeds in (*seeds)[g] (`check_preimages`; empty for the others);
 /// without, it is the failure `several_preimages`.
+/// Re-triggers at isolated points are appended to `notes` (see `check_guard`).
 template <HybridModel M>
-PreflightFailure<state_dim_v<M>> preflight(const TensorGrid<state_dim_v<M>>& grid,
-                                           const double* par, const PreflightOptions& opt = {},
-                                           std::vector<std::vector<double>>* seeds = nullptr) {
+PreflightFailure<state_dim_v<M>> preflight(
+    const TensorGrid<state_dim_v<M>>& grid, const double* par, const PreflightOptions& opt = {},
+    std::vector<std::vector<double>>* seeds = nullptr,
+    std::vector<PreflightFailure<state_dim_v<M>>>* notes = nullptr) {
   PreflightFailure<state_dim_v<M>> f = check_initial_density<M>(grid, par);
   double diam = 0.0;
   for (const GridAxis& a : grid.axes) diam = std::max(diam, a.max - a.min);
@@ -492,7 +535,7 @@ PreflightFailure<state_dim_v<M>> preflight(const TensorGrid<state_dim_v<M>>& gri
     const bool count =
         opt.backward && !detail::guard_info<M>(static_cast<std::size_t>(g)).has_inverse;
     std::vector<std::pair<std::size_t, std::array<double, state_dim_v<M>>>> crossings;
-    f = check_guard<M>(g, grid, par, opt, count ? &crossings : nullptr);
+    f = check_guard<M>(g, grid, par, opt, count ? &crossings : nullptr, notes);
     if (f.ok() && count)
       f = check_preimages<M>(g, std::move(crossings), diam, par, opt,
                              seeds != nullptr ? &(*seeds)[static_cast<std::size_t>(g)] : nullptr);

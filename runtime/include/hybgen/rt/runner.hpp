@@ -59,6 +59,7 @@ struct RunConfig {
   long long particles = 1000000;  ///< Samples of method particles.
   std::uint64_t seed = 1;         ///< Seed of method particles.
   bool quiet = false;             ///< No progress output.
+  bool preflight_only = false;    ///< Run the pre-flight scan only (`hybgen check --preflight`).
   nlohmann::json seconds;         ///< Timings of the earlier stages.
 };
 
@@ -109,6 +110,7 @@ RunConfig read_config(const std::string& path) {
     c.budget = j.value("budget", std::string("full"));
     c.budget_tol = j.value("budget_tol", 3e-4);
     c.quiet = j.value("quiet", false);
+    c.preflight_only = j.value("preflight_only", false);
     c.step = j.value("step", 0.0);
     c.scheme = j.value("scheme", std::string("hat"));
     c.samples = j.value("samples", 0);
@@ -177,7 +179,7 @@ int run_model(const RunConfig& c) {
   ms.quiet = c.quiet;
   const CharacteristicsOptions opt = detail::trace_options(ms);
 
-  if (!c.quiet) {
+  if (!c.quiet && !c.preflight_only) {
     if (c.method == "invariant")
       std::fprintf(stderr, "hybgen: %s: invariant density on %zu nodes x %d mode(s)...\n",
                    c.model.c_str(), grid.size(), M::n_mode);
@@ -190,15 +192,33 @@ int run_model(const RunConfig& c) {
   // at once, J finite and ≠ 0, no grazing, a converging numeric inverse, and for the
   // characteristics the seeds that enumerate a reset's several pre-images (preflight.hpp).
   std::vector<std::vector<double>> seeds;
+  std::vector<PreflightFailure<N>> notes;
   {
     PreflightOptions popt;
     popt.newton_max_iter = opt.newton_max_iter;
     popt.newton_tol = opt.newton_tol;
     popt.backward = c.method == "characteristics";  // the one method that inverts Δ
-    const PreflightFailure<N> pf = preflight<M>(grid, par, popt, &seeds);
+    const PreflightFailure<N> pf = preflight<M>(grid, par, popt, &seeds, &notes);
+    for (const auto& note : notes)
+      std::fprintf(stderr,
+                   "hybgen: warning: %s, at an isolated point only (measure zero: no mass is "
+                   "there); the scan excludes it\n",
+                   describe_preflight<M>(note).c_str());
     if (!pf.ok()) {
       std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
       return 3;
+    }
+    if (c.preflight_only) {
+      std::size_t enumerated = 0;
+      for (const auto& sd : seeds) enumerated += sd.empty() ? 0 : 1;
+      std::printf("pre-flight scan (t = 0, %s, grid of %zu nodes): ok, %d guard(s)",
+                  c.method.c_str(), grid.size(), M::n_guard);
+      if (enumerated > 0)
+        std::printf(", %zu with several pre-images (enumerated by the characteristics)",
+                    enumerated);
+      if (!notes.empty()) std::printf(", %zu isolated re-trigger point(s)", notes.size());
+      std::printf("\n");
+      return 0;
     }
   }
   ms.preimage_seeds = &seeds;
