@@ -278,7 +278,7 @@ TEST(Cli, BouncingBallDyadicGridTiesAreDecidedOnce) {
 }
 
 TEST(Cli, RestitutionMassBudget) {
-  json s = run("bouncing_ball", "restitution", "--set e=0.8");
+  json s = run("bouncing_ball", "restitution", "--set e=0.8 --set budget=full");
   ASSERT_TRUE(s.contains("atom"));
   const auto& times = s["times"];
   const auto& atom = s["atom"];

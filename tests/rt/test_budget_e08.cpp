@@ -50,8 +50,9 @@ std::vector<double> output_times() {
 }
 
 rt::MethodResult<2> solve(const std::string& method, const std::string& scheme = "") {
-  rt::MethodSettings s;  // the runner's defaults: tol 1e-10, budget_tol 3e-4, step = dt
+  rt::MethodSettings s;  // the runner's defaults: tol 1e-10, step = dt
   s.method = method;
+  s.budget = "full";  // budget_tol 3e-4
   s.quiet = true;
   s.particles = 100000;
   s.seed = 3;

@@ -35,6 +35,7 @@ rt::MethodResult<2> solve(const std::string& method, int n, const std::string& s
   s.step = 0.05;
   s.particles = 200000;
   s.eigenvalues = 3;
+  s.budget = "full";
   if (!scheme.empty()) s.scheme = scheme;
   return rt::solve_method<Ball>(grid(n), kTimes, 0.5, kPar.data(), s);
 }
@@ -81,6 +82,7 @@ TEST(Methods, CharacteristicsBudgetSetting) {
   s.method = "characteristics";
   s.quiet = true;
   s.budget = "off";
+  EXPECT_EQ(rt::MethodSettings{}.budget, "fast");  // the default
   const auto off = rt::solve_method<Ball>(grid(41), kTimes, 0.5, kPar.data(), s);
   ASSERT_TRUE(off.ok()) << off.failure;
   EXPECT_TRUE(off.budget.mass.empty());

@@ -81,7 +81,7 @@ struct Simulation {
   std::string scheme = "hat";              ///< Transfer operator: hat | cell.
   int samples = 0;      ///< Transfer operator: sample points per axis and cell (0: default).
   int eigenvalues = 6;  ///< Eigenvalues reported by method invariant.
-  std::string budget = "full";  ///< characteristics: mass budget full | fast | off.
+  std::string budget = "fast";  ///< characteristics: mass budget full | fast | off.
   double budget_tol = 3e-4;     ///< characteristics: relative tolerance of the full budget.
 };
 

@@ -50,7 +50,7 @@ struct RunConfig {
   double dt = 0.1;                      ///< Output interval.
   double tol = 1e-10;                   ///< ODE relative tolerance.
   long max_events = 100000;             ///< Cap on resets per characteristic.
-  std::string budget = "full";          ///< characteristics: mass budget full | fast | off.
+  std::string budget = "fast";          ///< characteristics: mass budget full | fast | off.
   double budget_tol = 3e-4;             ///< Relative tolerance of the mass budget's cubature.
   double step = 0.0;                    ///< Transfer-operator step (0: dt).
   std::string scheme = "hat";           ///< Transfer operator: hat | cell (transfer.hpp).
@@ -107,7 +107,7 @@ RunConfig read_config(const std::string& path) {
     c.dt = j.at("dt").template get<double>();
     c.tol = j.value("tol", 1e-10);
     c.max_events = j.value("max_events", 100000L);
-    c.budget = j.value("budget", std::string("full"));
+    c.budget = j.value("budget", std::string("fast"));
     c.budget_tol = j.value("budget_tol", 3e-4);
     c.quiet = j.value("quiet", false);
     c.preflight_only = j.value("preflight_only", false);
