@@ -202,7 +202,8 @@ int run_model(const RunConfig& c) {
     for (const auto& note : notes)
       std::fprintf(stderr,
                    "hybgen: warning: %s, at an isolated point only (measure zero: no mass is "
-                   "there); the scan excludes it\n",
+                   "there); the scan excludes it, but a grid node exactly there has no finite "
+                   "density (choose a grid without a node at that point)\n",
                    describe_preflight<M>(note).c_str());
     if (!pf.ok()) {
       std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
