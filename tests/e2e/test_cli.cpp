@@ -496,6 +496,26 @@ TEST(Cli, IntegrateAndFireInvariantDensityFollowsTheSpikingCycle) {
   }
 }
 
+// `check --preflight` runs the run's pre-flight scan (building the ball's runner, shared with
+// the other tests through the cache): with e = 3/2 the reset at (0, −2) lands at p = 3,
+// outside the box, and check says so with the run's message and exit code; with the
+// default e it passes. Before, check passed both and only `run` refused.
+TEST(Cli, CheckPreflightAgreesWithRun) {
+  Result ok = hybgen("check models/bouncing_ball.model --preflight -q");
+  EXPECT_EQ(ok.code, 0) << ok.out;
+  EXPECT_NE(ok.out.find("pre-flight scan (t = 0, characteristics, grid of 5625 nodes): ok"),
+            std::string::npos)
+      << ok.out;
+  Result bad = hybgen("check models/bouncing_ball.model --preflight -q --set e=3/2");
+  EXPECT_EQ(bad.code, 3) << bad.out;
+  EXPECT_NE(bad.out.find("the reset lands outside the domain (the grid box) at the point (x = 0, "
+                         "p = -2)"),
+            std::string::npos)
+      << bad.out;
+  Result plain = hybgen("check models/bouncing_ball.model --set e=3/2");
+  EXPECT_EQ(plain.code, 0) << plain.out;  // without --preflight: no runner, no scan
+}
+
 TEST(Cli, NumericalFailureExitsThree) {
   // On the Chaplygin energy surface |v| ≤ √(2E/m) = √2; widening the domain to
   // |v| ≤ 2 asks for θ' = √(negative): the vector field is not finite there,
