@@ -866,6 +866,10 @@ AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<c
   values.par = par;
   values.fopt.ode = opt.ode;
   values.fopt.graze_tol = opt.graze_tol;
+  // The run's event cap (`max_events`, 100000 by default), not the forward flow's 1000: a
+  // model that switches often over a long horizon without Zeno (a spiking neuron) must not
+  // fail its budget where its characteristics pass.
+  values.fopt.max_events = opt.max_events;
   // The integrand is 0 where u0 is: the cubature covers the box of the grid nodes with
   // u0 > 0, widened by one grid cell (u0 between nodes), clipped to the grid's box. A
   // localized initial density then gets the cubature's whole resolution (a 4-D density on
