@@ -450,22 +450,24 @@ PreflightFailure<state_dim_v<M>> check_preimages(
            detail::dot<N>(grad.data(), X.data()) * gi.direction > 0.0 &&
            std::fabs(M::guard_surface(g, z.data(), par)) <= opt.surface_tol * gn * diam;
   };
+  // Whether z is one of `found` (closer than 1e-6·diam in the max norm).
+  auto among = [diam](const std::vector<State>& found, const State& z) {
+    for (const State& q : found) {
+      double dist = 0.0;
+      for (std::size_t a = 0; a < N; ++a) dist = std::max(dist, std::fabs(z[a] - q[a]));
+      if (dist <= 1e-6 * diam) return true;
+    }
+    return false;
+  };
   // The distinct pre-images of y found from `starts`.
   auto preimages = [&](const State& y, const std::vector<State>& starts) {
     std::vector<State> found;
     for (const State& start : starts) {
       State z{};
-      if (!detail::newton_reset_solve<M>(g, y.data(), start.data(), par, opt.newton_max_iter,
-                                         opt.newton_tol, z) ||
-          !fires(z))
-        continue;
-      bool dup = false;
-      for (const State& q : found) {
-        double dist = 0.0;
-        for (std::size_t a = 0; a < N; ++a) dist = std::max(dist, std::fabs(z[a] - q[a]));
-        dup = dup || dist <= 1e-6 * diam;
-      }
-      if (!dup) found.push_back(z);
+      if (detail::newton_reset_solve<M>(g, y.data(), start.data(), par, opt.newton_max_iter,
+                                        opt.newton_tol, z) &&
+          fires(z) && !among(found, z))
+        found.push_back(z);
     }
     return found;
   };
@@ -500,15 +502,8 @@ PreflightFailure<state_dim_v<M>> check_preimages(
     f.mode = gi.from;
     f.state = pts[i];
     f.image = y;
-    for (const State& z : more) {  // one the seeds did not find
-      bool seen = false;
-      for (const State& q : found[i]) {
-        double dist = 0.0;
-        for (std::size_t a = 0; a < N; ++a) dist = std::max(dist, std::fabs(z[a] - q[a]));
-        seen = seen || dist <= 1e-6 * diam;
-      }
-      if (!seen) f.other = z;
-    }
+    for (const State& z : more)  // one the seeds did not find
+      if (!among(found[i], z)) f.other = z;
     return f;
   }
   seeds->clear();
