@@ -341,7 +341,9 @@ TEST(ShearReset, CharacteristicsBudget) {
   // missing mass is at the density's jump across the reset image of the guard in
   // [0.5, 1] × [0, 0.5]: a cell whose Gauss nodes all lie on one side of a jump sees no error
   // (one root cell there is low by 6.3e-5 with an estimate of 8e-8; 25 root cells agree to
-  // 3e-6) — the adaptive cubature's blind spot (budget.hpp). So there it must be within its
+  // 3e-6) — the adaptive cubature's blind spot (budget.hpp), in leaves narrower than the
+  // 41-node grid's spacing, where the grid's nodes no longer serve as check points (with
+  // them: t = 2 low by 3.8e-5, estimate 1.2e-6, flagged 5.2×). So there it must be within its
   // target or
   // flagged by the runner's closure check, |defect| > kDefectFactor·budget_defect_error
   // (methods.hpp: the warning "the mass budget does not close"). Measured: t = 1 within

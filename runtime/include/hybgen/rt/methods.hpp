@@ -210,7 +210,8 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
     aopt.max_points = kFastBudgetPoints;
   }
   AdaptiveBudgetInfo info;
-  const BudgetResult<N> budget = adaptive_mass_budget<M>(grid, times, par, opt, aopt, &info);
+  const BudgetResult<N> budget =
+      adaptive_mass_budget<M>(grid, times, par, opt, aopt, &info, &r.solution);
   r.budget_s = detail::seconds_since(t1);
   if (!budget.ok()) {
     r.failure =
@@ -255,6 +256,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   r.summary["budget"] = {{"kind", s.budget},
                          {"rel_tol", aopt.rel_tol},
                          {"volume_points", info.volume.points},
+                         {"check_points", info.volume.check_points},
                          {"face_points", info.surface.points},
                          {"atom_points", info.atom.points},
                          {"converged", converged},
