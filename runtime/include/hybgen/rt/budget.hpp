@@ -284,9 +284,10 @@ struct Cell {
 /// is split. A leaf C with check points y_j (n of them) has the misfit
 ///   c_k = |C|·(1/n) Σ_j (v_jk − 𝓘_C(y_j)) ≈ ∫_C (u − 𝓘_C) = ∫_C u − I_C,
 /// the points taken as samples of the interpolant's error: a signed estimate of I_C's error
-/// with d's sign convention. Where |c| > |d| it stands for d in the error model (Σ d in the
-/// systematic part, Σ d² in the random part) and in the leaf's indicator. It sees what the Gauss
-/// nodes are blind to — a jump between them, a thin strip, a feature inside a cell whose
+/// with d's sign convention. Where |c| > 4|d| (kMisfitOverDiscrepancy: where the Gauss nodes
+/// see the feature too, d is the sharper estimate) c stands for d in the error model (Σ d in
+/// the systematic part, Σ d² in the random part) and in the leaf's indicator. It sees what
+/// the Gauss nodes are blind to — a jump between them, a thin strip, a feature inside a cell whose
 /// nodes all read 0 — to the resolution of the check points: such a leaf is refined instead
 /// of frozen as empty or accurate. Signed, because near a Zeno point the misfits of the
 /// striped density cancel as the discrepancies do; |c| summed would never converge there.
