@@ -49,6 +49,7 @@ struct Frontend {
   SourceText src;
   Model model;
   HybridSystem sys;
+  std::vector<double> file_params;  ///< The parameters' values in the file, before --set.
   double seconds = 0;
 
   explicit Frontend(const Request& req) : src(SourceText::load(req.path)) {
@@ -67,6 +68,7 @@ struct Frontend {
                          "' is a general model)");
       model = check(ast, src);  // stage 2: AST -> Model
     }
+    for (const auto& p : model.params) file_params.push_back(p.value_d);
     apply_overrides(model, req.sets);  //          --set KEY=VALUE
     {
       // A single GiNaC operation cannot be interrupted: past the derivation's
@@ -240,15 +242,28 @@ int cmd_generate(const Request& req, std::string dir) {
 }
 
 BuildResult do_build(Frontend& fe, const std::string& cache, bool verbose, bool quiet) {
-  GeneratedFiles files = emit(fe.sys);  // stage 4: IR -> sources
+  // The runner reads the parameter values from its configuration (run_config), and its
+  // kernels take them as par[]: its header carries the file's defaults, not the --set
+  // values, so that the cache key (build.cpp) does not change with them and another value
+  // reuses the cached runner (tests/e2e/test_cli.cpp, ParameterValuesReuseTheRunner).
+  Model file_model = fe.model;
+  for (std::size_t j = 0; j < file_model.params.size(); ++j)
+    file_model.params[j].value_d = fe.file_params[j];
+  HybridSystem file_sys = fe.sys;
+  file_sys.model = &file_model;
+  GeneratedFiles files = emit(file_sys);  // stage 4: IR -> sources
   BuildOptions opt;
   opt.cache_dir = cache;
   opt.verbose = verbose;
+  opt.progress = !quiet;
   opt.with_transfer = method_needs_transfer(fe.model.sim.method);
   if (!quiet) std::cerr << "hybgen: building the runner of '" << fe.model.name << "'...\n";
   BuildResult b = build_runner(files, fe.model.name, opt);  // stage 5: sources -> runner
-  if (!quiet)
-    std::cerr << "hybgen: runner " << (b.cached ? "(cached) " : "") << b.executable << "\n";
+  if (!quiet) {
+    char took[48];
+    std::snprintf(took, sizeof took, "(built in %.1f s) ", b.seconds);
+    std::cerr << "hybgen: runner " << (b.cached ? "(cached) " : took) << b.executable << "\n";
+  }
   return b;
 }
 

@@ -77,6 +77,26 @@ TEST(Emit, ProvenanceHeader) {
   EXPECT_EQ(h.find("pow(x,(1.0/2.0))"), std::string::npos);
 }
 
+TEST(Build, TargetCpuIsResolved) {
+  // The cache key names the CPU the runner is compiled for as the compiler resolves
+  // -march=native (build.hpp), not the literal flag: two machines sharing a cache must not
+  // share a runner built for the other's instruction set.
+  const std::string t = hybgen::gen::runner_target();
+  ASSERT_FALSE(t.empty());
+  const bool gcc = t.find("-march=") != std::string::npos;
+  const bool clang = t.find("-target-cpu") != std::string::npos;
+  EXPECT_TRUE(gcc || clang) << t;
+  if (gcc) {
+    // GCC prints "-march=<tab>znver3": the resolved name, never "native".
+    const std::size_t at = t.find("-march=");
+    std::istringstream line(t.substr(at + 7, t.find('\n', at) - at - 7));
+    std::string arch;
+    line >> arch;
+    EXPECT_FALSE(arch.empty());
+    EXPECT_NE(arch, "native");
+  }
+}
+
 /// Compile each model's kernels into a probe that prints every kernel's value
 /// at the points given on stdin; compare with evalf of the IR.
 TEST(Emit, KernelsCompileWithWerrorAndMatchGiNaC) {

@@ -353,9 +353,17 @@ int run_model(const RunConfig& c) {
   write_file_atomic((out / "summary.json").string(), s.dump(2) + "\n");
 
   if (!c.quiet) {
-    std::printf("%s: %s on %zu nodes, %zu frame(s): solve %.3f s, budget %.3f s, output %.3f s\n",
-                c.model.c_str(), c.method.c_str(), n_node, sol.n_time, res.solve_s, res.budget_s,
-                output_s);
+    // The time hybgen spent before the runner started (derive, build: its config), then ours.
+    std::string before;
+    for (const char* key : {"derive", "build"})
+      if (secs.contains(key) && secs[key].is_number()) {
+        char b[48];
+        std::snprintf(b, sizeof b, "%s %.3f s, ", key, secs[key].template get<double>());
+        before += b;
+      }
+    std::printf("%s: %s on %zu nodes, %zu frame(s): %ssolve %.3f s, budget %.3f s, output %.3f s\n",
+                c.model.c_str(), c.method.c_str(), n_node, sol.n_time, before.c_str(), res.solve_s,
+                res.budget_s, output_s);
     if (res.summary.contains("invariant")) {
       const auto& inv = res.summary["invariant"];
       std::printf("leading eigenvalues of the transfer operator (step %g):\n",
