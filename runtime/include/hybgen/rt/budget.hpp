@@ -420,12 +420,15 @@ class AdaptiveCubature {
 
   /// Estimated |error| of slot k: |Σ d| + 2·sqrt(Σ d² + Σ o²), and once the run is over:
   ///  * if it spent more than half its point cap, at least the change of the integral over the
-  ///    rest (an integral still moving that much is not closer to its limit than that: a 4-D
-  ///    Zeno basin, tests/validation/test_two_balls.cpp, "converged" 0.027 low with an
-  ///    estimate of 8.5e-3, having moved by more);
+  ///    rest (an integral still moving that much is not closer to its limit than that; the
+  ///    capped 4-D volume of tests/validation/test_two_balls.cpp, mass 0.498 against 0.871
+  ///    at t = 2.5, had an estimate of 0.17 without this floor and 0.22 with it);
   ///  * if stopped by the cap, at least Σ |c| (the leaves' check-point misfits taken
   ///    one-signed: a cubature that could not refine to its target cannot count on their
   ///    cancelling).
+  /// Neither floor catches a cubature that converges on a wrong value without moving (the
+  /// same file's 4-D atom at rel_tol 1e-2 and 32768 points: 0.1015 against 0.1288 with an
+  /// estimate of 8.5e-3, unchanged over its second half).
   double error(std::size_t k) const {
     const double e =
         std::fabs(D1_[k]) + 2.0 * std::sqrt(std::max(D2_[k], 0.0) + std::max(O2_[k], 0.0));
@@ -1232,8 +1235,9 @@ AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<c
   }
   // Check points: the grid's nodes in the cubature's box, with their atom integrand from the
   // same forward flows, so that a Zeno basin the grid resolves is not missed between Gauss
-  // nodes (tests/validation/test_two_balls.cpp: a 4-D basin at budget=fast was 0.103 against
-  // 0.129 with an estimate of 4.5e-3 without them). A failed flow there leaves the cubature
+  // nodes (tests/validation/test_two_balls.cpp at budget=fast: 0.103 against 0.129 with an
+  // estimate of 4.5e-3 without them, 0.1015 with 1.0e-2 with them — the basin's edge is
+  // finer than that test's 9 nodes per axis). A failed flow there leaves the cubature
   // without check points; its own nodes report the failures that matter.
   detail::CheckPoints<N> checks;
   {
