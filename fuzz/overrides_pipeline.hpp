@@ -54,24 +54,31 @@ simulation {
 /// What is wrong with a model after accepted overrides ("" if nothing).
 inline std::string override_invariant_violation(const gen::Model& m) {
   const auto& s = m.sim;
+  const auto& k = s.settings;
   for (const auto& p : m.params)
     if (!std::isfinite(p.value_d)) return "non-finite parameter " + p.name + " accepted";
-  if (!(s.t_end > 0) || !std::isfinite(s.t_end)) return "bad t_end accepted";
-  if (!(s.dt > 0) || !std::isfinite(s.dt)) return "bad dt accepted";
-  if (!(s.tol > 0 && s.tol < 1)) return "bad tol accepted";
-  if (s.max_events < 1) return "bad max_events accepted";
+  // Written out by hand, not from the settings table (runtime/include/hybgen/rt/settings.hpp),
+  // so that a wrong row in the table is caught too.
+  const double t_end = k.real<"t_end">(), dt = k.real<"dt">(), tol = k.real<"tol">();
+  const double step = k.real<"step">();
+  if (!(t_end > 0) || !std::isfinite(t_end)) return "bad t_end accepted";
+  if (!(dt > 0) || !std::isfinite(dt)) return "bad dt accepted";
+  if (!(tol > 0 && tol < 1)) return "bad tol accepted";
+  if (k.integer<"max_events">() < 1) return "bad max_events accepted";
   if (s.grid.size() != m.state.size()) return "grid rank changed";
   double nodes = 1;
   for (long n : s.grid) nodes *= static_cast<double>(n);
   if (nodes > static_cast<double>(gen::kMaxGridNodes)) return "grid above the node limit accepted";
-  if (s.particles < 1 || s.seed < 0 || s.step < 0 || !std::isfinite(s.step))
+  if (k.integer<"particles">() < 1 || k.integer<"seed">() < 0 || step < 0 || !std::isfinite(step))
     return "bad particles/seed/step accepted";
-  if (s.eigenvalues < 1 || s.eigenvalues > 64) return "bad eigenvalues accepted";
-  if (s.method != "characteristics" && s.method != "transfer" && s.method != "invariant" &&
-      s.method != "particles")
+  if (k.integer<"eigenvalues">() < 1 || k.integer<"eigenvalues">() > 64)
+    return "bad eigenvalues accepted";
+  const std::string& method = k.word<"method">();
+  if (method != "characteristics" && method != "transfer" && method != "invariant" &&
+      method != "particles")
     return "unknown method accepted";
-  if (s.scheme != "hat" && s.scheme != "cell") return "unknown scheme accepted";
-  if (s.samples < 0 || s.samples > 64) return "bad samples accepted";
+  if (k.word<"scheme">() != "hat" && k.word<"scheme">() != "cell") return "unknown scheme accepted";
+  if (k.integer<"samples">() < 0 || k.integer<"samples">() > 64) return "bad samples accepted";
   if (!(m.limits.derive_seconds > 0) || m.limits.max_expr_nodes < 1 ||
       !(m.limits.max_expand_terms >= 1))
     return "bad derivation limit accepted";

@@ -1,7 +1,7 @@
 // hybgen: .model text --parse--> AST --check--> Model --derive--> IR --emit-->
 // generated sources --build--> runner --run--> densities.
 //
-// Every failure is a hybgen::gen::Error mapped to the exit codes of DESIGN.md;
+// Every failure is a hybgen::gen::Error mapped to the exit codes of docs/design.md;
 // anything else that escapes is a bug (exit 70).
 
 #include <fcntl.h>
@@ -29,6 +29,7 @@
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/parse.hpp"
 #include "hybgen/gen/reduce.hpp"
+#include "hybgen/rt/settings.hpp"
 
 namespace {
 
@@ -197,10 +198,10 @@ int run_process(const std::string& exe, const std::string& config, const Interru
   return 70;
 }
 
-int run_preflight(Frontend& fe, const std::string& cache, bool quiet);
+int run_preflight(Frontend& fe, const BuildOptions& build, bool quiet);
 
 /// `hybgen check`: parse, check and derive; with `preflight`, also the run's pre-flight scan.
-int cmd_check(const Request& req, bool preflight, const std::string& cache, bool quiet) {
+int cmd_check(const Request& req, bool preflight, const BuildOptions& build, bool quiet) {
   Frontend fe(req);
   fe.print_warnings();
   std::cout << fe.src.path() << ": ok: model '" << fe.model.name << "', " << fe.model.state.size()
@@ -208,7 +209,7 @@ int cmd_check(const Request& req, bool preflight, const std::string& cache, bool
             << " guards\n";
   if (!preflight) return 0;
   std::cout.flush();
-  return run_preflight(fe, cache, quiet);
+  return run_preflight(fe, build, quiet);
 }
 
 int cmd_derive(const Request& req, const std::string& format) {
@@ -241,7 +242,7 @@ int cmd_generate(const Request& req, std::string dir) {
   return 0;
 }
 
-BuildResult do_build(Frontend& fe, const std::string& cache, bool verbose, bool quiet) {
+BuildResult do_build(Frontend& fe, const BuildOptions& options, bool quiet) {
   // The runner reads the parameter values from its configuration (run_config), and its
   // kernels take them as par[]: its header carries the file's defaults, not the --set
   // values, so that the cache key (build.cpp) does not change with them and another value
@@ -252,11 +253,8 @@ BuildResult do_build(Frontend& fe, const std::string& cache, bool verbose, bool 
   HybridSystem file_sys = fe.sys;
   file_sys.model = &file_model;
   GeneratedFiles files = emit(file_sys);  // stage 4: IR -> sources
-  BuildOptions opt;
-  opt.cache_dir = cache;
-  opt.verbose = verbose;
+  BuildOptions opt = options;
   opt.progress = !quiet;
-  opt.with_transfer = method_needs_transfer(fe.model.sim.method);
   if (!quiet) std::cerr << "hybgen: building the runner of '" << fe.model.name << "'...\n";
   BuildResult b = build_runner(files, fe.model.name, opt);  // stage 5: sources -> runner
   if (!quiet) {
@@ -267,10 +265,10 @@ BuildResult do_build(Frontend& fe, const std::string& cache, bool verbose, bool 
   return b;
 }
 
-int cmd_build(const Request& req, const std::string& cache, bool verbose) {
+int cmd_build(const Request& req, const BuildOptions& build) {
   Frontend fe(req);
   fe.print_warnings();
-  BuildResult b = do_build(fe, cache, verbose, false);
+  BuildResult b = do_build(fe, build, false);
   std::cout << b.executable << "\n";
   return 0;
 }
@@ -372,7 +370,6 @@ nlohmann::json run_config(const Model& m, const std::string& out_dir,
                           const std::string& final_out_dir, bool quiet) {
   nlohmann::json cfg;
   cfg["model"] = m.name;
-  cfg["method"] = m.sim.method;
   cfg["out_dir"] = out_dir;
   cfg["final_out_dir"] = final_out_dir;
   std::vector<double> params;
@@ -383,18 +380,7 @@ nlohmann::json run_config(const Model& m, const std::string& out_dir,
     axes.push_back(
         {{"name", m.state[i]}, {"min", m.sim.lo[i]}, {"max", m.sim.hi[i]}, {"n", m.sim.grid[i]}});
   cfg["axes"] = axes;
-  cfg["t_end"] = m.sim.t_end;
-  cfg["dt"] = m.sim.dt;
-  cfg["tol"] = m.sim.tol;
-  cfg["max_events"] = m.sim.max_events;
-  cfg["particles"] = m.sim.particles;
-  cfg["seed"] = m.sim.seed;
-  cfg["step"] = m.sim.step > 0 ? m.sim.step : m.sim.dt;
-  cfg["scheme"] = m.sim.scheme;
-  cfg["samples"] = m.sim.samples;
-  cfg["eigenvalues"] = m.sim.eigenvalues;
-  cfg["budget"] = m.sim.budget;
-  cfg["budget_tol"] = m.sim.budget_tol;
+  cfg.update(m.sim.settings.to_json());  // method, times, every method setting (settings.hpp)
   cfg["quiet"] = quiet;
   return cfg;
 }
@@ -403,13 +389,13 @@ nlohmann::json run_config(const Model& m, const std::string& out_dir,
 /// (the checks `run` makes at t = 0, preflight.hpp) on the model's grid and method, so that
 /// `check` and `run` agree. Nothing is written but a config file in a fresh temporary
 /// directory, removed afterwards. Exit 0, or 3 with the scan's failure.
-int run_preflight(Frontend& fe, const std::string& cache, bool quiet) {
+int run_preflight(Frontend& fe, const BuildOptions& build, bool quiet) {
   const Model& m = fe.model;
   if (!m.sim.present)
     throw ModelError(m.path, {1, 1},
                      "the model has no simulation block, so there is no grid "
                      "for the pre-flight scan");
-  BuildResult b = do_build(fe, cache, false, quiet);
+  BuildResult b = do_build(fe, build, quiet);
   const InterruptGuard interrupt_guard;
   std::string tmpl = (fs::temp_directory_path() / "hybgen-preflight-XXXXXX").string();
   if (::mkdtemp(tmpl.data()) == nullptr)
@@ -438,7 +424,7 @@ int run_preflight(Frontend& fe, const std::string& cache, bool quiet) {
 /// directory and leaves OUT as it was. The lock `OUT.lock` serialises runs into the same OUT;
 /// a run that finds OUT missing but a complete `OUT.old-<pid>` of a run killed mid-swap
 /// restores it first.
-int cmd_run(const Request& req, std::string out, const std::string& cache, bool quiet) {
+int cmd_run(const Request& req, std::string out, const BuildOptions& build, bool quiet) {
   Frontend fe(req);
   fe.print_warnings();
   const Model& m = fe.model;
@@ -448,7 +434,7 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
   // The backward characteristics need the inverse of every reset; a reset injective on its
   // guard only has none (derive.cpp): refuse before building, at the reset, with the methods
   // that apply.
-  if (m.sim.method == "characteristics")
+  if (m.sim.settings.word<"method">() == "characteristics")
     for (std::size_t gi = 0; gi < fe.sys.guards.size(); ++gi)
       if (fe.sys.guards[gi].inverse_on_guard_only)
         throw fe.src.error(m.guards[gi].reset_loc,
@@ -504,7 +490,7 @@ int cmd_run(const Request& req, std::string out, const std::string& cache, bool 
     fs::remove_all(p, ec);
   }
 
-  BuildResult b = do_build(fe, cache, false, quiet);
+  BuildResult b = do_build(fe, build, quiet);
   // From here on an interrupt removes the staging directory instead of leaving it.
   const InterruptGuard interrupt_guard;
   const std::string tag = std::to_string(::getpid());
@@ -588,9 +574,17 @@ int main(int argc, char** argv) {
       "hybgen"};
   app.set_version_flag("--version", std::string("hybgen ") + generator_version());
   app.require_subcommand(1);
-  std::string model, format = "text", out, cache;
+  std::string model, format = "text", out;
   std::vector<std::string> sets;
-  bool verbose = false, quiet = false;
+  BuildOptions bopt;
+  bool quiet = false;
+  auto add_build = [&](CLI::App* sub) {
+    sub->add_option("--cache", bopt.cache_dir,
+                    "build cache directory (default: $HYBGEN_CACHE or ~/.cache/hybgen)");
+    sub->add_flag("--inline-runtime", bopt.inline_runtime,
+                  "compile the whole runtime with the kernels inlined (about a minute) instead "
+                  "of linking the precompiled runtime (under a second); see bench/runner_build.sh");
+  };
   bool unreduced = false;
   auto add_model = [&](CLI::App* sub) {
     sub->add_option("MODEL", model, "the .model file")->required();
@@ -606,7 +600,7 @@ int main(int argc, char** argv) {
   check->add_flag("--preflight", preflight,
                   "also build the runner (cached) and run the pre-flight scan that `run` makes "
                   "at t = 0 on the model's grid and method");
-  check->add_option("--cache", cache, "build cache directory (with --preflight)");
+  add_build(check);
   check->add_flag("-q,--quiet", quiet, "no progress output (with --preflight)");
   auto* derive = app.add_subcommand("derive", "print the derived equations");
   add_model(derive);
@@ -617,13 +611,16 @@ int main(int argc, char** argv) {
   generate->add_option("-o,--output", out, "output directory (default: generated/<model>)");
   auto* build = app.add_subcommand("build", "generate and compile the runner (cached)");
   add_model(build);
-  build->add_option("--cache", cache,
-                    "build cache directory (default: $HYBGEN_CACHE or ~/.cache/hybgen)");
-  build->add_flag("-v,--verbose", verbose, "print the compiler command");
+  add_build(build);
+  build->add_flag("-v,--verbose", bopt.verbose, "print the compiler command");
   auto* run = app.add_subcommand("run", "derive, build and run: evolve the initial density");
   add_model(run);
   run->add_option("--out", out, "output directory (default: out/<model>)");
-  run->add_option("--cache", cache, "build cache directory");
+  add_build(run);
+  run->footer(
+      "\nSettings (--set KEY=VALUE, or KEY VALUE in the model's simulation block; also\n"
+      "grid=N1xN2..., domain.<state>=[a,b] and any parameter; docs/settings.md):\n" +
+      hybgen::rt::settings_help());
   run->add_flag("-q,--quiet", quiet, "no progress output");
 
   try {
@@ -640,11 +637,11 @@ int main(int argc, char** argv) {
   }
   const Request req{model, sets, unreduced ? ReduceTarget::Unreduced : ReduceTarget::Reduced};
   try {
-    if (*check) return cmd_check(req, preflight, cache, quiet);
+    if (*check) return cmd_check(req, preflight, bopt, quiet);
     if (*derive) return cmd_derive(req, format);
     if (*generate) return cmd_generate(req, out);
-    if (*build) return cmd_build(req, cache, verbose);
-    if (*run) return cmd_run(req, out, cache, quiet);
+    if (*build) return cmd_build(req, bopt);
+    if (*run) return cmd_run(req, out, bopt, quiet);
   } catch (const ModelError& e) {
     std::cerr << e.what() << "\n";
     return static_cast<int>(e.exit_code());

@@ -608,7 +608,6 @@ Model check(const ModelAst& ast, const SourceText& src) {
     Converter sconv(src, full_scope, "a 'support' condition");
     for (const auto& r : s.support)
       sim.support.push_back({sconv.convert(r.lhs) - sconv.convert(r.rhs), r.op, r.loc});
-    bool have_dt = false;
     std::set<std::string> seen;
     for (const auto& st : s.settings) {
       const std::string& k = st.key.name;
@@ -620,13 +619,12 @@ Model check(const ModelAst& ast, const SourceText& src) {
           v.number = number(st.value, "setting '" + k + "'"), v.has_number = true;
         if (const std::string why = set_simulation_setting(m, k, v); !why.empty())
           throw src.error(st.value_loc, "setting '" + k + "': " + why);
-        if (k == "dt") have_dt = true;
       } else {
         std::vector<std::string> keys = setting_names();
         throw src.error(st.key.loc, "unknown simulation setting '" + k + "'" + suggestion(k, keys));
       }
     }
-    if (!have_dt) sim.dt = sim.t_end / 10;
+    if (!sim.settings.given("dt")) sim.settings.put<"dt">(sim.settings.real<"t_end">() / 10);
   }
 
   // TeX names for Greek-letter symbols.
@@ -651,24 +649,12 @@ Model check(const ModelAst& ast, const SourceText& src) {
 }
 
 const std::vector<std::string>& setting_names() {
-  static const std::vector<std::string> names = {"grid",
-                                                 "t_end",
-                                                 "dt",
-                                                 "method",
-                                                 "tol",
-                                                 "max_events",
-                                                 "particles",
-                                                 "seed",
-                                                 "step",
-                                                 "scheme",
-                                                 "samples",
-                                                 "eigenvalues",
-                                                 "budget",
-                                                 "budget_tol",
-                                                 "max_expr_nodes",
-                                                 "max_expand_terms",
-                                                 "derive_seconds",
-                                                 "domain.<state>"};
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v = {"grid"};
+    for (const auto& spec : rt::kSettings) v.emplace_back(spec.name);
+    v.emplace_back("domain.<state>");
+    return v;
+  }();
   return names;
 }
 
@@ -733,82 +719,23 @@ double parse_override_number(const std::string& key, const std::string& value) {
 }  // namespace
 
 bool is_simulation_setting(const std::string& key) {
-  static const std::set<std::string> keys = {
-      "t_end",          "dt",      "tol",    "max_events",  "method",         "particles",
-      "seed",           "step",    "scheme", "eigenvalues", "max_expr_nodes", "max_expand_terms",
-      "derive_seconds", "samples", "budget", "budget_tol"};
-  return keys.count(key) > 0;
+  return rt::find_setting(key) != nullptr;
 }
 
 std::string set_simulation_setting(Model& model, const std::string& key, const SettingValue& v) {
-  Simulation& sim = model.sim;
-  auto word = [&](const std::vector<std::string>& allowed, std::string& into) -> std::string {
-    if (std::find(allowed.begin(), allowed.end(), v.word) != allowed.end()) {
-      into = v.word;
-      return "";
-    }
-    std::string list;
-    for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-    return (v.word.empty() ? "needs one of: " : "unknown value '" + v.word + "' (available: ") +
-           list + (v.word.empty() ? "" : ")");
-  };
-  // A number in [lo, hi]; `integer` also requires a whole number.
-  auto num = [&](double lo, double hi, bool integer, const char* what,
-                 auto&& store) -> std::string {
-    if (!v.has_number) return std::string("needs a number (") + what + ")";
-    if (!(v.number >= lo && v.number <= hi) || (integer && v.number != std::floor(v.number)))
-      return std::string("must be ") + what;
-    store(v.number);
-    return "";
-  };
-  if (key == "method")
-    return word({"characteristics", "transfer", "invariant", "particles"}, sim.method);
-  if (key == "scheme") {
-    // The backward interpolating scheme created mass at resets with |J| != 1 and was
-    // withdrawn; its spelling gets the reason (runtime/include/hybgen/rt/transfer.hpp).
-    if (v.word == "interpolate" || v.word == "conservative")
-      return "'" + v.word +
-             "' was withdrawn: use 'hat' (the default: forward samples "
-             "deposited on hat functions) or 'cell' (Ulam); both conserve mass";
-    return word({"hat", "cell"}, sim.scheme);
-  }
-  if (key == "budget") return word({"full", "fast", "off"}, sim.budget);
-  if (key == "budget_tol")
-    return num(1e-12, 0.1, false, "in [1e-12, 0.1]", [&](double x) { sim.budget_tol = x; });
-  if (key == "samples")
-    return num(0, 64, true, "an integer in [0, 64] (0: 4 per axis up to 2-D, 3 in 3-D, 2 above)",
-               [&](double x) { sim.samples = static_cast<int>(x); });
-  if (key == "t_end")
-    return num(std::nextafter(0.0, 1.0), 1e300, false, "positive",
-               [&](double x) { sim.t_end = x; });
-  if (key == "dt")
-    return num(std::nextafter(0.0, 1.0), 1e300, false, "positive", [&](double x) { sim.dt = x; });
-  if (key == "step")
-    return num(std::nextafter(0.0, 1.0), 1e300, false, "positive", [&](double x) { sim.step = x; });
-  if (key == "tol")
-    return num(std::nextafter(0.0, 1.0), std::nextafter(1.0, 0.0), false, "in (0, 1)",
-               [&](double x) { sim.tol = x; });
-  if (key == "max_events")
-    return num(1, 1e9, true, "an integer in [1, 1e9]",
-               [&](double x) { sim.max_events = static_cast<long>(x); });
-  if (key == "particles")
-    return num(1, 1e10, true, "an integer in [1, 1e10]",
-               [&](double x) { sim.particles = static_cast<long>(x); });
-  if (key == "seed")
-    return num(0, 9007199254740992.0, true, "an integer in [0, 2^53]",
-               [&](double x) { sim.seed = static_cast<long>(x); });
-  if (key == "eigenvalues")
-    return num(1, 64, true, "an integer in [1, 64]",
-               [&](double x) { sim.eigenvalues = static_cast<int>(x); });
-  if (key == "max_expr_nodes")
-    return num(100, 1e12, true, "an integer in [100, 1e12]",
-               [&](double x) { model.limits.max_expr_nodes = static_cast<std::size_t>(x); });
-  if (key == "max_expand_terms")
-    return num(1, 1e300, false, "at least 1", [&](double x) { model.limits.max_expand_terms = x; });
-  if (key == "derive_seconds")
-    return num(0.001, 1e9, false, "in [0.001, 1e9] seconds",
-               [&](double x) { model.limits.derive_seconds = x; });
-  return "unknown setting";
+  // The backward interpolating scheme created mass at resets with |J| != 1 and was
+  // withdrawn; its spelling gets the reason (runtime/include/hybgen/rt/transfer.hpp).
+  if (key == "scheme" && (v.word == "interpolate" || v.word == "conservative"))
+    return "'" + v.word +
+           "' was withdrawn: use 'hat' (the default: forward samples "
+           "deposited on hat functions) or 'cell' (Ulam); both conserve mass";
+  if (std::string why = model.sim.settings.set(key, v); !why.empty()) return why;
+  // The derivation limits are the symbolic stage's (limits.hpp), read from the table.
+  const rt::Settings& s = model.sim.settings;
+  model.limits.max_expr_nodes = static_cast<std::size_t>(s.integer<"max_expr_nodes">());
+  model.limits.max_expand_terms = s.real<"max_expand_terms">();
+  model.limits.derive_seconds = s.real<"derive_seconds">();
+  return "";
 }
 
 void apply_overrides(Model& model, const std::vector<std::string>& sets) {

@@ -628,7 +628,7 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
 
   // A reset without an inverse cannot run by characteristics (main.cpp refuses it there):
   // say so at `check` too when that is the model's method.
-  if (m.sim.present && m.sim.method == "characteristics")
+  if (m.sim.present && m.sim.settings.word<"method">() == "characteristics")
     for (const auto& g : sys.guards)
       if (g.inverse_on_guard_only)
         sys.warnings.push_back("guard '" + g.name +

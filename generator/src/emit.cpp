@@ -426,7 +426,7 @@ void reduction_latex(std::ostream& os, const Model& m, Printer& pr) {
   os << "\n\\]\n";
 }
 
-/// The `reduction` block of derive --format json (DESIGN.md).
+/// The `reduction` block of derive --format json (docs/design.md).
 nlohmann::ordered_json reduction_json(const Model& m, Printer& pr) {
   const Reduction& r = *m.reduction;
   const unsigned n = r.algebra_dim;
@@ -539,6 +539,8 @@ GeneratedFiles emit(const HybridSystem& sys) {
   files.header = hb.assemble();
   files.report_name = "report.md";
   files.report = report_markdown(sys, pr);
+  files.n_state = static_cast<int>(n);
+  files.n_guard = static_cast<int>(ng);
   return files;
 }
 

@@ -86,7 +86,7 @@ void q_equation_of(const LieModel& lm, const ex& phi, const ex& level, const std
   red.q_dot = factored_q_dot(red, xi, q, qe);
 }
 
-/// Hypothesis transversal (DESIGN.md "guard transversal"): on the surface
+/// Hypothesis transversal (docs/design.md "guard transversal"): on the surface
 /// s(q) = 0 of guard g, the rate s'(q) q' must not vanish identically (in the
 /// momenta and the parameters), or the flow is tangent to the whole surface and
 /// never crosses it — e.g. `when q = -1` for q = det − 1, where q' = (q + 1) tr ζ

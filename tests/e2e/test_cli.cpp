@@ -1,4 +1,4 @@
-// End to end: the `hybgen` executable on good and bad input, the DESIGN.md
+// End to end: the `hybgen` executable on good and bad input, the docs/design.md
 // contracts (derive JSON, run outputs, exit codes), every shipped model run on
 // a small grid, and the bouncing ball against its closed-form density.
 
@@ -17,6 +17,7 @@
 
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/rt/npy.hpp"
+#include "hybgen/rt/settings.hpp"
 #include "support/ball_closed_form.hpp"
 #include "support/shell.hpp"
 
@@ -83,7 +84,7 @@ TEST(Cli, DeriveJsonContract) {
       EXPECT_TRUE(g["direction"] == "decreasing" || g["direction"] == "increasing");
     }
   }
-  // The example of DESIGN.md, literally.
+  // The example of docs/design.md, literally.
   Result r = hybgen("derive models/bouncing_ball.model --format json");
   json j = json::parse(r.out);
   EXPECT_EQ(j["state"], json({"x", "p"}));
@@ -322,6 +323,69 @@ TEST(Cli, ParameterValuesReuseTheRunner) {
       run("bouncing_ball", "reuse", "--set e=0.8 --set g=2 --set grid=21x21 --set t_end=1");
   EXPECT_EQ(s["parameters"]["e"].get<double>(), 0.8);
   EXPECT_EQ(s["parameters"]["g"].get<double>(), 2.0);
+}
+
+TEST(Cli, OneRunnerForEveryMethodAndValue) {
+  // One runner per model (generator/src/build.cpp): parameter values, the method and every
+  // setting are read at run time, so after the first build nothing compiles. A private
+  // cache, so that the count of its entries is this test's.
+  const fs::path cache = kWork / "cache_one_runner";
+  fs::remove_all(cache);
+  auto go = [&](const std::string& sets) {
+    const fs::path out = run_dir("one_runner");
+    fs::remove_all(out);
+    return hybgen::testing::run_shell("cd '" + kSrc + "' && HYBGEN_CACHE='" + cache.string() +
+                                      "' '" + kExe + "' run models/bouncing_ball.model --out '" +
+                                      out.string() + "' --set grid=21x21 --set t_end=1 " + sets +
+                                      " 2>&1");
+  };
+  const Result first = go("--set e=0.55");
+  ASSERT_EQ(first.code, 0) << first.out;
+  EXPECT_NE(first.out.find("runner (built in"), std::string::npos) << first.out;
+  for (const char* sets : {"--set e=0.8", "--set method=transfer",
+                           "--set method=particles "
+                           "--set particles=20000",
+                           "--set method=invariant --set scheme=cell"}) {
+    const Result r = go(sets);
+    ASSERT_EQ(r.code, 0) << sets << "\n" << r.out;
+    EXPECT_NE(r.out.find("runner (cached)"), std::string::npos) << sets << "\n" << r.out;
+  }
+  std::size_t entries = 0;
+  for (const auto& e : fs::directory_iterator(cache)) entries += e.is_directory() ? 1 : 0;
+  EXPECT_EQ(entries, 1u);
+}
+
+TEST(Cli, InlineRuntimeAgreesWithTheLibrary) {
+  // --inline-runtime compiles the whole runtime with the kernels inlined (the path of models
+  // outside the library's shapes, build.cpp): the same densities to rounding. Rounding
+  // differs (the compiler contracts a*b+c differently once a kernel is inlined), and at t = 2
+  // one node of this grid, (x, p) = (2/15, 0), lies within rounding of the curve where the
+  // density jumps (the backward characteristic ends at x = 0, t = 0: one bounce more or
+  // less, a factor 1/e^2): there the two runners may take either side. So: every node at
+  // t = 1, and all but 1 % of the nodes at t = 2.
+  const std::string sets = "--set e=0.8 --set grid=31x31 --set t_end=2 --set dt=1";
+  const json a = run("bouncing_ball", "library", sets);
+  const json b = run("bouncing_ball", "inline", sets + " --inline-runtime");
+  for (const char* frame : {"u_0001.npy", "u_0002.npy"}) {
+    const auto ua = hybgen::rt::read_npy((run_dir("library") / frame).string());
+    const auto ub = hybgen::rt::read_npy((run_dir("inline") / frame).string());
+    ASSERT_EQ(ua.data.size(), ub.data.size());
+    double peak = 0;
+    for (double v : ua.data) peak = std::max(peak, std::fabs(v));
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < ua.data.size(); ++i)
+      differ += std::fabs(ua.data[i] - ub.data[i]) > 1e-9 * peak ? 1 : 0;
+    EXPECT_GT(peak, 0.1) << frame;
+    EXPECT_LE(differ, std::string(frame) == "u_0001.npy" ? 0 : ua.data.size() / 100) << frame;
+  }
+  EXPECT_NEAR(a["atom"].back().get<double>(), b["atom"].back().get<double>(), 1e-9);
+}
+
+TEST(Cli, RunHelpListsEverySetting) {
+  const Result r = hybgen("run --help");
+  ASSERT_EQ(r.code, 0) << r.out;
+  for (const auto& s : hybgen::rt::kSettings)
+    EXPECT_NE(r.out.find("  " + std::string(s.name) + " "), std::string::npos) << s.name;
 }
 
 TEST(Cli, TransferNeverCreatesMassThroughTheCommandLine) {

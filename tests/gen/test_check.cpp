@@ -68,8 +68,8 @@ TEST(Check, BouncingBallModel) {
   ASSERT_EQ(m.guards.size(), 1u);
   EXPECT_EQ(m.guards[0].reset_kind, ResetDecl::Kind::Restitution);
   EXPECT_EQ(m.sim.grid, (std::vector<long>{11, 13}));
-  EXPECT_DOUBLE_EQ(m.sim.t_end, 3.0);
-  EXPECT_DOUBLE_EQ(m.sim.dt, 0.3);  // default: t_end / 10
+  EXPECT_DOUBLE_EQ(m.sim.settings.real<"t_end">(), 3.0);
+  EXPECT_DOUBLE_EQ(m.sim.settings.real<"dt">(), 0.3);  // default: t_end / 10
   EXPECT_DOUBLE_EQ(m.sim.lo[1], -2.0);
 }
 
@@ -89,8 +89,8 @@ TEST(Check, Overrides) {
   apply_overrides(m, {"e=0.5", "grid=21x31", "t_end=9.8", "dt=1/5", "domain.x=[0,3]"});
   EXPECT_DOUBLE_EQ(m.params[2].value_d, 0.5);
   EXPECT_EQ(m.sim.grid, (std::vector<long>{21, 31}));
-  EXPECT_DOUBLE_EQ(m.sim.t_end, 9.8);
-  EXPECT_DOUBLE_EQ(m.sim.dt, 0.2);
+  EXPECT_DOUBLE_EQ(m.sim.settings.real<"t_end">(), 9.8);
+  EXPECT_DOUBLE_EQ(m.sim.settings.real<"dt">(), 0.2);
   EXPECT_DOUBLE_EQ(m.sim.hi[0], 3.0);
   EXPECT_THROW(apply_overrides(m, {"nosuch=1"}), UsageError);
   EXPECT_THROW(apply_overrides(m, {"grid=21"}), UsageError);     // wrong number of axes

@@ -3,7 +3,7 @@
 // Every derived formula is checked by an independent route:
 //  - flows, divergences, resets against formulas derived by hand in the
 //    comments (exact symbolic comparison);
-//  - hybrid Jacobians against DESIGN.md's basis formula
+//  - hybrid Jacobians against docs/design.md's basis formula
 //        J = det[DΔ·t1 … DΔ·t(N−1) | X⁺(Δz)] / det[t1 … t(N−1) | X⁻(z)],
 //    evaluated numerically with a tangent basis built from a finite-difference
 //    gradient of s and with DΔ by central finite differences (so neither the
@@ -84,7 +84,7 @@ double det(std::vector<std::vector<double>> a) {
   return d;
 }
 
-/// DESIGN.md's basis formula for the hybrid Jacobian at z ∈ S, numerically.
+/// docs/design.md's basis formula for the hybrid Jacobian at z ∈ S, numerically.
 double basis_formula_J(const Derived& d, std::size_t gi, const std::vector<double>& z) {
   const IrGuard& g = d.sys.guards[gi];
   const std::size_t n = z.size();
@@ -155,7 +155,7 @@ TEST(Derive, BouncingBall) {
   EXPECT_TRUE(d.same(gd.reset[1], -e * p));
   ASSERT_TRUE(gd.has_inverse);
   EXPECT_TRUE(d.same(gd.reset_inverse[1], -p / e));
-  // J = e²: the paper's appendix theorem gives c⁴ with e = c² (DESIGN.md).
+  // J = e²: the paper's appendix theorem gives c⁴ with e = c² (docs/design.md).
   EXPECT_TRUE(d.same(gd.hybrid_jacobian_on_surface, e * e));
   for (double pv : {-0.3, -1.0, -1.7}) {
     std::vector<double> z{0.0, pv};

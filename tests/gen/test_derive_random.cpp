@@ -21,7 +21,7 @@
 //        J = det[DΔ v_1, …, DΔ v_{n−1}, X⁺] / det[v_1, …, v_{n−1}, X⁻],
 //    the factor by which the flux of n-volume through S changes across the reset. This is
 //    hybgen's convention, signed (README "Derived equations": J = ∇sᵀ adj(DΔ) X⁺(Δx) /
-//    ∇sᵀ X⁻(x), "equal to DESIGN.md's determinant quotient for every tangent basis";
+//    ∇sᵀ X⁻(x), "equal to docs/design.md's determinant quotient for every tangent basis";
 //    derive.hpp proves the identity; the transport uses 1/|J|, README "The methods").
 //    SignConventionOnShippedModels pins it on the shipped ball (J = e²), a 1-D thermostat
 //    with an identity reset (J = X⁺/X⁻ < 0) and the shipped sawtooth (J = 1/2). Both J

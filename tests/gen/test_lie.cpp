@@ -14,7 +14,7 @@
 //     (Π̇ = Π × Ω for so(3)) is right. Also "for all ξ ∈ 𝔤*" should be ξ ∈ 𝔤.
 //  E2 §4.3: the paper states [A,B] = BA − AB; its ad* matrix and eq.
 //     (cont_eom_matrix_groups) are in fact consistent with [A,B] = AB − BA
-//     (DESIGN.md). Its 4×4 "ad*_{dh}" is the matrix acting on ROW vectors from
+//     (docs/design.md). Its 4×4 "ad*_{dh}" is the matrix acting on ROW vectors from
 //     the right (ζ̇ = ζ M); the column-vector matrix is Mᵀ. In coordinates
 //     ad*_ξ ζ = [ξᵀ, ζ] = ξᵀζ − ζξᵀ, so ζ̇ = ζᵀζ − ζζᵀ for h = ½ tr(ζζᵀ).
 //  E3 §4.3: "ζ̇_i = C_ij^k (ζᵀ)^i ζ_k" has the free index wrong: ζ̇_j =
@@ -39,7 +39,7 @@
 //     elastic reset does NOT depend on the point of Σ = Kg₀. What non-normality
 //     breaks is the theorem's Δζ ∈ Ann(𝔨): here Δζ ∈ Ann(Ad_{g₀⁻¹}𝔨) ≠ Ann(𝔨)
 //     for b₀ ≠ 0, which depends on the coset representative. hybgen still
-//     requires normality (DESIGN.md), so Aff(1) with K = {b = 0} is rejected.
+//     requires normality (docs/design.md), so Aff(1) with K = {b = 0} is rejected.
 //  E10 §4.2: the paper's Lie algebra element A has the rotation block
 //     transposed ([[0, θ̇], [−θ̇, 0]]) and untranslated ẋ, ẏ; for
 //     g = [[cos θ, −sin θ, x], [sin θ, cos θ, y], [0, 0, 1]] the body velocity is
@@ -281,7 +281,7 @@ TEST(LiePoissonTest, So3EulerEquations) {
   EXPECT_TRUE(same(h, (P[0] * P[0] / I1 + P[1] * P[1] / I2 + P[2] * P[2] / I3) / 2));
   const LiePoisson lp = lie_poisson(g, P, h);
   const ex W[3] = {P[0] / I1, P[1] / I2, P[2] / I3};  // Ω = I⁻¹Π
-  // Π' = Π × Ω (DESIGN.md; paper §2.3 example, right).
+  // Π' = Π × Ω (docs/design.md; paper §2.3 example, right).
   EXPECT_TRUE(same(lp.zeta_dot[0], P[1] * W[2] - P[2] * W[1]));
   EXPECT_TRUE(same(lp.zeta_dot[1], P[2] * W[0] - P[0] * W[2]));
   EXPECT_TRUE(same(lp.zeta_dot[2], P[0] * W[1] - P[1] * W[0]));
@@ -640,7 +640,7 @@ TEST(LieReducedGl2, DivergenceAndHybridJacobian) {
   ex div = 0;
   for (unsigned i = 0; i < 5; ++i) div += X[i].diff(GiNaC::ex_to<GiNaC::symbol>(x[i]));
   EXPECT_TRUE(same(div, z[0] + z[3]));
-  // Erratum E6: DESIGN.md's basis formula on the guard q = 0 with tangent
+  // Erratum E6: docs/design.md's basis formula on the guard q = 0 with tangent
   // basis e_ζ1..e_ζ4: J = det[DΔ·e_1…DΔ·e_4 | X(Δx)] / det[e_1…e_4 | X(x)].
   Components reset;
   for (unsigned k = 0; k < 4; ++k) reset.push_back(z[k] + dz[k]);

@@ -4,7 +4,7 @@
 // Every derived object is compared with an independent computation: matrix
 // commutators for the structure constants and ad*, closed-form matrix
 // expressions for ζ', Jacobi's formula for q', the energy/annihilator
-// characterisation for Δζ, DESIGN.md's determinant formula for J, and — the
+// characterisation for Δζ, docs/design.md's determinant formula for J, and — the
 // theorem itself — a numerical integration of the unreduced 2n-dimensional
 // impact system against the reduced (n+1)-dimensional one; for the
 // nonholonomic Chaplygin sleigh the twin is Lagrange–d'Alembert in the
@@ -13,7 +13,7 @@
 //
 // Paper disagreements asserted here (see also tests/gen/test_lie.cpp, E1–E10):
 //  R1 §4.3: the hybrid Jacobian of the reduced GL₂ system is J = +1 for e = 1
-//     (J = e² with restitution), not the paper's −1 (DESIGN.md's determinant
+//     (J = e² with restitution), not the paper's −1 (docs/design.md's determinant
 //     formula: the reset's tangential block has det −e and the normal
 //     velocity q' = (q + 1) tr ζ changes by the factor −e).
 //  R2 §4.3: Δζ = −(2/n) tr(ζ) I_n is RIGHT (n = 2, 3), verified as the unique
@@ -150,7 +150,7 @@ TEST(ReduceGl, Gl2ReducedSystem) {
   EXPECT_TRUE(m.reduction->normal && m.reduction->codim1 && m.reduction->left_invariant);
   EXPECT_TRUE(m.reduction->multiplicative);
   // Hybrid Jacobian (R1): J = e², so +1 for e = 1 (the paper prints −1).
-  // Independent: DESIGN.md's determinant quotient with the tangent basis
+  // Independent: docs/design.md's determinant quotient with the tangent basis
   // e_ζ1..e_ζ4 of the guard q = 0: J = det[DΔ e_1…DΔ e_4 | X(Δx)] / det[e_1…e_4 | X(x)].
   const IrGuard& g = p->sys.guards[0];
   const auto& X = p->sys.modes[0].flow;

@@ -6,7 +6,7 @@
 ///
 /// State (x, p), parameters (m, g, e). One mode `flight`: X = (p/m, −m g), div X = 0.
 /// Guard `ground`: s = x, decreasing; Δ(x, p) = (x, −e p); Δ⁻¹(y) = (x, −p/e);
-/// J = e² (DESIGN.md formula with tangent t = (0, 1): det[DΔ t | X(Δx)] / det[t | X(x)]
+/// J = e² (docs/design.md formula with tangent t = (0, 1): det[DΔ t | X(Δx)] / det[t | X(x)]
 /// = (−e²p/m) / (−p/m)). u0 = exp(−(x−1)² − p²) on the support x ≥ 0.
 
 #include <array>
@@ -136,7 +136,7 @@ static_assert(HybridModel<Spiral2D>);
 /// Two modes on the line with identity resets (a switching system with branching
 /// histories; closed form in test_characteristics.cpp): A: x' = +1, guard "up" A → B at
 /// x = 1 (increasing); B: x' = −2, guard "down" B → A at x = −1 (decreasing).
-/// J = X⁺(Δx)/X⁻(x) (DESIGN.md in 1-D): J_up = −2/1, J_down = 1/(−2).
+/// J = X⁺(Δx)/X⁻(x) (docs/design.md in 1-D): J_up = −2/1, J_down = 1/(−2).
 struct TwoModeLine {
   static constexpr int n_state = 1, n_param = 0, n_mode = 2, n_guard = 2;
   static constexpr const char* name = "two_mode";

@@ -51,12 +51,12 @@ std::vector<double> output_times() {
 
 rt::MethodResult<2> solve(const std::string& method, const std::string& scheme = "") {
   rt::MethodSettings s;  // the runner's defaults: tol 1e-10, step = dt
-  s.method = method;
-  s.budget = "full";  // budget_tol 3e-4
+  s.set("method", method);
+  s.set("budget", "full");  // budget_tol 3e-4
   s.quiet = true;
-  s.particles = 100000;
-  s.seed = 3;
-  if (!scheme.empty()) s.scheme = scheme;
+  s.set("particles", 100000);
+  s.set("seed", 3);
+  if (!scheme.empty()) s.set("scheme", scheme);
   return rt::solve_method<Ball>(grid(), output_times(), kDt, kPar.data(), s);
 }
 

@@ -273,7 +273,7 @@ TEST(Characteristics, DivergenceFactor) {
 // Two modes on the line, identity resets (a switching system with branching histories):
 //   A: x' = +1,  guard 0 "up":   A → B when s0 = x − 1 crosses 0 increasing;
 //   B: x' = −2,  guard 1 "down": B → A when s1 = x + 1 crosses 0 decreasing.
-// J (DESIGN.md, 1-D: no tangent vectors) = X⁺(Δx)/X⁻(x): J0 = −2/1, J1 = 1/(−2).
+// J (docs/design.md, 1-D: no tangent vectors) = X⁺(Δx)/X⁻(x): J0 = −2/1, J1 = 1/(−2).
 // Closed form, backward in time:
 //   mode A, x(τ) = x − τ: if x > 1 the path meets S0 at τ = x − 1 the way the forward flow
 //     fires, so no A-history exists beyond: contribution 0 from then on; if x ≥ −1 it meets

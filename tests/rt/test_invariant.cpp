@@ -19,7 +19,7 @@ namespace rt = hybgen::rt;
 
 // ---------------------------------------------------------------------------------------
 // A cyclic system on [0, 1]: x' = a(x) = 1 + x + 0.3 sin(2πx) > 0 (a ≥ 0.7), guard
-// s = x − 1 crossing upwards, reset Δ(x) = x − 1 (x = 1 ↦ 0). Hybrid Jacobian (DESIGN.md)
+// s = x − 1 crossing upwards, reset Δ(x) = x − 1 (x = 1 ↦ 0). Hybrid Jacobian (docs/design.md)
 // J = ∇s·adj(DΔ)·X(Δx) / ∇s·X(x) = a(0)/a(1) = 1/2. The invariant density solves
 // (a u)' = 0 in the interior with the jump condition u(0) = u(1)/|J|, i.e. a u is the same
 // constant flux on both sides: u* = c / a(x), c = 1 / ∫₀¹ dx/a = 1/T, T the period of the

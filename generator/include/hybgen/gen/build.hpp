@@ -1,12 +1,19 @@
 #pragma once
 /// \file build.hpp
-/// Stage 5 (build): generated sources -> runner executable, compiled against
-/// the runtime and cached by a content hash of everything that affects it
-/// (kernel header, runner source, runtime headers, compiler identity, the target
-/// CPU as the compiler resolves -march=native, flags, generator version). The
-/// header carries the model file's parameter defaults: values set at run time do
-/// not change the key. Concurrent builds of the same model are safe: each
-/// compiles to a private temporary name and renames into place.
+/// Stage 5 (build): generated sources -> runner executable, cached by a content
+/// hash of everything that affects its machine code (kernel header, runner
+/// source, runtime headers and library, compiler identity, the target CPU as the
+/// compiler resolves -march=native, flags, generator version). The header
+/// carries the model file's parameter defaults, and the method and every other
+/// setting are read at run time: one runner per model. Concurrent builds of the
+/// same model are safe: each compiles to a private temporary name and renames
+/// into place.
+///
+/// A runner is the model's kernels linked against the precompiled runtime
+/// (`hybgen::runner`, runtime/include/hybgen/rt/table_model.hpp): one small
+/// translation unit. A model outside the library's shapes (more states or guards
+/// than it is instantiated for) is compiled with the whole runtime inlined
+/// instead, which takes about a minute.
 
 #include <string>
 
@@ -29,15 +36,14 @@ struct BuildOptions {
   bool werror = false;    ///< Compile with -Werror (tests).
   bool verbose = false;   ///< Print the compiler command.
   bool progress = false;  ///< Count the compile's seconds on stderr (a terminal only).
-  /// Compile the transfer-operator methods (transfer, invariant) into the runner. They pull
-  /// in Eigen and Spectra, which more than double the compile time, so a runner for
-  /// characteristics or particles is built without them (-DHYBGEN_RUNNER_WITHOUT_TRANSFER;
-  /// a separate cache entry, since the flags are part of the key).
-  bool with_transfer = true;
+  /// Compile the whole runtime into the runner, kernels inlined, instead of linking the
+  /// precompiled library (which a model outside its shapes always does).
+  bool inline_runtime = false;
 };
 
-/// Whether `method` needs a runner built with the transfer operator.
-bool method_needs_transfer(const std::string& method);
+/// Whether the runner of `files` is built against the precompiled runtime library (else
+/// with the runtime inlined): the model fits the library's shapes and `inline_runtime` is off.
+bool runner_uses_library(const GeneratedFiles& files, const BuildOptions& options);
 
 /// The default cache root: $HYBGEN_CACHE, else $XDG_CACHE_HOME/hybgen, else
 /// ~/.cache/hybgen.
@@ -50,7 +56,7 @@ std::string default_cache_dir();
 std::string runner_target();
 
 /// The compiler flags a runner is built with (part of the cache key).
-std::string runner_flags(bool werror, bool with_transfer = true);
+std::string runner_flags(bool werror);
 
 /// Stage 5: build (or reuse) the runner of `files`. Throws BuildError (exit 4)
 /// with the compiler log's path when compilation fails.

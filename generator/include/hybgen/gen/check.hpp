@@ -24,21 +24,15 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets);
 const std::vector<std::string>& setting_names();
 
 /// A setting's value as written: a number, or a word (e.g. a method name).
-struct SettingValue {
-  double number = 0;        ///< The number, when `has_number`.
-  bool has_number = false;  ///< Whether a number was given.
-  std::string word;         ///< The word, when one was given.
-};
+using SettingValue = rt::SettingValue;
 
-/// Whether `key` is a scalar simulation setting (t_end, dt, tol, max_events,
-/// method, particles, seed, step, scheme, eigenvalues) or a derivation limit
-/// (max_expr_nodes, max_expand_terms, derive_seconds); grid and domain.X are
-/// handled separately.
+/// Whether `key` is a row of the settings table (runtime/include/hybgen/rt/settings.hpp);
+/// grid and domain.X are handled separately.
 bool is_simulation_setting(const std::string& key);
 
-/// Set one scalar setting of `model` (the same rules for the model file's
-/// simulation block and for --set). Returns "" on success, else why the
-/// value is invalid (the caller adds where).
+/// Set one setting of `model` (the same rules for the model file's simulation block and for
+/// --set: the table's). Returns "" on success, else why the value is invalid (the caller
+/// adds where).
 std::string set_simulation_setting(Model& model, const std::string& key, const SettingValue& v);
 
 /// Parse a grid literal such as "75x75" (UsageError if malformed).

@@ -11,7 +11,7 @@
 ///
 ///     J(x) = ∇s(x)ᵀ adj(DΔ(x)) X⁺(Δ(x)) / ∇s(x)ᵀ X⁻(x),   x ∈ S,
 ///
-/// which equals DESIGN.md's det[DΔ·t₁…DΔ·t_{N−1} | X⁺(Δx)] / det[t₁…t_{N−1} | X⁻(x)]
+/// which equals docs/design.md's det[DΔ·t₁…DΔ·t_{N−1} | X⁺(Δx)] / det[t₁…t_{N−1} | X⁻(x)]
 /// for every basis t of T_xS: both determinants are linear in their last column
 /// and vanish on span(t) = ker ∇s, so det[T | v] = κ ∇sᵀv, and
 /// det[A T | w] = det(A) det[T | A⁻¹w] = κ ∇sᵀ adj(A) w (a polynomial identity

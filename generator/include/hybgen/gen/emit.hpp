@@ -20,6 +20,8 @@ struct GeneratedFiles {
   std::string header;       ///< Kernel header text.
   std::string report_name;  ///< "report.md"
   std::string report;       ///< Derivation report (Markdown with LaTeX).
+  int n_state = 0;          ///< State dimension of the model (the builder's choice of runtime).
+  int n_guard = 0;          ///< Guards of the model (the builder's choice of runtime).
 };
 
 /// Generator version string (provenance headers, cache keys).
@@ -37,7 +39,7 @@ std::string derive_text(const HybridSystem& sys);
 /// `hybgen derive --format latex`: the PDE and jump conditions as the paper writes them.
 std::string derive_latex(const HybridSystem& sys);
 
-/// `hybgen derive --format json` (DESIGN.md contract).
+/// `hybgen derive --format json` (docs/design.md contract).
 nlohmann::ordered_json derive_json(const HybridSystem& sys);
 
 /// C++ identifier for the model's struct (the model name, sanitised).

@@ -1,7 +1,7 @@
 #pragma once
 /// \file errors.hpp
 /// hybgen's errors: a small class hierarchy, one class per exit code of
-/// DESIGN.md. Every failure the user can cause is one of these; anything else
+/// docs/design.md. Every failure the user can cause is one of these; anything else
 /// that escapes is a bug and exits 70.
 
 #include <stdexcept>
@@ -9,17 +9,12 @@
 
 #include "hybgen/gen/ast.hpp"
 
+#include "hybgen/rt/exit_codes.hpp"
+
 namespace hybgen::gen {
 
-/// Exit codes of the command-line contract (DESIGN.md).
-enum class ExitCode : int {
-  Success = 0,      ///< Everything worked.
-  ModelError = 1,   ///< The model is wrong (syntax, unknown symbol, hypothesis).
-  UsageError = 2,   ///< Bad command line.
-  Numerical = 3,    ///< Numerical failure at run time.
-  BuildFailed = 4,  ///< Compiling generated code failed.
-  Internal = 70,    ///< A bug in hybgen.
-};
+/// Process exit codes, shared with the runners (runtime/include/hybgen/rt/exit_codes.hpp).
+using ExitCode = rt::ExitCode;
 
 /// Base of all hybgen errors: a message and the exit code it maps to.
 class Error : public std::runtime_error {

@@ -6,7 +6,7 @@
 /// Impact Lie–Poisson Reduction theorem and the momentum jump Δζ of its
 /// corollary. Self-contained; the `lie` model kind wires it into the pipeline.
 ///
-/// Conventions (DESIGN.md, checked in tests/gen/test_lie.cpp):
+/// Conventions (docs/design.md, checked in tests/gen/test_lie.cpp):
 ///  - basis E_1..E_n of 𝔤; vectors ξ ∈ 𝔤 and covectors ζ ∈ 𝔤* are component
 ///    lists ξ = Σ ξ^i E_i, ζ(η) = Σ ζ_k η^k (for gl_n with the elementary
 ///    matrices, row-major, this is the Frobenius pairing tr(ζᵀη));

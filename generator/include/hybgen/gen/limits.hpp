@@ -27,14 +27,19 @@
 #include "hybgen/gen/ast.hpp"
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/source.hpp"
+#include "hybgen/rt/settings.hpp"
 
 namespace hybgen::gen {
 
-/// The limits of one derivation (defaults; `--set KEY=VALUE` overrides them).
+/// The limits of one derivation (defaults from the settings table,
+/// runtime/include/hybgen/rt/settings.hpp; `--set KEY=VALUE` overrides them).
 struct DeriveLimits {
-  std::size_t max_expr_nodes = 200000;  ///< Largest derived expression, in tree nodes.
-  double max_expand_terms = 1e5;        ///< Largest estimated expansion simplify attempts.
-  double derive_seconds = 120;          ///< Wall-clock budget of derive.
+  /// Largest derived expression, in tree nodes.
+  std::size_t max_expr_nodes = static_cast<std::size_t>(rt::setting_number("max_expr_nodes"));
+  /// Largest estimated expansion simplify attempts.
+  double max_expand_terms = rt::setting_number("max_expand_terms");
+  /// Wall-clock budget of derive.
+  double derive_seconds = rt::setting_number("derive_seconds");
 };
 
 /// A limit was hit; derive turns it into a located ModelError naming the object.

@@ -18,6 +18,8 @@
 #include "hybgen/gen/ast.hpp"
 #include "hybgen/gen/limits.hpp"
 
+#include "hybgen/rt/settings.hpp"
+
 namespace hybgen::gen {
 
 /// A relation `expr OP 0` with OP one of <, <=, >, >= (lhs − rhs moved left).
@@ -64,25 +66,15 @@ struct GuardSpec {
 
 /// Simulation settings (defaults from the model, overridable by --set).
 struct Simulation {
-  bool present = false;                    ///< Whether the model had a block.
-  SourceLoc loc;                           ///< Where it was written.
-  std::vector<double> lo, hi;              ///< Domain per state variable.
-  std::vector<long> grid;                  ///< Nodes per axis.
-  std::vector<GiNaC::ex> initial;          ///< Initial density per mode (0 if none).
-  std::vector<Condition> support;          ///< State-space restriction.
-  double t_end = 1.0;                      ///< Final time.
-  double dt = 0.1;                         ///< Output interval.
-  std::string method = "characteristics";  ///< Solver.
-  double tol = 1e-10;                      ///< ODE relative tolerance.
-  long max_events = 100000;                ///< Cap on resets per characteristic.
-  long particles = 1000000;                ///< Samples of method particles.
-  long seed = 1;                           ///< Random seed of method particles.
-  double step = 0;                         ///< Transfer-operator step (0: dt).
-  std::string scheme = "hat";              ///< Transfer operator: hat | cell.
-  int samples = 0;      ///< Transfer operator: sample points per axis and cell (0: default).
-  int eigenvalues = 6;  ///< Eigenvalues reported by method invariant.
-  std::string budget = "fast";  ///< characteristics: mass budget full | fast | off.
-  double budget_tol = 3e-4;     ///< characteristics: relative tolerance of the full budget.
+  bool present = false;            ///< Whether the model had a block.
+  SourceLoc loc;                   ///< Where it was written.
+  std::vector<double> lo, hi;      ///< Domain per state variable.
+  std::vector<long> grid;          ///< Nodes per axis.
+  std::vector<GiNaC::ex> initial;  ///< Initial density per mode (0 if none).
+  std::vector<Condition> support;  ///< State-space restriction.
+  /// Method, times and every method setting (runtime/include/hybgen/rt/settings.hpp: the
+  /// table both sides share). dt is resolved (t_end/10 unless given) after the block.
+  rt::Settings settings;
 };
 
 /// What the reduce stage derived for a Lie-group model (paper §3.2): carried by

@@ -1,6 +1,6 @@
 #pragma once
 /// \file reduce.hpp
-/// Lie-group models (DESIGN.md "Two kinds of model", paper §3.2):
+/// Lie-group models (docs/design.md "Two kinds of model", paper §3.2):
 ///
 ///   AST --check_lie--> LieModel --reduce--> Model (general kind) --derive--> IR
 ///

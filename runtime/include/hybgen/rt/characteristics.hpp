@@ -147,7 +147,7 @@ inline double axis_node(const GridAxis& a, int i) {
 }
 
 /// A tensor grid over the box Π[min_a, max_a]; flat node index in C order (last axis fastest),
-/// matching the .npy layout of DESIGN.md.
+/// matching the .npy layout of docs/design.md.
 template <std::size_t N>
 struct TensorGrid {
   std::array<GridAxis, N> axes{};  ///< One axis per state variable, in state order.
@@ -325,13 +325,8 @@ inline bool solve_linear(std::array<double, N * N>& A, std::array<double, N>& b)
 /// loses track of the event index through the inlined event locator at -O3, quiet).
 template <HybridModel M>
 inline GuardInfo guard_info(std::size_t g) {
-  if constexpr (M::n_guard > 0) {
-    if (g < M::guards.size()) return M::guards[g];
-    return GuardInfo{0, 0, 0, true};
-  } else {
-    (void)g;
-    return GuardInfo{0, 0, 0, true};
-  }
+  if (g < M::guards.size()) return M::guards[g];
+  return GuardInfo{0, 0, 0, true};
 }
 
 /// A solution z of Δ_g(z) = y by Newton's method from z = start: stops when
@@ -465,8 +460,8 @@ class Tracer {
  public:
   static constexpr std::size_t N = state_dim_v<M>;  ///< State dimension.
   static constexpr std::size_t D = N + 1;           ///< ODE dimension: state, then I = ∫div dτ.
-  /// Guards (≥ 1 for array sizes).
-  static constexpr std::size_t kGuards = M::n_guard > 0 ? static_cast<std::size_t>(M::n_guard) : 1;
+  /// Guards (≥ 1 for array sizes; model.hpp).
+  static constexpr std::size_t kGuards = guard_capacity_v<M>;
   static constexpr std::size_t kMaxEv = 2 * kGuards;  ///< Events per mode: incoming + outgoing.
   static constexpr std::size_t kMaxPending = 64;      ///< Pending reversed-reset branches.
   static constexpr std::size_t kMaxPreimages = 16;    ///< Pre-images of one crossing.

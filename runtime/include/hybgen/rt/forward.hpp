@@ -124,8 +124,8 @@ template <HybridModel M>
 class ForwardFlow {
  public:
   static constexpr std::size_t N = state_dim_v<M>;  ///< State dimension.
-  /// Guards (≥ 1 for array sizes).
-  static constexpr std::size_t kGuards = M::n_guard > 0 ? static_cast<std::size_t>(M::n_guard) : 1;
+  /// Guards (≥ 1 for array sizes; model.hpp).
+  static constexpr std::size_t kGuards = guard_capacity_v<M>;
   static constexpr std::size_t kZenoGaps = 3;             ///< Gaps in the Zeno signature.
   static constexpr std::size_t kHistory = kZenoGaps + 1;  ///< Event times/states kept.
   using State = std::array<double, N>;                    ///< A state.

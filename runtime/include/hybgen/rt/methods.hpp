@@ -3,7 +3,7 @@
 /// The solver methods of `hybgen run` behind one interface: each takes the grid, the output
 /// times and the parameters and returns a `MethodResult` — densities on the grid nodes at
 /// the output times, the mass budget, and the method's own summary fields — which the runner
-/// writes out the same way whatever the method (DESIGN.md run contract).
+/// writes out the same way whatever the method (docs/design.md run contract).
 ///
 ///  - characteristics: exact backward characteristics per node (characteristics.hpp); the
 ///    budget by adaptive cubature of the same characteristics (budget.hpp);
@@ -34,13 +34,10 @@
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/particles.hpp"
 #include "hybgen/rt/progress.hpp"
+#include "hybgen/rt/settings.hpp"
 
-// The transfer-operator methods need Eigen and Spectra, which more than double a runner's
-// compile time: runners for the other methods are built with HYBGEN_RUNNER_WITHOUT_TRANSFER.
-#ifndef HYBGEN_RUNNER_WITHOUT_TRANSFER
 #include "hybgen/rt/invariant.hpp"
 #include "hybgen/rt/transfer.hpp"
-#endif
 
 namespace hybgen::rt {
 
@@ -57,25 +54,37 @@ inline constexpr double kDefectFloor = 1e-12;  ///< See kDefectFactor.
 
 /// The settings every method reads (from the run configuration).
 struct MethodSettings {
-  std::string method = "characteristics";  ///< characteristics | transfer | invariant | particles.
-  double tol = 1e-10;                      ///< ODE relative tolerance (absolute: tol/100).
-  long max_events = 100000;                ///< Cap on resets per characteristic/trajectory.
-  /// characteristics: the mass budget (`solve_by_characteristics`): fast (the default: to
-  /// max(budget_tol, kFastBudgetTol) with at most kFastBudgetPoints per integral, about the
-  /// cost of the solve on the shipped models), full (to budget_tol), off (none: summary.json's
-  /// mass, outflow and atom are empty).
-  std::string budget = "fast";
-  double budget_tol = 3e-4;    ///< characteristics: the full budget's relative tolerance.
-  double step = 0.0;           ///< transfer/invariant: step h (0: the output dt).
-  std::string scheme = "hat";  ///< transfer/invariant: hat | cell (transfer.hpp).
-  int samples = 0;      ///< transfer/invariant: sample points per axis and cell (0: default).
-  int eigenvalues = 6;  ///< invariant: eigenvalues to report (≥ 2).
-  long long particles = 1000000;  ///< particles: number of samples.
-  std::uint64_t seed = 1;         ///< particles: random seed.
-  bool quiet = false;             ///< No progress output.
+  /// The run's settings (settings.hpp: method, tol, max_events, budget, budget_tol, step,
+  /// scheme, samples, eigenvalues, particles, seed). The mass budget of characteristics
+  /// (`solve_by_characteristics`): fast (the default: to max(budget_tol, kFastBudgetTol)
+  /// with at most kFastBudgetPoints per integral, about the cost of the solve on the shipped
+  /// models), full (to budget_tol), off (none: summary.json's mass, outflow and atom are
+  /// empty).
+  Settings settings;
+  bool quiet = false;  ///< No progress output.
   /// characteristics: per guard, the pre-flight's seeds for enumerating pre-images
   /// (CharacteristicsOptions::preimage_seeds); null or empty: every reset is injective.
   const std::vector<std::vector<double>>* preimage_seeds = nullptr;
+
+  /// Set a number setting; throws std::invalid_argument when the table refuses it.
+  MethodSettings& set(std::string_view name, double x) {
+    SettingValue v;
+    v.number = x, v.has_number = true;
+    return set_value(name, v);
+  }
+  /// Set a word setting; throws std::invalid_argument when the table refuses it.
+  MethodSettings& set(std::string_view name, std::string_view word) {
+    SettingValue v;
+    v.word = std::string(word);
+    return set_value(name, v);
+  }
+
+ private:
+  MethodSettings& set_value(std::string_view name, const SettingValue& v) {
+    if (std::string why = settings.set(name, v); !why.empty())
+      throw std::invalid_argument("setting '" + std::string(name) + "': " + why);
+    return *this;
+  }
 };
 
 /// What a method produced.
@@ -119,22 +128,23 @@ void set_time_frames(MethodResult<N>& r, std::span<const double> times) {
 
 inline CharacteristicsOptions trace_options(const MethodSettings& s) {
   CharacteristicsOptions opt;
-  opt.ode.rtol = s.tol;
-  opt.ode.atol = s.tol * 1e-2;
-  opt.max_events = static_cast<int>(std::min<long>(s.max_events, 1000000000L));
+  const double tol = s.settings.real<"tol">();
+  opt.ode.rtol = tol;
+  opt.ode.atol = tol * 1e-2;
+  opt.max_events = static_cast<int>(s.settings.integer<"max_events">());
   opt.preimage_seeds = s.preimage_seeds;
   return opt;
 }
 
-#ifndef HYBGEN_RUNNER_WITHOUT_TRANSFER
 inline TransferOptions transfer_options(const MethodSettings& s, double dt) {
   TransferOptions o;
-  o.step = s.step > 0 ? s.step : dt;
-  o.scheme = parse_scheme(s.scheme);
-  o.samples_per_axis = s.samples;
-  o.forward.max_events = static_cast<int>(std::min<long>(s.max_events, 1000000000L));
-  o.forward.ode.rtol = s.tol;
-  o.forward.ode.atol = s.tol * 1e-2;
+  const double step = s.settings.real<"step">(), tol = s.settings.real<"tol">();
+  o.step = step > 0 ? step : dt;
+  o.scheme = parse_scheme(s.settings.word<"scheme">());
+  o.samples_per_axis = static_cast<int>(s.settings.integer<"samples">());
+  o.forward.max_events = static_cast<int>(s.settings.integer<"max_events">());
+  o.forward.ode.rtol = tol;
+  o.forward.ode.atol = tol * 1e-2;
   return o;
 }
 
@@ -170,8 +180,6 @@ TransferOperator<state_dim_v<M>> assemble(const TensorGrid<state_dim_v<M>>& grid
   return assemble_transfer<M>(grid, par, o);
 }
 
-#endif  // HYBGEN_RUNNER_WITHOUT_TRANSFER
-
 }  // namespace detail
 
 /// The characteristics method and its adaptive mass budget.
@@ -196,7 +204,9 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
     r.failure = describe<M>(r.solution.failure);
     return r;
   }
-  if (s.budget == "off") {
+  const std::string& budget_kind = s.settings.word<"budget">();
+  const double budget_tol = s.settings.real<"budget_tol">();
+  if (budget_kind == "off") {
     r.summary["budget"] = {{"kind", "off"}};
     return r;
   }
@@ -204,9 +214,9 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   // grid rule cannot integrate the unbounded, striped density near a Zeno point.
   const auto t1 = detail::MethodClock::now();
   AdaptiveOptions aopt;
-  aopt.rel_tol = s.budget_tol;
-  if (s.budget == "fast") {
-    aopt.rel_tol = std::max(s.budget_tol, kFastBudgetTol);
+  aopt.rel_tol = budget_tol;
+  if (budget_kind == "fast") {
+    aopt.rel_tol = std::max(budget_tol, kFastBudgetTol);
     aopt.max_points = kFastBudgetPoints;
   }
   AdaptiveBudgetInfo info;
@@ -253,7 +263,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
                   times[worst_k], defect[worst_k], worst_ratio, bar[worst_k], aopt.rel_tol / 10);
     r.warnings.push_back(b);
   }
-  r.summary["budget"] = {{"kind", s.budget},
+  r.summary["budget"] = {{"kind", budget_kind},
                          {"rel_tol", aopt.rel_tol},
                          {"volume_points", info.volume.points},
                          {"check_points", info.volume.check_points},
@@ -269,7 +279,6 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   return r;
 }
 
-#ifndef HYBGEN_RUNNER_WITHOUT_TRANSFER
 /// The transfer-operator method: assemble once, march to the output times.
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>& grid,
@@ -318,7 +327,7 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   const TransferOperator<N> op = detail::assemble<M>(grid, par, o, s.quiet);
   if (detail::assembly_failed(op, r, t0)) return r;
   InvariantOptions io;
-  io.n_eigen = std::max(2, s.eigenvalues);
+  io.n_eigen = std::max(2, static_cast<int>(s.settings.integer<"eigenvalues">()));
   const InvariantResult inv = invariant_density(op, io);
   r.solve_s = detail::seconds_since(t0);
   r.solution.n_time = 1;
@@ -347,8 +356,6 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   return r;
 }
 
-#endif  // HYBGEN_RUNNER_WITHOUT_TRANSFER
-
 /// The particle method.
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>& grid,
@@ -358,11 +365,11 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   MethodResult<N> r;
   detail::set_time_frames(r, times);
   ParticleOptions po;
-  po.particles = static_cast<std::size_t>(s.particles);
-  po.seed = s.seed;
-  po.forward.ode.rtol = s.tol;
-  po.forward.ode.atol = s.tol * 1e-2;
-  po.forward.max_events = static_cast<int>(std::min<long>(s.max_events, 1000000000L));
+  po.particles = static_cast<std::size_t>(s.settings.integer<"particles">());
+  po.seed = static_cast<std::uint64_t>(s.settings.integer<"seed">());
+  po.forward.ode.rtol = s.settings.real<"tol">();
+  po.forward.ode.atol = po.forward.ode.rtol * 1e-2;
+  po.forward.max_events = static_cast<int>(s.settings.integer<"max_events">());
   const auto t0 = detail::MethodClock::now();
   Progress progress("particles", po.particles, s.quiet);
   po.progress = &progress;
@@ -379,32 +386,24 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   r.summary["particles"] = {
       {"particles", run.particles},
       {"traced", run.traced},
-      {"seed", s.seed},
+      {"seed", po.seed},
       {"sampled_mass", run.sampled_mass},
       {"note", "mass_error and atom_error are 2-sigma Monte-Carlo estimates"}};
   r.summary["mass_error"] = r.budget.mass_error;
   return r;
 }
 
-/// Dispatch on `s.method`; throws std::invalid_argument for an unknown method.
+/// Dispatch on the setting `method`; throws std::invalid_argument for an unknown method.
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_method(const TensorGrid<state_dim_v<M>>& grid,
                                           std::span<const double> times, double dt,
                                           const double* par, const MethodSettings& s) {
-  if (s.method == "characteristics") return solve_by_characteristics<M>(grid, times, par, s);
-#ifndef HYBGEN_RUNNER_WITHOUT_TRANSFER
-  if (s.method == "transfer") return solve_by_transfer<M>(grid, times, dt, par, s);
-  if (s.method == "invariant") return solve_invariant<M>(grid, dt, par, s);
-#else
-  (void)dt;
-  if (s.method == "transfer" || s.method == "invariant")
-    throw std::invalid_argument(
-        "this runner was built without the transfer operator "
-        "(HYBGEN_RUNNER_WITHOUT_TRANSFER); rebuild it for method " +
-        s.method);
-#endif
-  if (s.method == "particles") return solve_by_particles<M>(grid, times, par, s);
-  throw std::invalid_argument("unknown method '" + s.method + "'");
+  const std::string& method = s.settings.word<"method">();
+  if (method == "characteristics") return solve_by_characteristics<M>(grid, times, par, s);
+  if (method == "transfer") return solve_by_transfer<M>(grid, times, dt, par, s);
+  if (method == "invariant") return solve_invariant<M>(grid, dt, par, s);
+  if (method == "particles") return solve_by_particles<M>(grid, times, par, s);
+  throw std::invalid_argument("unknown method '" + method + "'");
 }
 
 }  // namespace hybgen::rt

@@ -4,7 +4,7 @@
 /// is a struct with static members satisfying `HybridModel`. The runtime is
 /// templated over it and never sees GiNaC.
 ///
-/// Conventions (DESIGN.md): state x ∈ ℝᴺ, parameters `par` ∈ ℝᴾ (run-time
+/// Conventions (docs/design.md): state x ∈ ℝᴺ, parameters `par` ∈ ℝᴾ (run-time
 /// values, defaults in `param_defaults`), modes 0..M-1, guards 0..G-1.
 /// A guard g fires in mode `guards[g].from` when s_g(x) crosses 0 in its
 /// direction; the state jumps to Δ_g(x) and the mode becomes `guards[g].to`.
@@ -14,6 +14,7 @@
 #include <array>
 #include <concepts>
 #include <cstddef>
+#include <type_traits>
 
 namespace hybgen::rt {
 
@@ -54,13 +55,29 @@ concept HybridModel = requires(int i, const double* x, const double* par, double
   { M::reset_inverse(i, x, par, out) } -> std::same_as<void>;
   /// DΔ_g(x), row-major N×N, into out[0..N*N) (for Newton inverses and checks).
   { M::reset_jacobian(i, x, par, out) } -> std::same_as<void>;
-  /// Hybrid Jacobian J_g(x) at x ∈ S_g (DESIGN.md formula).
+  /// Hybrid Jacobian J_g(x) at x ∈ S_g (docs/design.md formula).
   { M::hybrid_jacobian(i, x, par) } -> std::same_as<double>;
   /// Initial density of mode `i` at x (already 0 outside the support/region).
   { M::initial_density(i, x, par) } -> std::same_as<double>;
   /// Whether x is in the state space (the `support` relations).
   { M::in_support(x, par) } -> std::same_as<bool>;
 };
+
+/// Guards a table model may have: the per-thread workspaces size their event arrays by it
+/// (characteristics.hpp, forward.hpp), so it is a compile-time capacity, not a limit of the
+/// mathematics. A model with more guards is built with the runtime inlined instead
+/// (table_model.hpp).
+inline constexpr int kTableMaxGuards = 32;
+
+/// Compile-time capacity for M's guards: n_guard itself where it is a constant expression
+/// (a generated struct), kTableMaxGuards for a table model. At least 1, for array sizes.
+template <class M>
+inline constexpr std::size_t guard_capacity_v = [] {
+  if constexpr (requires { typename std::integral_constant<int, M::n_guard>; })
+    return M::n_guard > 0 ? static_cast<std::size_t>(M::n_guard) : std::size_t{1};
+  else
+    return static_cast<std::size_t>(kTableMaxGuards);
+}();
 
 /// Whether x lies in (the closure of) mode m's region: M::in_region(m, x, par) where the model
 /// has modes restricted by `where` relations (the generator emits it only then), else true.

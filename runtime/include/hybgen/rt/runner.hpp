@@ -2,14 +2,14 @@
 /// \file runner.hpp
 /// The main program of a generated runner: `runner CONFIG.json`. `hybgen run`
 /// writes the config (grid, times, parameter values, output directory) and
-/// executes the runner, which solves, writes the outputs of DESIGN.md's run
+/// executes the runner, which solves, writes the outputs of docs/design.md's run
 /// contract and prints the mass budget.
 ///
-/// Exit codes: 0 success; 3 numerical failure (what, where, when: a pre-flight
-/// failure at t = 0, see preflight.hpp, or a failed characteristic with its
-/// backward time); 2 a bad config; 70 anything unexpected, including I/O
-/// failures such as a full disk (the message names the file). I/O failures stay
-/// 70, not 3: DESIGN.md reserves 3 for the numerics, and the runner writes into
+/// Exit codes (exit_codes.hpp): 0 success; 3 numerical failure (what, where,
+/// when: a pre-flight failure at t = 0, see preflight.hpp, or a failed
+/// characteristic with its backward time); 2 a bad config; 70 anything
+/// unexpected, including I/O failures such as a full disk (the message names the
+/// file). I/O failures stay 70, not 3: 3 is reserved for the numerics, and the runner writes into
 /// the staging directory `hybgen run` gives it, so on any non-zero exit the
 /// previous outputs are untouched and `hybgen run` says so.
 
@@ -28,11 +28,13 @@
 
 #include "hybgen/rt/atomic_file.hpp"
 #include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/exit_codes.hpp"
 #include "hybgen/rt/methods.hpp"
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/npy.hpp"
 #include "hybgen/rt/png.hpp"
 #include "hybgen/rt/preflight.hpp"
+#include "hybgen/rt/settings.hpp"
 #include "hybgen/rt/vti.hpp"
 
 namespace hybgen::rt {
@@ -40,27 +42,19 @@ namespace hybgen::rt {
 /// A run's settings, read from the config file `hybgen run` writes.
 struct RunConfig {
   std::string model;                    ///< Model name.
-  std::string method;                   ///< Solver (see methods.hpp).
   std::string out_dir;                  ///< Output directory (exists; hybgen's staging dir).
   std::string final_dir;                ///< Where the outputs end up (messages only).
   std::vector<double> params;           ///< Parameter values, model order.
   std::vector<std::string> axis_names;  ///< State names.
   std::vector<GridAxis> axes;           ///< Grid axes.
-  double t_end = 1.0;                   ///< Final time.
-  double dt = 0.1;                      ///< Output interval.
-  double tol = 1e-10;                   ///< ODE relative tolerance.
-  long max_events = 100000;             ///< Cap on resets per characteristic.
-  std::string budget = "fast";          ///< characteristics: mass budget full | fast | off.
-  double budget_tol = 3e-4;             ///< Relative tolerance of the mass budget's cubature.
-  double step = 0.0;                    ///< Transfer-operator step (0: dt).
-  std::string scheme = "hat";           ///< Transfer operator: hat | cell (transfer.hpp).
-  int samples = 0;      ///< Transfer operator: sample points per axis and cell (0: default).
-  int eigenvalues = 6;  ///< Eigenvalues reported by method invariant.
-  long long particles = 1000000;  ///< Samples of method particles.
-  std::uint64_t seed = 1;         ///< Seed of method particles.
-  bool quiet = false;             ///< No progress output.
-  bool preflight_only = false;    ///< Run the pre-flight scan only (`hybgen check --preflight`).
-  nlohmann::json seconds;         ///< Timings of the earlier stages.
+  /// Method, times and every method setting (settings.hpp), validated by the table's rules.
+  Settings settings;
+  bool quiet = false;           ///< No progress output.
+  bool preflight_only = false;  ///< Run the pre-flight scan only (`hybgen check --preflight`).
+  nlohmann::json seconds;       ///< Timings of the earlier stages.
+
+  /// The method.
+  const std::string& method() const { return settings.word<"method">(); }
 };
 
 /// A configuration error (exit 2).
@@ -94,7 +88,6 @@ RunConfig read_config(const std::string& path) {
   RunConfig c;
   try {
     c.model = j.at("model").get<std::string>();
-    c.method = j.at("method").get<std::string>();
     c.out_dir = j.at("out_dir").get<std::string>();
     c.final_dir = j.value("final_out_dir", c.out_dir);
     c.params = j.at("params").get<std::vector<double>>();
@@ -103,20 +96,13 @@ RunConfig read_config(const std::string& path) {
       c.axes.push_back({a.at("min").template get<double>(), a.at("max").template get<double>(),
                         a.at("n").get<int>()});
     }
-    c.t_end = j.at("t_end").template get<double>();
-    c.dt = j.at("dt").template get<double>();
-    c.tol = j.value("tol", 1e-10);
-    c.max_events = j.value("max_events", 100000L);
-    c.budget = j.value("budget", std::string("fast"));
-    c.budget_tol = j.value("budget_tol", 3e-4);
+    // The generator writes every setting (Settings::to_json); method, t_end and dt have no
+    // default a runner could assume.
+    for (const char* key : {"method", "t_end", "dt"})
+      if (!j.contains(key)) throw ConfigError(std::string("missing setting '") + key + "'");
+    c.settings = Settings::from_json(j);
     c.quiet = j.value("quiet", false);
     c.preflight_only = j.value("preflight_only", false);
-    c.step = j.value("step", 0.0);
-    c.scheme = j.value("scheme", std::string("hat"));
-    c.samples = j.value("samples", 0);
-    c.eigenvalues = j.value("eigenvalues", 6);
-    c.particles = j.value("particles", 1000000LL);
-    c.seed = j.value("seed", std::uint64_t{1});
     c.seconds = j.value("seconds", nlohmann::json::object());
   } catch (const std::exception& e) {
     throw ConfigError("bad run configuration '" + path + "': " + e.what());
@@ -132,23 +118,16 @@ RunConfig read_config(const std::string& path) {
       throw ConfigError("axis '" + c.axis_names[a] + "' needs min < max and at least 2 nodes");
   for (double p : c.params)
     if (!std::isfinite(p)) throw ConfigError("a parameter value is not finite");
-  if (!(c.t_end > 0) || !(c.dt > 0)) throw ConfigError("t_end and dt must be positive");
-  if (c.method != "characteristics" && c.method != "transfer" && c.method != "invariant" &&
-      c.method != "particles")
-    throw ConfigError("unknown method '" + c.method + "'");
-  if (c.scheme != "hat" && c.scheme != "cell")
-    throw ConfigError("unknown transfer scheme '" + c.scheme + "' (hat or cell)");
-  if (c.samples < 0 || c.samples > 64) throw ConfigError("samples must be in 0..64");
-  if (!(c.step >= 0) || c.particles < 1 || c.eigenvalues < 1)
-    throw ConfigError("step, particles and eigenvalues must be positive");
+  if (!(c.settings.real<"dt">() > 0)) throw ConfigError("setting 'dt' must be positive");
   return c;
 }
 
 namespace detail {
 
-inline std::string fmt(const char* f, double v) {
+/// t with three decimals (a frame's title).
+inline std::string fixed3(double v) {
   char b[64];
-  std::snprintf(b, sizeof b, f, v);
+  std::snprintf(b, sizeof b, "%.3f", v);
   return b;
 }
 
@@ -163,29 +142,21 @@ int run_model(const RunConfig& c) {
   const double* par = c.params.data();
   TensorGrid<N> grid;
   for (std::size_t a = 0; a < N; ++a) grid.axes[a] = c.axes[a];
-  const std::vector<double> times = output_times(c.t_end, c.dt);
+  const double dt = c.settings.real<"dt">();
+  const std::vector<double> times = output_times(c.settings.real<"t_end">(), dt);
+  const std::string& method = c.method();
   MethodSettings ms;
-  ms.method = c.method;
-  ms.tol = c.tol;
-  ms.max_events = c.max_events;
-  ms.budget = c.budget;
-  ms.budget_tol = c.budget_tol;
-  ms.step = c.step;
-  ms.scheme = c.scheme;
-  ms.samples = c.samples;
-  ms.eigenvalues = c.eigenvalues;
-  ms.particles = c.particles;
-  ms.seed = c.seed;
+  ms.settings = c.settings;
   ms.quiet = c.quiet;
   const CharacteristicsOptions opt = detail::trace_options(ms);
 
   if (!c.quiet && !c.preflight_only) {
-    if (c.method == "invariant")
+    if (method == "invariant")
       std::fprintf(stderr, "hybgen: %s: invariant density on %zu nodes x %d mode(s)...\n",
                    c.model.c_str(), grid.size(), M::n_mode);
     else
       std::fprintf(stderr, "hybgen: %s: %s on %zu nodes x %d mode(s), %zu output times...\n",
-                   c.model.c_str(), c.method.c_str(), grid.size(), M::n_mode, times.size());
+                   c.model.c_str(), method.c_str(), grid.size(), M::n_mode, times.size());
   }
   // Pre-flight (t = 0): u0 ≥ 0 and finite on the grid; at every crossing point of every guard
   // in the box, a finite reset landing in the support and the box, not on a guard that fires
@@ -197,7 +168,7 @@ int run_model(const RunConfig& c) {
     PreflightOptions popt;
     popt.newton_max_iter = opt.newton_max_iter;
     popt.newton_tol = opt.newton_tol;
-    popt.backward = c.method == "characteristics";  // the one method that inverts Δ
+    popt.backward = method == "characteristics";  // the one method that inverts Δ
     const PreflightFailure<N> pf = preflight<M>(grid, par, popt, &seeds, &notes);
     for (const auto& note : notes)
       std::fprintf(stderr,
@@ -207,32 +178,32 @@ int run_model(const RunConfig& c) {
                    describe_preflight<M>(note).c_str());
     if (!pf.ok()) {
       std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
-      return 3;
+      return exit_status(ExitCode::Numerical);
     }
     if (c.preflight_only) {
       std::size_t enumerated = 0;
       for (const auto& sd : seeds) enumerated += sd.empty() ? 0 : 1;
-      std::printf("pre-flight scan (t = 0, %s, grid of %zu nodes): ok, %d guard(s)",
-                  c.method.c_str(), grid.size(), M::n_guard);
+      std::printf("pre-flight scan (t = 0, %s, grid of %zu nodes): ok, %d guard(s)", method.c_str(),
+                  grid.size(), M::n_guard);
       if (enumerated > 0)
         std::printf(", %zu with several pre-images (enumerated by the characteristics)",
                     enumerated);
       if (!notes.empty()) std::printf(", %zu isolated re-trigger point(s)", notes.size());
       std::printf("\n");
-      return 0;
+      return exit_status(ExitCode::Success);
     }
   }
   ms.preimage_seeds = &seeds;
   MethodResult<N> res;
   try {
-    res = solve_method<M>(grid, times, c.dt, par, ms);
+    res = solve_method<M>(grid, times, dt, par, ms);
   } catch (const std::invalid_argument& e) {
     throw ConfigError(e.what());  // e.g. an output time that is not a multiple of the step
   }
   for (const auto& w : res.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
   if (!res.ok()) {
     std::fprintf(stderr, "hybgen: numerical failure: %s\n", res.failure.c_str());
-    return 3;
+    return exit_status(ExitCode::Numerical);
   }
 
   // Outputs: one .npy per frame (sum over modes; per mode too when there are several), a
@@ -274,9 +245,8 @@ int run_model(const RunConfig& c) {
       }
     }
     std::string title = c.model + "   ";
-    title += res.frame_times.empty()
-                 ? std::string("invariant density (transfer operator)")
-                 : c.method + "   t = " + detail::fmt("%.3f", res.frame_times[k]);
+    title += res.frame_times.empty() ? std::string("invariant density (transfer operator)")
+                                     : method + "   t = " + detail::fixed3(res.frame_times[k]);
     if (M::n_mode > 1) title += "   (sum over modes)";
     const std::string png = (out / (base + ".png")).string();
     if constexpr (N == 1) {
@@ -318,12 +288,12 @@ int run_model(const RunConfig& c) {
   progress.finish();
   const double output_s = std::chrono::duration<double>(Clock::now() - t2).count();
 
-  // summary.json (DESIGN.md run contract, extended with the atom, per-mode files and the
+  // summary.json (docs/design.md run contract, extended with the atom, per-mode files and the
   // method's own fields).
   const MassBudget& mb = res.budget;
   nlohmann::json s;
   s["model"] = c.model;
-  s["method"] = c.method;
+  s["method"] = method;
   nlohmann::json axes = nlohmann::json::array();
   for (std::size_t a = 0; a < N; ++a)
     axes.push_back({{"name", c.axis_names[a]},
@@ -362,7 +332,7 @@ int run_model(const RunConfig& c) {
         before += b;
       }
     std::printf("%s: %s on %zu nodes, %zu frame(s): %ssolve %.3f s, budget %.3f s, output %.3f s\n",
-                c.model.c_str(), c.method.c_str(), n_node, sol.n_time, before.c_str(), res.solve_s,
+                c.model.c_str(), method.c_str(), n_node, sol.n_time, before.c_str(), res.solve_s,
                 res.budget_s, output_s);
     if (res.summary.contains("invariant")) {
       const auto& inv = res.summary["invariant"];
@@ -396,7 +366,7 @@ int run_model(const RunConfig& c) {
                   res.frame_names.front().c_str(), res.frame_names.back().c_str());
     }
   }
-  return 0;
+  return exit_status(ExitCode::Success);
 }
 
 /// Entry point of a generated runner.
@@ -405,17 +375,17 @@ int runner_main(int argc, char** argv) {
   if (argc != 2) {
     std::fprintf(stderr, "usage: %s CONFIG.json (written by `hybgen run`)\n",
                  argc ? argv[0] : "runner");
-    return 2;
+    return exit_status(ExitCode::UsageError);
   }
   try {
     const RunConfig c = read_config<M>(argv[1]);
     return run_model<M>(c);
   } catch (const ConfigError& e) {
     std::fprintf(stderr, "hybgen: error: %s\n", e.what());
-    return 2;
+    return exit_status(ExitCode::UsageError);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "hybgen: error: %s\n", e.what());
-    return 70;
+    return exit_status(ExitCode::Internal);
   }
 }
 

@@ -1,0 +1,144 @@
+// The settings table (runtime/include/hybgen/rt/settings.hpp) is the one definition of every
+// run setting. These tests walk each row through both sides: the generator's model-file and
+// `--set` path (check.cpp), the run configuration it writes, and the runner's reader, which
+// must accept exactly what the generator accepts and read back the same value; and they
+// check that the settings page of the docs is the table.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "hybgen/gen/check.hpp"
+#include "hybgen/gen/errors.hpp"
+#include "hybgen/gen/fs.hpp"
+#include "hybgen/gen/parse.hpp"
+#include "hybgen/rt/settings.hpp"
+
+namespace hybgen::gen {
+namespace {
+
+const char* const kModel = R"(model box
+state x
+parameter a = 1
+mode m {
+  x' = -a*x
+}
+simulation {
+  domain x in [0, 1]
+  grid 11
+  initial 1
+  t_end 2
+}
+)";
+
+Model model() {
+  SourceText src("t.model", kModel);
+  return check(parse(src), src);
+}
+
+/// A valid value of `s` other than its default, as `--set` text.
+std::string other_value(const rt::SettingSpec& s) {
+  if (s.type == rt::SettingType::word) {
+    const std::string_view w = s.words.substr(s.words.rfind('|') + 1);  // the last word
+    return std::string(w == s.word ? s.words.substr(0, s.words.find('|')) : w);
+  }
+  double x = s.hi < 1e300 ? s.hi : (s.number > 0 ? 2 * s.number : 3.0);
+  if (x == s.number) x = s.lo_open ? (s.lo + s.hi) / 2 : s.lo;
+  if (s.type == rt::SettingType::integer) x = std::floor(x);
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", x);
+  return b;
+}
+
+/// A value `s` refuses, as `--set` text.
+std::string bad_value(const rt::SettingSpec& s) {
+  if (s.type == rt::SettingType::word) return "nosuchword";
+  if (s.hi < 1e300) return "1e301";
+  return s.lo_open ? std::to_string(s.lo) : "-1e300";
+}
+
+TEST(Settings, EveryRowTravelsFromSetToTheRunner) {
+  for (const rt::SettingSpec& s : rt::kSettings) {
+    const std::string name(s.name), value = other_value(s);
+    Model m = model();
+    ASSERT_NO_THROW(apply_overrides(m, {name + "=" + value})) << name << "=" << value;
+    EXPECT_TRUE(m.sim.settings.given(name)) << name;
+    if (s.methods == "derive") continue;  // the symbolic stage's: not in the runner's config
+    // What the generator writes (main.cpp's run_config) is what the runner reads.
+    const nlohmann::json config = m.sim.settings.to_json();
+    ASSERT_TRUE(config.contains(name)) << name;
+    rt::Settings runner;
+    ASSERT_NO_THROW(runner = rt::Settings::from_json(config)) << name;
+    EXPECT_EQ(runner.to_json(), config) << name;
+    if (s.type == rt::SettingType::word)
+      EXPECT_EQ(config[name].get<std::string>(), value) << name;
+    else
+      EXPECT_EQ(config[name].get<double>(), std::stod(value)) << name;
+  }
+}
+
+TEST(Settings, BothSidesRefuseTheSameValuesWithTheSameReason) {
+  for (const rt::SettingSpec& s : rt::kSettings) {
+    const std::string name(s.name), value = bad_value(s);
+    Model m = model();
+    std::string generator_says;
+    try {
+      apply_overrides(m, {name + "=" + value});
+      ADD_FAILURE() << name << "=" << value << " accepted";
+    } catch (const UsageError& e) {
+      generator_says = e.what();
+      EXPECT_EQ(e.exit_code(), ExitCode::UsageError);
+    }
+    if (s.methods == "derive") continue;
+    nlohmann::json config = model().sim.settings.to_json();  // valid: dt resolved
+    if (s.type == rt::SettingType::word)
+      config[name] = value;
+    else
+      config[name] = std::stod(value);
+    try {
+      (void)rt::Settings::from_json(config);
+      ADD_FAILURE() << "the runner accepted " << name << "=" << value;
+    } catch (const std::invalid_argument& e) {
+      // The reason after the name is the table's, on both sides.
+      const std::string runner_says = e.what();
+      const std::string reason = runner_says.substr(runner_says.find(' ', 9) + 1);
+      EXPECT_NE(generator_says.find(reason), std::string::npos)
+          << "generator: " << generator_says << "\nrunner: " << runner_says;
+    }
+  }
+}
+
+TEST(Settings, ModelFileBlockUsesTheSameRules) {
+  // A setting in the simulation block goes through the same row as --set.
+  const std::string text = std::string(kModel).replace(std::string(kModel).find("  t_end 2"), 9,
+                                                       "  t_end 2\n  samples 65");
+  SourceText src("t.model", text);
+  try {
+    (void)check(parse(src), src);
+    ADD_FAILURE() << "samples 65 accepted";
+  } catch (const ModelError& e) {
+    EXPECT_NE(std::string(e.what()).find("must be an integer in [0, 64]"), std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(Settings, DefaultsAndDerivedDefaults) {
+  const Model m = model();
+  EXPECT_EQ(m.sim.settings.word<"method">(), "characteristics");
+  EXPECT_EQ(m.sim.settings.real<"tol">(), 1e-10);
+  EXPECT_EQ(m.sim.settings.real<"dt">(), 0.2);  // t_end/10 when not given
+  EXPECT_FALSE(m.sim.settings.given("dt"));
+  // The derivation limits are read from the table.
+  EXPECT_EQ(m.limits.derive_seconds, rt::setting_number("derive_seconds"));
+}
+
+TEST(Settings, DocsPageIsTheTable) {
+  const std::string page = read_file(std::string(HYBGEN_SOURCE_DIR) + "/docs/settings.md");
+  EXPECT_NE(page.find(rt::settings_markdown()), std::string::npos)
+      << "docs/settings.md is out of date; its table is rt::settings_markdown():\n"
+      << rt::settings_markdown();
+}
+
+}  // namespace
+}  // namespace hybgen::gen
