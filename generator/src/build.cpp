@@ -110,9 +110,10 @@ std::string runner_target() {
 
 namespace {
 
-/// Hash of every runtime header (paths relative to the include root + content) and of the
-/// precompiled runtime library.
-std::string runtime_fingerprint() {
+/// Hash of every runtime header (paths relative to the include root + content) and, when the
+/// runner links it, of the precompiled runtime library (a runner with the runtime inlined
+/// does not change with it).
+std::string runtime_fingerprint(bool library) {
   std::vector<std::string> files;
   for (const auto& e : fs::recursive_directory_iterator(HYBGEN_RUNTIME_INCLUDE))
     if (e.is_regular_file()) files.push_back(e.path().string());
@@ -122,12 +123,14 @@ std::string runtime_fingerprint() {
     all += fs::relative(f, HYBGEN_RUNTIME_INCLUDE).string() + '\n';
     all += sha256_hex(read_file(f)) + '\n';
   }
-  try {
-    all += "library\n" + sha256_hex(read_file(HYBGEN_RUNTIME_LIBRARY)) + '\n';
-  } catch (const std::exception& e) {
-    throw BuildError(std::string("the runtime library is missing (build the target "
-                                 "hybgen_runner): ") +
-                     e.what());
+  if (library) {
+    try {
+      all += "library\n" + sha256_hex(read_file(HYBGEN_RUNTIME_LIBRARY)) + '\n';
+    } catch (const std::exception& e) {
+      throw BuildError(std::string("the runtime library is missing (build the target "
+                                   "hybgen_runner): ") +
+                       e.what());
+    }
   }
   return sha256_hex(all);
 }
@@ -233,8 +236,8 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
       (library ? shell_quote(HYBGEN_RUNTIME_LIBRARY) + " " : std::string()) + HYBGEN_RUNNER_LIBS;
   const std::string key =
       sha256_hex(std::string(generator_version()) + '\n' + files.header + '\n' + main_src + '\n' +
-                 runtime_fingerprint() + '\n' + compiler_identity() + '\n' + runner_target() +
-                 '\n' + flags + '\n' + libs);
+                 runtime_fingerprint(library) + '\n' + compiler_identity() + '\n' +
+                 runner_target() + '\n' + flags + '\n' + libs);
   BuildResult r;
   r.key = key;
   const std::string root = options.cache_dir.empty() ? default_cache_dir() : options.cache_dir;

@@ -22,12 +22,9 @@ namespace rt = hybgen::rt;
 using Ball = rt::testing::BouncingBall;
 using Table = rt::TableModel<2>;
 
+/// The ball's table, installed as TableModel<2>'s model.
 const rt::ModelTable& ball_table() {
-  static const rt::ModelTable t = [] {
-    rt::ModelTable x = rt::make_table<Ball>();
-    Table::install(x);
-    return x;
-  }();
+  static const rt::ModelTable t = rt::make_table<Ball>();
   Table::install(t);
   return t;
 }

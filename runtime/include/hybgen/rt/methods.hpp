@@ -70,19 +70,14 @@ struct MethodSettings {
   MethodSettings& set(std::string_view name, double x) {
     SettingValue v;
     v.number = x, v.has_number = true;
-    return set_value(name, v);
+    settings.assign(name, v);
+    return *this;
   }
   /// Set a word setting; throws std::invalid_argument when the table refuses it.
   MethodSettings& set(std::string_view name, std::string_view word) {
     SettingValue v;
     v.word = std::string(word);
-    return set_value(name, v);
-  }
-
- private:
-  MethodSettings& set_value(std::string_view name, const SettingValue& v) {
-    if (std::string why = settings.set(name, v); !why.empty())
-      throw std::invalid_argument("setting '" + std::string(name) + "': " + why);
+    settings.assign(name, v);
     return *this;
   }
 };
@@ -126,25 +121,30 @@ void set_time_frames(MethodResult<N>& r, std::span<const double> times) {
   for (std::size_t k = 0; k < times.size(); ++k) r.frame_names.push_back(frame_name(k));
 }
 
+/// The ODE tolerances of `s` (rtol = tol, atol = tol/100) and its event cap into `o`, a
+/// CharacteristicsOptions or ForwardOptions: the one place every method takes them from.
+template <class Options>
+void set_ode_settings(const MethodSettings& s, Options& o) {
+  const double tol = s.settings.real<"tol">();
+  o.ode.rtol = tol;
+  o.ode.atol = tol * 1e-2;
+  o.max_events = static_cast<int>(s.settings.integer<"max_events">());
+}
+
 inline CharacteristicsOptions trace_options(const MethodSettings& s) {
   CharacteristicsOptions opt;
-  const double tol = s.settings.real<"tol">();
-  opt.ode.rtol = tol;
-  opt.ode.atol = tol * 1e-2;
-  opt.max_events = static_cast<int>(s.settings.integer<"max_events">());
+  set_ode_settings(s, opt);
   opt.preimage_seeds = s.preimage_seeds;
   return opt;
 }
 
 inline TransferOptions transfer_options(const MethodSettings& s, double dt) {
   TransferOptions o;
-  const double step = s.settings.real<"step">(), tol = s.settings.real<"tol">();
+  const double step = s.settings.real<"step">();
   o.step = step > 0 ? step : dt;
   o.scheme = parse_scheme(s.settings.word<"scheme">());
   o.samples_per_axis = static_cast<int>(s.settings.integer<"samples">());
-  o.forward.max_events = static_cast<int>(s.settings.integer<"max_events">());
-  o.forward.ode.rtol = tol;
-  o.forward.ode.atol = tol * 1e-2;
+  set_ode_settings(s, o.forward);
   return o;
 }
 
@@ -367,9 +367,7 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   ParticleOptions po;
   po.particles = static_cast<std::size_t>(s.settings.integer<"particles">());
   po.seed = static_cast<std::uint64_t>(s.settings.integer<"seed">());
-  po.forward.ode.rtol = s.settings.real<"tol">();
-  po.forward.ode.atol = po.forward.ode.rtol * 1e-2;
-  po.forward.max_events = static_cast<int>(s.settings.integer<"max_events">());
+  detail::set_ode_settings(s, po.forward);
   const auto t0 = detail::MethodClock::now();
   Progress progress("particles", po.particles, s.quiet);
   po.progress = &progress;

@@ -243,6 +243,12 @@ class Settings {
     return "";
   }
 
+  /// Set `name` to `v`, or throw std::invalid_argument "setting 'NAME': why".
+  void assign(std::string_view name, const SettingValue& v) {
+    if (std::string why = set(name, v); !why.empty())
+      throw std::invalid_argument("setting '" + std::string(name) + "': " + why);
+  }
+
   /// Whether `name` was set (not left at its default).
   bool given(std::string_view name) const {
     const std::size_t i = setting_index(name);
@@ -293,7 +299,7 @@ class Settings {
   }
 
   /// The settings of a run configuration, each validated by the table's rule; a missing
-  /// member keeps its default. Throws std::invalid_argument naming the setting.
+  /// member keeps its default. Throws std::invalid_argument naming the setting (`assign`).
   static Settings from_json(const nlohmann::json& j) {
     Settings out;
     for (const SettingSpec& s : kSettings) {
@@ -306,8 +312,7 @@ class Settings {
         v.word = x.get<std::string>();
       else if (x.is_number())
         v.number = x.get<double>(), v.has_number = true;
-      if (std::string why = out.set(s.name, v); !why.empty())
-        throw std::invalid_argument("setting '" + key + "' " + why);
+      out.assign(s.name, v);
     }
     return out;
   }
