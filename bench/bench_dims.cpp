@@ -1,4 +1,4 @@
-// Benchmarks of the density solvers on higher-dimensional systems (issue 3, benchmark d):
+// Benchmarks of the density solvers on higher-dimensional systems (docs/benchmarks.md):
 // time and memory against grid size for
 //  - the reduced Chaplygin sleigh, 3-D (models/chaplygin.model: state (v, omega, theta) on
 //    [−1.5, 1.5]² × [−1, 1], t_end = 2, dt = 0.5), grids n³ for n = 17, 33, 65, 129;

@@ -1,4 +1,4 @@
-# Hardening builds (issue 5); see README.md, "Hardening".
+# Hardening builds; see docs/hardening.md.
 #
 # HYBGEN_SANITIZE=ON: AddressSanitizer + UndefinedBehaviorSanitizer on every
 #   target (compile and link), and — through HYBGEN_RUNNER_EXTRA_FLAGS, which

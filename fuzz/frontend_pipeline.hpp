@@ -42,6 +42,7 @@
 #include "hybgen/gen/ast.hpp"
 #include "hybgen/gen/check.hpp"
 #include "hybgen/gen/derive.hpp"
+#include "hybgen/gen/frontend.hpp"
 #include "hybgen/gen/limits.hpp"
 #include "hybgen/gen/parse.hpp"
 #include "hybgen/gen/reduce.hpp"
@@ -183,40 +184,42 @@ inline bool within_lie_caps(const gen::LieDecl& lie) {
   return ok;
 }
 
-/// derive `model` if it is within the derive caps, with derive_seconds below
-/// the fuzzer's -timeout=10 (a hang is a finding).
-inline Stage derive_within_caps(gen::Model& model, const gen::SourceText& src) {
-  if (!within_derive_caps(model)) return Stage::Checked;
-  model.limits.derive_seconds = 5;
-  gen::HybridSystem sys = gen::derive(model, src);
-  sys.model = &model;
-  return Stage::Derived;
+/// The front end's options with the caps: check_lie and reduce only within the Lie caps,
+/// derive only within the derive caps and with derive_seconds below the fuzzer's
+/// -timeout=10 (a hang is a finding).
+inline gen::FrontendOptions capped_options(gen::ReduceTarget target) {
+  gen::FrontendOptions o;
+  o.target = target;
+  o.sets = {"derive_seconds=5"};
+  o.before_lie = [](const gen::ModelAst& ast) { return within_lie_caps(*ast.lie); };
+  o.before_derive = [](const gen::Model& m) { return within_derive_caps(m); };
+  return o;
 }
 
-/// The Lie-group path: check_lie -> reduce -> derive, then the unreduced twin
-/// (reduce, and derive under the caps). Returns the stage of the reduced model.
-inline Stage run_lie(const gen::ModelAst& ast, const gen::SourceText& src) {
-  if (!within_lie_caps(*ast.lie)) return Stage::Parsed;
-  gen::LieModel lie = gen::check_lie(ast, src);
-  lie.base.limits.derive_seconds = 5;  // for reduce too, once it runs under the limits
-  gen::Model reduced = gen::reduce(lie, src, gen::ReduceTarget::Reduced);
-  const Stage stage = derive_within_caps(reduced, src);
-  gen::Model twin = gen::reduce(lie, src, gen::ReduceTarget::Unreduced);
-  (void)derive_within_caps(twin, src);
-  return stage;
+/// How far `fe` went, as a Stage.
+inline Stage stage_of(const gen::Frontend& fe) {
+  switch (fe.stage) {
+    case gen::FrontendStage::Parsed:
+      return Stage::Parsed;
+    case gen::FrontendStage::Checked:
+      return Stage::Checked;
+    case gen::FrontendStage::Derived:
+      return Stage::Derived;
+  }
+  return Stage::Parsed;
 }
 
-/// Run the front end on `text` (as file "fuzz.model"). Throws what the stages
-/// throw: hybgen::gen::Error (other than InternalError) is the expected
-/// outcome for bad input; anything else is a bug.
+/// Run the front end (hybgen/gen/frontend.hpp) on `text` (as file "fuzz.model"), and for a
+/// Lie-group model within the caps its unreduced twin too. Returns the stage of the
+/// (reduced) model. Throws what the stages throw: hybgen::gen::Error (other than
+/// InternalError) is the expected outcome for bad input; anything else is a bug.
 inline Stage run_frontend(std::string_view text, [[maybe_unused]] Guards guards = Guards::All) {
   if (text.size() > kMaxInputBytes) return Stage::Skipped;
-  gen::SourceText src("fuzz.model", std::string(text));
-  src.validate();
-  gen::ModelAst ast = gen::parse(src);
-  if (gen::is_lie_model(ast)) return run_lie(ast, src);
-  gen::Model model = gen::check(ast, src);
-  return derive_within_caps(model, src);
+  const gen::SourceText src("fuzz.model", std::string(text));
+  const gen::Frontend fe(src, capped_options(gen::ReduceTarget::Reduced));
+  if (fe.lie && fe.stage != gen::FrontendStage::Parsed)
+    const gen::Frontend twin(src, capped_options(gen::ReduceTarget::Unreduced));
+  return stage_of(fe);
 }
 
 }  // namespace hybgen::fuzz

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# CI's hardening stage (issue 5), after the README's test command:
+# CI's hardening stage (docs/hardening.md), after the README's test command:
 #  1. the test suite under AddressSanitizer + UndefinedBehaviorSanitizer
 #     (CMake preset `asan`: hybgen, the tests and every generated runner the
 #     tests build), in build-asan/: every unit and validation test and a chosen

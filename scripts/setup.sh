@@ -1,7 +1,14 @@
 #!/usr/bin/env bash
-# Install what is missing (Debian 12 packages only) and build hybgen into build/.
+# Install what is missing (Debian 12 packages only) and build into build/: hybgen and its
+# runtime library (what `hybgen run` needs), or with --tests everything (tests, benchmarks).
 # Environment: BUILD_DIR (default build), HYBGEN_WERROR (ON in CI).
 set -euo pipefail
+targets=(--target hybgen)
+case "${1:-}" in
+  "") ;;
+  --tests) targets=() ;;
+  *) echo "usage: scripts/setup.sh [--tests]" >&2; exit 2 ;;
+esac
 cd "$(dirname "$0")/.."
 
 packages=(build-essential cmake ninja-build pkg-config libginac-dev libcln-dev libeigen3-dev
@@ -24,4 +31,4 @@ fi
 BUILD_DIR=${BUILD_DIR:-build}
 WERROR=${HYBGEN_WERROR:-$([[ "${CI:-}" == "true" ]] && echo ON || echo OFF)}
 cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHYBGEN_WERROR="$WERROR" >/dev/null
-cmake --build "$BUILD_DIR" -j"$(nproc)"
+cmake --build "$BUILD_DIR" -j"$(nproc)" "${targets[@]}"

@@ -1,4 +1,4 @@
-// End to end: every numerical failure class of issue #5 provoked by a tiny model of
+// End to end: every numerical failure class (docs/hardening.md) provoked by a tiny model of
 // tests/data/failures/ (exit 3 and the message: what, which guard/mode, where, when), and
 // "nothing lost, nothing half-written": staged outputs swapped into place only on success,
 // the output-directory lock, a full disk, a corrupted build cache, a failed compile (exit 4

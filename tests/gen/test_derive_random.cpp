@@ -1,4 +1,4 @@
-// Differential test of `derive` on random models (issue #16, item 7).
+// Differential test of `derive` on random models (docs/hardening.md).
 //
 // tests/support/random_model.hpp draws well-formed general models (1–4 states, 1–3 modes,
 // 1–3 guards; polynomial/trigonometric flows, affine and mildly nonlinear surfaces, affine,
@@ -22,7 +22,7 @@
 //    the factor by which the flux of n-volume through S changes across the reset. This is
 //    hybgen's convention, signed (README "Derived equations": J = ∇sᵀ adj(DΔ) X⁺(Δx) /
 //    ∇sᵀ X⁻(x), "equal to docs/design.md's determinant quotient for every tangent basis";
-//    derive.hpp proves the identity; the transport uses 1/|J|, README "The methods").
+//    derive.hpp proves the identity; the transport uses 1/|J|, docs/methods.md).
 //    SignConventionOnShippedModels pins it on the shipped ball (J = e²), a 1-D thermostat
 //    with an identity reset (J = X⁺/X⁻ < 0) and the shipped sawtooth (J = 1/2). Both J
 //    (general) and J with s = 0 substituted (hybrid_jacobian_on_surface) are compared.
@@ -70,7 +70,9 @@
 #include <string>
 #include <vector>
 
+#include "hybgen/gen/check.hpp"
 #include "hybgen/gen/errors.hpp"
+#include "hybgen/gen/parse.hpp"
 #include "support/pipeline.hpp"
 #include "support/random_model.hpp"
 
@@ -825,7 +827,7 @@ TEST(DeriveRandom, SignConventionOnShippedModels) {
   // A 1-D thermostat with identity resets: J = X⁺/X⁻, signed. Heating x' = 2 − x switches
   // off at x = 1.5 (X⁻ = 0.5) to cooling x' = −x (X⁺ = −1.5): J = −3; cooling switches on at
   // x = 0.5 (X⁻ = −0.5, X⁺ = 1.5): J = −3. The sign records that the flux reverses; the
-  // density transport divides by |J| (README "The methods").
+  // density transport divides by |J| (docs/methods.md).
   {
     const Pipeline pl("thermostat.model", R"(state x
 mode heat { x' = 2 - x }

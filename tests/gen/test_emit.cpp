@@ -19,6 +19,7 @@
 #include "hybgen/gen/check.hpp"
 #include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/emit.hpp"
+#include "hybgen/gen/frontend.hpp"
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/parse.hpp"
 
@@ -32,18 +33,14 @@ const std::vector<std::string> kModels = {
     "bouncing_ball",     "sir", "sir_3d", "filippov", "chaplygin_energy", "sawtooth",
     "integrate_and_fire"};
 
-struct Derived {
-  SourceText src;
-  Model model;
-  HybridSystem sys;
+/// A shipped model through the front end, named by its path relative to the source tree
+/// (paths in provenance must not depend on where the tree is).
+struct Derived : Frontend {
   explicit Derived(const std::string& name)
-      : src(SourceText::load(std::string(HYBGEN_SOURCE_DIR) + "/models/" + name + ".model")) {
-    // Paths in provenance must not depend on where the tree is: load relative.
-    src = SourceText("models/" + name + ".model", src.text());
-    model = check(parse(src), src);
-    sys = derive(model, src);
-    sys.model = &model;
-  }
+      : Frontend(SourceText(
+            "models/" + name + ".model",
+            SourceText::load(std::string(HYBGEN_SOURCE_DIR) + "/models/" + name + ".model")
+                .text())) {}
 };
 
 TEST(Emit, GoldenFilesAreUpToDate) {

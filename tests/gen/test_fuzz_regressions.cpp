@@ -1,4 +1,4 @@
-// Fuzzing regressions (issue 5): every input that made a fuzzer of fuzz/
+// Fuzzing regressions (docs/hardening.md): every input that made a fuzzer of fuzz/
 // crash, hang or leak, run through the normal library. Each must end in
 // success or a clean hybgen::gen::Error (not an InternalError, exit 70). In
 // the sanitizer build (HYBGEN_SANITIZE) the same tests also check, through

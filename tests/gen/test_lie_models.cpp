@@ -1,5 +1,5 @@
 // Lie-group models beyond a matrix parametrisation with h at the identity
-// (issue #4): a kinetic energy given by a METRIC IN COORDINATES, checked for
+// (docs/model-language.md): a kinetic energy given by a METRIC IN COORDINATES, checked for
 // left invariance (I(c) = L(c)ᵀ M(c) L(c) constant), and a group given by
 // STRUCTURE CONSTANTS (`group G = algebra(E1, ..., En) { [Ei, Ej] = ... }`),
 // which has no coordinates.

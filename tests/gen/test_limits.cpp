@@ -1,4 +1,4 @@
-// Derivation limits (issue 5; generator/include/hybgen/gen/limits.hpp): a
+// Derivation limits (generator/include/hybgen/gen/limits.hpp): a
 // symbolic blow-up ends with a located model error that names the object
 // being derived and the limit, and the limits are settings (--set).
 

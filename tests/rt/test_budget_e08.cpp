@@ -1,4 +1,4 @@
-// The mass budget of the bouncing ball with restitution e = 0.8 on a 301² grid (issue 3, "Done
+// The mass budget of the bouncing ball with restitution e = 0.8 on a 301² grid ("Done
 // when": mass + outflow + atom = initial mass within 1e-3 on a 301² grid), for the three methods
 // that report a budget — characteristics, the conservative transfer operator and particles —
 // through the runner's method interface (methods.hpp): the paper's box [0, 2] × [−2, 2], u0 =

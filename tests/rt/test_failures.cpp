@@ -1,5 +1,5 @@
 // Tests of hybgen/rt/preflight.hpp and of the failure reports of the characteristics:
-// every numerical failure class of issue #5 provoked on hand-written models (variants of the
+// every numerical failure class (docs/hardening.md) provoked on hand-written models (variants of the
 // bouncing ball of bouncing_ball_model.hpp), with the place (guard, mode, state) and the
 // value of the report checked against hand computations.
 

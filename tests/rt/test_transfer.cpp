@@ -208,7 +208,7 @@ TEST(Transfer, BallConvergesUnderRefinement) {
   // interpolating scheme measured 1.50e-2 … 2.42e-4 and 3.26e-1 … 1.98e-2 here, 3–4× less, at
   // an h chosen in its favour (g·h a whole number of cells: no interpolation along p): the
   // price of moving mass instead of values; on the paper's configuration (h = 0.2) the two
-  // differ by 6 % (README). The smoothing carries mass beyond E = 1.8 to the faces on coarse
+  // differ by 6 % (docs/benchmarks.md). Smoothing carries mass past E = 1.8 to the faces on coarse
   // grids (outflow 4.7e-2, 1.9e-3, 1.0e-5, 6e-10 of 2.3): it is booked as outflow, never lost.
   // Asserted: both errors fall at every refinement; the t = 1 orders lie in [1.8, 2.1]; the
   // t = 10 orders of the two finer refinements in [1.0, 1.7]; mass + outflow = mass0 to 1e-12.

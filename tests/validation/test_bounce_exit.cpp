@@ -30,7 +30,7 @@
 //
 // Compared:
 //  * characteristics (solve_grid, 41 × 93 nodes, 6 times up to 2.5): error relative to
-//    max(u, 1) below 100·rtol for rtol 1e-10 and 1e-12 (README: the error is the ODE
+//    max(u, 1) below 100·rtol for rtol 1e-10 and 1e-12 (docs/methods.md: the error is the ODE
 //    tolerance; measured 3.7e-9 and 4.6e-11).
 //  * its mass budget (adaptive_mass_budget, what `hybgen run` reports) at the output times 0,
 //    0.05, 2.5 (rel_tol 1e-4 and the runner's 3e-4): the outflow against outflow(t) within its
@@ -40,10 +40,10 @@
 //    same at 11 output times through the exit window. On a taller box the 41 × 93 grid
 //    does not resolve the post-impact strip and the volume cubature misses 0.9 % of the mass
 //    with a small estimate (figures at the test; a fifth of it before the grid's nodes were
-//    its check points): the closure check flags it as the README promises (asserted); on a
+//    its check points): the closure check flags it as docs/outputs.md promises (asserted); on a
 //    grid twice as fine the mass is within its estimate (asserted).
 //  * transfer (hat, h = 0.25): outflow and density against the closed forms on two grids,
-//    with the convergence ratios (README: O(Δx²/h) plus the error where mass crosses the
+//    with the convergence ratios (docs/methods.md: O(Δx²/h) plus the error where mass crosses the
 //    guard; figures at the test).
 //  * particles (2·10⁵): mass and outflow within 5σ (σ² ≤ F·Σw²/Σw, the compound-Poisson
 //    bound of test_outflow.cpp; measured |z| ≤ 0.93).
@@ -278,7 +278,7 @@ TEST(BounceExit, ReferencesAreConsistent) {
 }
 
 TEST(BounceExit, CharacteristicsMatchTheBackwardMap) {
-  // The error is the ODE tolerance (README), amplified by the dynamics (the impact and the
+  // The error is the ODE tolerance (docs/methods.md), amplified by the dynamics (the impact and the
   // drag compress the density, whose foot then lies on u0's steep flanks): measured 3.7e-9
   // with rtol 1e-10 and 4.6e-11 with rtol 1e-12 (ratio 81 for a 100 times finer tolerance).
   // Asserted: < 1e-8, and < 1e-10 with the finer tolerance.
@@ -307,7 +307,7 @@ TEST(BounceExit, CharacteristicsMatchTheBackwardMap) {
 
 /// The characteristics budget at `times` on the box [0, L] × [plo, phi] against the closed
 /// forms (file comment): the outflow within its estimate, atom 0; with `strict`, the mass within
-/// its estimate plus the target and the defect within the closure bar, else (the README's
+/// its estimate plus the target and the defect within the closure bar, else (docs/outputs.md's
 /// promise) a mass outside that must be flagged by the closure check. Returns the worst mass
 /// error.
 double check_budget(const std::vector<double>& times, double rel_tol, double plo, double phi,
@@ -384,7 +384,7 @@ TEST(BounceExit, BudgetMassMissedByTheCubatureIsFlagged) {
   // estimate 9.3e-5. What is left is a piece of the strip that no grid node sees either
   // (5.7e-3 of it in the leaf x ∈ [0.875, 1] × p ∈ [−0.75, 0.625], all of whose 16 Gauss
   // nodes and ~130 grid nodes read 0): the cubature sees what the grid resolves, no more.
-  // There the README's promise for "an error the estimates missed" is the closure check's
+  // There docs/outputs.md's promise for "an error the estimates missed" is the closure check's
   // warning, |defect| > kDefectFactor × budget_defect_error: asserted, with the outflow
   // (independent of the volume cubature) within its estimate.
   const double worst = check_budget({0.0, 1.25}, 1e-4, -3.5, 2.0, false);
@@ -402,7 +402,7 @@ TEST(BounceExit, BudgetOnAGridThatResolvesTheStripIsWithinItsEstimate) {
 }
 
 TEST(BounceExit, TransferBooksTheOutflow) {
-  // h = 0.25 (the hat smoothing is per step: O(Δx²/h), README), 81 × 185 and 161 × 369 nodes.
+  // h = 0.25 (hat smoothing is per step: O(Δx²/h), docs/methods.md), 81 × 185 and 161 × 369 nodes.
   // Measured: worst outflow error over the output times 4.69e-3 and 1.21e-3 (ratio 3.9, second
   // order); relative L1 of the density at t = 0.5 (after every impact) 4.6e-2 and 1.2e-2
   // (ratio 3.8), at t = 1 0.18 and 0.052 (3.5): the post-impact strip is 2–5 cells thick on

@@ -33,10 +33,10 @@
 // u0 = cos²(π r/(2·0.4)), r = |z − (0.2, −0.9)| < 0.4, split between the modes by their
 // regions (most of it in R). Compared:
 //  * characteristics (solve_grid, 34 × 35 nodes, t = 1, 3, 5.5: up to three switches back)
-//    against `exact`, both modes: error relative to max u below 1e-8 (README: the ODE
+//    against `exact`, both modes: error relative to max u below 1e-8 (docs/methods.md: the ODE
 //    tolerance, rtol 1e-10 here; measured 2.9e-10).
 //  * transfer (hat, h = 0.25): u0 marched to t = 3 (R → L and back), relative L1 against
-//    `exact` and the mode masses, on two grids with the convergence ratios (README: O(Δx²/h)
+//    `exact` and the mode masses, on two grids with convergence ratios (docs/methods.md: O(Δx²/h)
 //    plus the switching error; figures at the test).
 //  * invariant (hat, h = 0.5): λ₁ = 1 to 1e-9, mode masses 2 : 1 with the convergence ratio,
 //    and q = u·ω_m|z|²/ρ a function of ρ (its variation across shells of orbits, against the
@@ -318,7 +318,7 @@ TEST(FocusSwitch, TransferConverges) {
   // 136 × 137 nodes. Measured: relative L1 0.215 and 0.0795 (ratio 2.7; the bump is 8 and 16
   // cells wide); the mode masses off by 2.09e-3 and 6.5e-4, 1.40 % and 0.43 % of the total
   // 0.1495 (ratio 3.2) (h = 0.1: L1 0.44 and 0.15; h = 0.5: 0.126 and 0.051 — the per-step
-  // smoothing, O(Δx²/h), README). No outflow (the state space is a union of orbits). Asserted: L1 <
+  // smoothing O(Δx²/h), docs/methods.md). No outflow (the state space is invariant). Asserted: L1 <
   // 0.3 and mode masses within 2e-2 of the total on the coarse grid, then ratios > 2.3 and > 2.5;
   // the mass kept to rounding.
   FocusSwitch::u0 = bump;

@@ -26,11 +26,11 @@
 // G = cos²(πρ/(2·0.6)), ρ = |(x, y) − (0.5, 0)| < 0.6 (inside r ≤ 1.1); h(θ) = 1 + ½ sin(2πθ/P).
 // Compared:
 //  * characteristics (solve_grid, 25 × 25 × 21 nodes, t = 0.7, 1.6, 3.1: up to 4 switches,
-//    both modes, the faces z = 0, 1 included): max error below 1e-8·max u (README: the ODE
+//    both modes, the faces z = 0, 1 included): max error below 1e-8·max u (docs/methods.md: the ODE
 //    tolerance, rtol 1e-10 here). Measured 1.5e-10 (7e-11 on the faces; max u = 1.5).
 //  * transfer (hat, h = 0.25, the 3-D default of 3 samples per axis, t = 1): relative L1
 //    against the closed form on 17² × 11 and 33² × 21 nodes, with the convergence ratio
-//    (README: O(Δx²) per step plus the switching error; figures at the test).
+//    (docs/methods.md: O(Δx²) per step plus the switching error; figures at the test).
 //  * invariant (17² × 21, h = 0.25): λ₁ = 1 to 1e-9, mode masses 2 : 1, a flat z-profile and
 //    u_up = 2 u_down node by node; with 4 samples per axis and with the default 3, whose
 //    switching error is much larger here (figures and bounds at the test).
@@ -257,7 +257,7 @@ double transfer_error(const rt::TransferOperator<3>& op, const std::vector<doubl
 }
 
 TEST(HelixSwitch, TransferConverges) {
-  // h = 0.25 (the hat smoothing is per step, so the error is O(Δx²/h): README), the 3-D
+  // h = 0.25 (the hat smoothing is per step, so the error is O(Δx²/h): docs/methods.md), the 3-D
   // default of 3 samples per axis, t = 1 (a state switches up to twice). The bump is only
   // 4 and 8 cells wide. Measured 0.330 (17² × 11) and 0.115 (33² × 21): ratio 2.9, as for the
   // product cycles of test_product.cpp (0.19 → 0.062 at 17³ → 33³). Asserted: < 0.45, then a
@@ -300,7 +300,7 @@ TEST(HelixSwitch, InvariantDensityHasTheModeRatio) {
   // unevenly: measured ratio 2.0000, layers 4e-15, pointwise 2.1e-2 (the hat smoothing at the
   // circular edge of the state space, as in test_oscillator_wall.cpp). With the 3-D default of
   // 3 samples the middle sample of a cell lands exactly on the guard at a step's end, and the
-  // straddling sub-cells booked whole in one mode (README, transfer) distort the z-profile:
+  // straddling sub-cells booked whole in one mode (docs/methods.md#transfer) distort the z-profile:
   // measured ratio 2.0065, layers 6.3e-2, pointwise 0.116 (on a grid that is not
   // commensurate, Δz = 1/21: 3.0e-2 and 6.3e-2 with 3 samples, 2.8e-2 and 6.1e-2 with 6).
   // Asserted: K = 4: ratio within 1e-3, layers < 1e-3, pointwise < 4e-2; K = 3: ratio within

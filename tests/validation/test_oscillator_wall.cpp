@@ -21,10 +21,10 @@
 // radius 1.68. Compared:
 //  * characteristics (solve_grid, 41 × 81 nodes, t = 1, 2.5, 4: the bump reaches the wall
 //    between t = 1.36 and 2.54, so at t = 2.5 it is split between both sides of a reflection
-//    and at t = 4 wholly reflected once): max error below 1e-8 (max u0 = 1; README: the error is
+//    and at t = 4 all reflected once): max error < 1e-8 (max u0 = 1; docs/methods.md: the error is
 //    the ODE tolerance, rtol 1e-10 here). Measured 1.4e-10 (9e-12 on the wall nodes x = 0).
 //  * transfer (hat, h = 0.05): relative L1 at t = 4 (80 steps) on 81 × 161 and 161 × 321
-//    nodes. The README promises O(Δx²) per step, O(Δx²/h) over a horizon, plus a sub-cell
+//    nodes. docs/methods.md promises O(Δx²) per step, O(Δx²/h) over a horizon, plus a sub-cell
 //    error at the wall. Measured 1.87e-1 and 5.14e-2 (ratio 3.6: second order; the narrow
 //    bump is 24 and 48 cells wide). Asserted: < 0.25, then a ratio > 3.
 //  * invariant: λ₁ = 1 to 1e-9 (a closed system: every column of a node in the state space
@@ -34,7 +34,7 @@
 //  * particles (10⁵): the mass and the first moments ∫x u, ∫p u at t = 0, 1, 2.5, 4 (the
 //    cloud-in-cell deposit keeps linear moments exactly) against the same moments of the
 //    closed form, by Gauss quadrature of u0 over its disk pushed by φ_t: within 5σ, σ² =
-//    E[φ²]·Σw²/Σw (i.i.d. bound; the README's 2σ estimate; measured |z| ≤ 0.08, errors ≤ 9e-5).
+//    E[φ²]·Σw²/Σw (iid bound; docs/methods.md's 2σ estimate; measured |z| ≤ 0.08, error ≤ 9e-5).
 
 #include <gtest/gtest.h>
 
@@ -303,7 +303,7 @@ TEST(OscillatorWall, InvariantDensityIsAFunctionOfTheEnergy) {
     EXPECT_GT(var_bump, 0.5);  // the measure tells a function of H from one that is not
   }
   // A function of H marched to t = 4 (h = 0.2) must keep its values: the relative L1 change
-  // is the scheme's smoothing, O(Δx²/h) by the README. Measured 3.44e-2 (41 × 81), 9.05e-3
+  // is the scheme's smoothing, O(Δx²/h) by docs/methods.md. Measured 3.44e-2 (41 × 81), 9.05e-3
   // (81 × 161): ratio 3.8. Asserted: < 5e-2, then a ratio > 3.
   double prev = 0.0;
   for (const int nx : {41, 81}) {

@@ -23,21 +23,21 @@
 //
 // Compared:
 //  * characteristics (solve_grid) at the 100 grid nodes (none at x = 1/2), both modes, all
-//    times: max error relative to max u0 below 1e-9 (measured 1.2e-15). The README promises no
+//    times: max error relative to max u0 below 1e-9 (measured 1.2e-15). docs/methods.md promises no
 //    interpolation error, only the ODE tolerance (rtol 1e-10 here).
 //    Its mass budget (adaptive_mass_budget, what `hybgen run` reports) against mass(t) and
 //    outflow(t): within 4e-6, twice the cubature's target rel_tol·mass = 1e-6·2 (measured
 //    1.3e-7 for the mass, 6e-14 for the outflow).
 //  * transfer (hat, h = 0.05, 201 and 401 nodes): the outflow it books per column against
 //    outflow(t), the budget (mass + outflow = mass0, no atom), and the density in relative
-//    L1 (at the times with mass ≥ 0.2 left). The README promises O(Δx²) per step, O(Δx²/h)
+//    L1 (at the times with mass ≥ 0.2 left). docs/methods.md promises O(Δx²) per step, O(Δx²/h)
 //    over a fixed horizon, plus a sub-cell error where mass crosses a guard. Measured: outflow
 //    1.48e-3 → 3.71e-4 (ratio 3.98: second order), L1 2.29e-2 → 1.04e-2 (ratio 2.2; the
 //    front steepened by the switch). Asserted: < 3e-3 and < 4e-2 at 201 nodes, and ratios
 //    > 3 and > 1.8 to 401.
 //  * particles (2·10⁵): mass and outflow within 5σ. σ is the i.i.d. estimate from the
 //    particles' own 2σ̂ of mass0 (σ² ≤ F·Σw²/Σw for the outflow F, the compound-Poisson
-//    bound of tests/rt/test_particles.cpp); the README calls it a 2σ estimate, and under the
+//    bound of tests/rt/test_particles.cpp); docs/methods.md calls it a 2σ estimate, and under the
 //    stratified draw it over-estimates (measured |z| ≤ 0.09: errors ≤ 3.7e-4).
 
 #include <gtest/gtest.h>

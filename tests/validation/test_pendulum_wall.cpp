@@ -19,11 +19,11 @@
 // u0 = cos²(πρ/(2·0.45)), ρ = |(θ, ω) − (−0.6, 0.7)| < 0.45 (energies −0.889 … −0.083: most
 // of its orbits, E > −cos w = −0.825, hit the wall). Box [−1.9, 0.6] × [−1.65, 1.65]. Compared:
 //  * characteristics (solve_grid, 41 × 55 nodes, t = 1, 2.5, 4) at the nodes in S against the
-//    RK4 backward map: max error below 1e-8 (max u0 = 1; README: the ODE tolerance, rtol
+//    RK4 backward map: max error below 1e-8 (max u0 = 1; docs/methods.md: the ODE tolerance, rtol
 //    1e-10 here; measured 3.8e-10, 5.4e-11 on the wall nodes θ = w).
 //  * invariant (hat): λ₁ = 1 to 1e-9 (closed) and the invariant density a function of E,
 //    measured by its variation along energy shells (against the bump's, which is no function
-//    of E); a function of E marched to t = 4 keeps its values to O(Δx²/h) (README), with the
+//    of E); a function of E marched to t = 4 keeps values to O(Δx²/h) (docs/methods.md), with the
 //    convergence ratio (figures at the test).
 //  * transfer (hat): u0 marched to t = 2.5 against the RK4 backward map at the nodes,
 //    relative L1, with the convergence ratio (figures at the test).
@@ -359,7 +359,7 @@ TEST(PendulumWall, InvariantDensityIsAFunctionOfTheEnergy) {
     EXPECT_GT(var_bump, 0.5);
   }
   // g(E) marched to t = 4 (h = 0.2) must keep its values: the relative L1 change is the
-  // scheme's smoothing, O(Δx²/h) (README). Measured 4.14e-2 (41 × 55), 1.07e-2 (81 × 109):
+  // scheme's smoothing, O(Δx²/h) (docs/methods.md). Measured 4.14e-2 (41 × 55), 1.07e-2 (81 × 109):
   // ratio 3.9 (3.1e-3 at 161 × 217). Asserted: < 6e-2, then a ratio > 3; the mass kept.
   double prev = 0.0;
   for (const auto& [nt, nw] : {std::pair{41, 55}, std::pair{81, 109}}) {

@@ -5,7 +5,7 @@
 // fires periodically), state space [v_r, v_p] = [−1, 3]. Guard `spike`: s = v − v_p
 // increasing, reset to v_r. The reset is written as the translation v ↦ v − (v_p − v_r), which
 // is v_r on the guard (the same hybrid system as the constant reset v ↦ v_r, but with an
-// inverse, so the backward characteristics apply: the README refuses them for a constant
+// inverse, so the backward characteristics apply: docs/outputs.md refuses them for a constant
 // reset). DΔ = 1, so J = ∇sᵀ adj(DΔ) X⁺ / ∇sᵀ X⁻ = f(v_r)/f(v_p) = 2/10 = 1/5: every spike
 // multiplies the density by 5. div X = f′(v) = 2v.
 //
@@ -22,10 +22,10 @@
 //
 // Compared:
 //  * characteristics (solve_grid, 201 nodes, t = 0.7, 2.5, 5.1: up to three spikes back):
-//    max error relative to max u below 1e-8 (README: the ODE tolerance, rtol 1e-10 here;
+//    max error relative to max u below 1e-8 (docs/methods.md: the ODE tolerance, rtol 1e-10 here;
 //    measured 2.6e-10).
 //  * invariant (hat, h = 0.05, 201 and 401 nodes): λ₁ = 1 to 1e-9 (a closed system: the box
-//    is the state space and the spike maps it onto itself) and u* in relative L1 (README:
+//    is the state space and the spike maps it onto itself) and u* in relative L1 (docs/methods.md:
 //    O(Δx²) per step plus the error of sub-cells straddling the spike; figures at the test).
 //  * transfer (hat, h = 0.05, 201 and 401 nodes): the wave q0 marched to t = 3 (about 1.5
 //    periods) against the closed form, relative L1, with the convergence ratio (figures at
@@ -214,7 +214,7 @@ TEST(QifNeuron, CharacteristicsFollowTheFluxWave) {
 
 TEST(QifNeuron, InvariantDensityIsTheFluxConservingOne) {
   // Measured: λ₁ − 1 = −3e-15, 9e-15; relative L1 4.50e-4 (201 nodes), 1.28e-4 (401): ratio
-  // 3.5, second order (the README's O(Δx²)). Asserted: λ₁ = 1 to 1e-9, < 1.5e-3 at 201 nodes,
+  // 3.5, second order (docs/methods.md's O(Δx²)). Asserted: λ₁ = 1 to 1e-9, < 1.5e-3 at 201 nodes,
   // then a ratio > 2.5.
   Qif::q0 = nullptr;
   double prev = 0.0;

@@ -28,13 +28,13 @@
 // it starts in the box and is in it at every multiple of the step).
 // Compared (worst difference of the mass and the first moments ∫x u, ∫y u at t = 1, 2, 3,
 // relative to the initial mass π/8 and the box scale 3):
-//  * characteristics (README: no interpolation error, the ODE tolerance): u at the midpoints
+//  * characteristics (docs/methods.md: no interpolation error, ODE tolerance): u at the midpoints
 //    of 240² cells, < 1.5e-3 (the bound of a midpoint rule across the jump; measured 6.1e-4);
 //    its adaptive budget: the outflow within rel_tol·mass0 at rel_tol 3e-4 and 1e-5 (measured
 //    1.3e-6 and 2.9e-8), the mass within it at 3e-4 (measured 5.6e-5 against 1.2e-4) — at
 //    1e-5 it does NOT converge (a known failure, skipped test with the figures; the
 //    runner's closure check flags it, which is asserted).
-//  * transfer (hat, h = 0.05, box-limited reference), 81 × 121 and 161 × 241: README O(Δx²)
+//  * transfer (hat, h = 0.05, box-limited reference), 81 × 121, 161 × 241: docs/methods.md O(Δx²)
 //    per step plus the switching error. Measured 4.8e-3 and 1.25e-3 (ratio 3.9: second
 //    order); asserted < 8e-3, then a ratio > 3.
 //  * particles (2·10⁵): the mass and first moments in the box (the cloud-in-cell deposit keeps

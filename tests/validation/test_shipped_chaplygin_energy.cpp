@@ -38,7 +38,7 @@
 //    Characteristics: rt::evaluate (rtol 1e-10) at the midpoints of 100² and 200² cells of the
 //    box. u is continuous (both modes start from the same u0 and |J| = 1), so the midpoint
 //    rule is second order and the difference must fall by about 4 from 100² to 200².
-//    Tolerance. The characteristics are exact to rtol (README); the reference is converged
+//    Tolerance. The characteristics are exact to rtol (docs/methods.md); the reference is converged
 //    (RK4 step 0.005 or 0.05, 15 or 60 panels change it by < 1e-6). About 93 % of the mass in
 //    the box at t = 2 has turned at least once. Measured worst differences: 1.16e-3, 2.80e-4,
 //    7.05e-5, 1.75e-5 on 50², 100², 200², 400² cells (ratio 4.0: second order, converging to

@@ -36,7 +36,7 @@
 //    Without the C splits the reference moved by 5e-3 between 15 and 120 panels.
 //    Characteristics: rt::evaluate (rtol 1e-10) at the midpoints of 100² and 200² cells of the
 //    box.
-//    Tolerance. The characteristics are exact to rtol (README); the reference is converged to
+//    Tolerance. Characteristics are exact to rtol (docs/methods.md); the reference is converged to
 //    ~1e-5 (15, 30, 60 panels; RK4 step 0.005 changes it by < 1e-7). 78 % (e = 1) and 81 %
 //    (e = 0.8) of the box mass at t = 2 has met the guard. Measured worst differences: 5.0e-5
 //    and 1.4e-5 (e = 1), 7.7e-5 and 9.4e-6 (e = 0.8) on 100² and 200² cells (400²: 1.0e-5,

@@ -38,7 +38,7 @@
 //    neighbour's by more than 1 % of max u: u jumps across the images of the edge s + i = 1
 //    (where u0 is largest) and, while resets happen, across a front behind the reset line,
 //    and the plain midpoint rule errs by O(Δx) there.
-//    Tolerance. The characteristics are exact to rtol (README), the reference converged
+//    Tolerance. The characteristics are exact to rtol (docs/methods.md), the reference converged
 //    (step 0.04 or 0.005 and 15 or 60 panels change it by < 2e-5); the rest is the quadrature
 //    of u's jumps. Measured worst differences (shipped parameters / α = f = 0.5): plain
 //    midpoint rule 1.7e-3 / 4.5e-3 (100²), 1.2e-3 / 3.7e-4 (200²), 3.7e-4 / 2.2e-4 (400²);

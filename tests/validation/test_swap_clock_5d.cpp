@@ -27,15 +27,15 @@
 // box [−1.2, 1.2]⁴ × [0, 1] holds the state space ℝ⁴ × [0, 1] forever (a closed system).
 // Compared:
 //  * characteristics (evaluate, 400 pseudo-random points, t = 0.3, 1.7, 2.9: up to three ticks)
-//    against `exact`: error relative to max u below 1e-8 (README: the ODE tolerance).
+//    against `exact`: error relative to max u below 1e-8 (docs/methods.md: the ODE tolerance).
 //  * particles (2·10⁵): the mass and ∫x_a u, ∫c u at t = 0, 0.3, 1.7, 2.9 (the cloud-in-cell
 //    deposit keeps linear moments exactly), within 5σ, σ² = ∫φ²u·Σw²/Σw.
 //  * transfer: not run, measured instead (2 threads, shared machine). On 9⁵ = 59049 nodes,
 //    the largest 5-D grid considered, the assembly takes 5.9–11.8 s (h = 0.125) and 7.6–13.0
 //    s (h = 0.25) depending on the load: with 2⁵ samples per cell, each deposited by the hat scheme
-//    on up to 3⁵ nodes, a column has ~168 nonzeros (the README's GL₂ at 9⁵: 10.4 and 0.14 s), which
+//    on ≤ 3⁵ nodes, a column has ~168 nonzeros (docs/benchmarks.md, GL₂ 9⁵: 10.4, 0.14 s), which
 //    alone exceeds this file's time budget; and at Δx = 0.3 the bump (radius 0.6) is 4 cells wide,
-//    so the per-step smoothing (O(Δx²/h), README) pushes 28 % (h = 0.125) or 6 % (h = 0.25)
+//    so per-step smoothing (O(Δx²/h), docs/methods.md) pushes 28 % (h = 0.125) or 6 % (h = 0.25)
 //    of the mass out of the box by t = 2.5 and the clock's marginal is 18–32 % off in L1:
 //    nothing but the budget's closure could be asserted. On 7⁴ × 9 nodes (2.1–2.9 s) 45 % leaves.
 

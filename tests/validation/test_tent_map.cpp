@@ -24,10 +24,10 @@
 //    pre-flight finds the second pre-image and passes seeds on the guard). Without seeds the
 //    pre-flight refuses (several_preimages, naming the mirror pre-image, as for the fold);
 //    with them, u at 24 off-grid points up to t = 3.3 (up to 2⁴ branches) against `exact`:
-//    relative error < 1e-8 (README: exact to the ODE tolerance; measured 3e-15), and without
+//    relative error < 1e-8 (docs/methods.md: the ODE tolerance; measured 3e-15), and without
 //    the seeds the same comparison is off by O(1) (asserted > 0.1: the check can fail).
 //  * transfer (hat, h = 0.25): u0 marched to t = 1.5 and 2.5 against `exact`, relative L1
-//    (README: O(Δx²/h) plus the switching error). Measured 9.7e-3, 1.08e-2 (41²) and 3.4e-3,
+//    (docs/methods.md: O(Δx²/h) + the switching error). Measured 9.7e-3, 1.08e-2 (41²) and 3.4e-3,
 //    3.1e-3 (81²): ratio 3.2. Asserted: < 2e-2, then a ratio > 2.5; mass kept to 1e-12.
 //  * invariant (41², h = 0.25): λ₁ = 1 to 1e-9 and u* = 1 within 1e-2 in relative L1 (a
 //    scheme that followed one pre-image would lose half the mass per tick: λ₁ = 1/2).

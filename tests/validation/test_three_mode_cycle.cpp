@@ -5,7 +5,7 @@
 //   A: x' = f_A = 2 + x    on [0, 1];   guard `a2b` at x = 1 (increasing), reset x ↦ 0, to B;
 //   B: x' = f_B = 2 − x    on [0, 1/2]; guard `b2c` at x = 1/2 (increasing), reset x ↦ 1, to C;
 //   C: x' = f_C = −(1 + 2x) on [0, 1];  guard `c2a` at x = 0 (decreasing), reset x ↦ 0, to A.
-// Every reset is constant (DΔ = 0: no inverse; the README: `run` refuses the characteristics
+// Every reset is constant (DΔ = 0: no inverse; docs/outputs.md: `run` refuses the characteristics
 // method for it, the forward methods need none). In 1-D adj(DΔ) = 1, so J = X⁺(Δx)/X⁻(x):
 // J_a2b = f_B(0)/f_A(1) = 2/3, J_b2c = f_C(1)/f_B(1/2) = −3/1.5 = −2, J_c2a = f_A(0)/f_C(0) = −2.
 //
@@ -24,14 +24,14 @@
 //    does for that method) fails with `inverse_failed` at a constant reset (Newton on
 //    Δ(z) = y with DΔ = 0), and passes without them (the forward methods).
 //  * invariant (hat, h = 0.02, 401 nodes): λ₁ = 1 to 1e-9 (a closed system), relative L1
-//    against u* below 1 % (the thermostat's bar; the README promises O(Δx²) plus the error
+//    against u* below 1 % (the thermostat's bar; docs/methods.md promises O(Δx²) plus the error
 //    of straddling sub-cells at switches; measured 7.0e-3), mode masses T_m/P within 2e-3
 //    (measured 3e-4).
 //  * transfer (hat, h = 0.02): a flux wave q0 = (1 + ½ sin 2πθ/P)/P marched to t = 2 (about
 //    five switches per state), relative L1 against the closed form below 1 %. Measured
 //    8.0e-3 (201 nodes), 7.2e-3 (401), 2.1e-3 (401, 16 samples per cell): as for the
 //    thermostat the error is made where mass switches (a straddling sub-cell is booked whole)
-//    and falls with the samples per cell, not with Δx (README); asserted: halved by K = 16.
+//    and falls with samples per cell, not with Δx (docs/methods.md); asserted: halved by K = 16.
 //  * particles (10⁵): the mode masses M_m(t) at t = 0, 0.5, 1, 2 (from the deposited
 //    densities: the cloud-in-cell deposit keeps the mass) within 5σ, σ² = M_m·Σw²/Σw (the
 //    compound-Poisson bound; measured |z| ≤ 0.3).

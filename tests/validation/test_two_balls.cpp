@@ -27,13 +27,13 @@
 //  * the forward flow's Zeno detection (what the atoms of the budget and of the particles rest
 //    on) against min(t_Z,1, t_Z,2) from 20000 initial states.
 //  * characteristics (evaluate, 600 points, every output time) against the product of the
-//    closed-form backward maps: error relative to max(u, 1) below 1e-8 (README: the ODE
+//    closed-form backward maps: error relative to max(u, 1) below 1e-8 (docs/methods.md: the ODE
 //    tolerance; measured 4.7e-12 where u reaches 2·10⁵ in the Zeno stripes).
 //  * its mass budget (adaptive_mass_budget: the box mass by backward characteristics, the atom
 //    by forward flows to a Zeno point, measured independently): the atom against 1 − (1 −
 //    Z_1)(1 − Z_2) within kDefectFactor × its estimate plus the target (the estimates are ≈ 2σ,
 //    budget.hpp), the mass against (1 − Z_1)(1 − Z_2) likewise or flagged by the closure check
-//    (the README's promise). With the runner's default `budget=fast` the atom is wrong by up
+//    (docs/outputs.md's promise). With the runner's default `budget=fast` the atom is wrong by up
 //    to 0.97 with estimates below 1e-2 and no flag: a hybgen bug, asserted (and failing).
 //  * particles (10⁵): the atom and the mass within 5σ (measured |z| ≤ 0.81).
 //  * transfer: not run, measured instead. In 4-D the default 2⁴ samples per cell and h = 1

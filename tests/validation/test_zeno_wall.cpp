@@ -30,13 +30,13 @@
 // [−1/2, 1/2], mass 1; its energy is at most 0.925, so nothing leaves the box. Zeno times lie
 // in [1.79, 4.58]; output times 0, 1, 1.5, …, 5. Compared:
 //  * characteristics (solve_grid, 65 × 97 nodes, every output time, the Zeno point left out):
-//    error relative to max(u, 1) against `exact` below 1e-9 (README: no interpolation error,
+//    error relative to max(u, 1) against `exact` < 1e-9 (docs/methods.md: no interpolation error,
 //    the ODE tolerance, rtol 1e-10 here; measured 1.5e-12, where u reaches 6200 near the Zeno
 //    point). Its adaptive budget (rel_tol 1e-4; what `hybgen run` reports): the box mass
 //    against 1 − Z(t) and the atom (measured on its own, by forward flows to the Zeno point)
 //    against Z(t), each within the target 1e-4·mass0 plus 3× its own estimated error (the
-//    README: the ball's atom 0.43411 ± 0.0013 against 0.43415; figures at the test).
-//  * particles (2·10⁵): the atom against Z(t) within 5σ (σ from atom_error, the README's 2σ
+//    docs/outputs.md: the ball's atom 0.43411 ± 0.0013 against 0.43415; figures at the test).
+//  * particles (2·10⁵): the atom against Z(t) within 5σ (σ from atom_error, docs/methods.md's 2σ
 //    estimate, floored by the compound-Poisson bound; measured |z| ≤ 0.7).
 //  * transfer (hat, h = 0.5): its atom lags by construction (transfer.hpp, "Zeno points":
 //    only samples with t_Z ≤ h drain into the atom; the Zeno point's own cell is re-spread

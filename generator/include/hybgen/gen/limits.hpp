@@ -1,6 +1,6 @@
 #pragma once
 /// \file limits.hpp
-/// Resource limits of the symbolic stage (issue 5, "derivation limits").
+/// Resource limits of the symbolic stage (docs/hardening.md, "Derivation limits").
 ///
 /// Symbolic work can blow up on a short input: (x+y+z+w)^4096 is 9 nodes but
 /// expands to 1.2·10^10 terms, a 10×10 symbolic inverse has millions. derive

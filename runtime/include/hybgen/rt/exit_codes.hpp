@@ -3,7 +3,7 @@
 /// The process exit codes of `hybgen` and of the runners it builds, defined once: the
 /// generator's error classes map to them (generator/include/hybgen/gen/errors.hpp) and the
 /// runner returns them (runner.hpp), and `hybgen run` passes a runner's code through.
-/// Documented in README.md ("Exit codes") and docs/design.md.
+/// Documented in README.md ("Exit codes") and docs/design.md ("Exit codes").
 
 namespace hybgen::rt {
 

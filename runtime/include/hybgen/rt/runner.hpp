@@ -330,6 +330,17 @@ int run_model(const RunConfig& c) {
         std::snprintf(b, sizeof b, "%s %.3f s, ", key, secs[key].template get<double>());
         before += b;
       }
+    // The last line repeats the whole time, build included, so that it is seen last.
+    double total = res.solve_s + res.budget_s + output_s;
+    for (const char* key : {"derive", "build"})
+      if (secs.contains(key) && secs[key].is_number()) total += secs[key].template get<double>();
+    char took_buf[96];
+    if (secs.contains("build") && secs["build"].is_number())
+      std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all, the build %.2f s)", total,
+                    secs["build"].template get<double>());
+    else
+      std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all)", total);
+    const std::string took = took_buf;
     std::printf("%s: %s on %zu nodes, %zu frame(s): %ssolve %.3f s, budget %.3f s, output %.3f s\n",
                 c.model.c_str(), method.c_str(), n_node, sol.n_time, before.c_str(), res.solve_s,
                 res.budget_s, output_s);
@@ -343,7 +354,8 @@ int run_model(const RunConfig& c) {
       std::printf("spectral gap %.3e, decay rate %.4g per unit time\n",
                   inv["spectral_gap"].template get<double>(),
                   inv["decay_rate"].template get<double>());
-      std::printf("outputs in %s: invariant .npy/.png/.vti, summary.json\n", c.final_dir.c_str());
+      std::printf("outputs in %s: invariant .npy/.png/.vti, summary.json%s\n", c.final_dir.c_str(),
+                  took.c_str());
     } else {
       if (mb.mass.empty()) {
         std::printf("mass budget: off\n");
@@ -361,8 +373,8 @@ int run_model(const RunConfig& c) {
                         mb.mass[k], mb.outflow[k], mb.atom[k],
                         k < res.atom_error.size() ? res.atom_error[k] : 0.0, defect[k], bar[k]);
       }
-      std::printf("outputs in %s: %s..%s .npy/.png/.vti, summary.json\n", c.final_dir.c_str(),
-                  res.frame_names.front().c_str(), res.frame_names.back().c_str());
+      std::printf("outputs in %s: %s..%s .npy/.png/.vti, summary.json%s\n", c.final_dir.c_str(),
+                  res.frame_names.front().c_str(), res.frame_names.back().c_str(), took.c_str());
     }
   }
   return exit_status(ExitCode::Success);

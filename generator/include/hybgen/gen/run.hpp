@@ -1,0 +1,48 @@
+#pragma once
+/// \file run.hpp
+/// Stages 5 and 6 for a derived model: build its runner (cached) and run it on the
+/// configuration of docs/design.md ("Runner contract"), inside an output transaction
+/// (outputs.hpp) and under an interrupt guard (process.hpp).
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "hybgen/gen/build.hpp"
+#include "hybgen/gen/frontend.hpp"
+
+namespace hybgen::gen {
+
+/// How `hybgen run` and `hybgen sweep` build and run.
+struct RunOptions {
+  std::string out;     ///< Output directory ("": out/<model>, or out/<model>-sweep).
+  BuildOptions build;  ///< How to build the runner.
+  bool quiet = false;  ///< No progress output.
+};
+
+/// Emit the runner's sources (with the file's parameter values, so that the cache key does
+/// not change with --set: the runner reads the values from its configuration) and build or
+/// reuse the runner. Says what it does on stderr unless `quiet`.
+BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, bool quiet);
+
+/// Throw the located error that stops `fe`'s model from running at all: no simulation
+/// block, or the characteristics method with a reset that has no inverse off its guard.
+void check_runnable(const Frontend& fe);
+
+/// The runner's configuration for `m` (read by read_config, runtime/include/hybgen/rt/
+/// runner.hpp): the runner writes into `out_dir`; `final_out_dir` is where the outputs end
+/// up (its messages name it).
+nlohmann::json run_config(const Model& m, const std::string& out_dir,
+                          const std::string& final_out_dir, bool quiet);
+
+/// `hybgen run`: build, run into a staging directory, and swap it in on success. Returns
+/// the exit code (the runner's on failure, OUT unchanged); on an interrupt, removes the
+/// staging directory and ends hybgen by the signal.
+int run_model(const Frontend& fe, const RunOptions& options);
+
+/// `hybgen check --preflight`: build the runner and run only its pre-flight scan (the checks
+/// `run` makes at t = 0, preflight.hpp) on the model's grid and method. Nothing is written
+/// but a configuration in a temporary directory, removed afterwards. Returns 0, or 3 with
+/// the scan's failure.
+int run_preflight(const Frontend& fe, const BuildOptions& build, bool quiet);
+
+}  // namespace hybgen::gen

@@ -1,0 +1,153 @@
+// Building and running a derived model (run.hpp).
+
+#include "hybgen/gen/run.hpp"
+
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <iostream>
+
+#include "hybgen/gen/emit.hpp"
+#include "hybgen/gen/errors.hpp"
+#include "hybgen/gen/fs.hpp"
+#include "hybgen/gen/outputs.hpp"
+#include "hybgen/gen/process.hpp"
+
+namespace hybgen::gen {
+
+namespace fs = std::filesystem;
+
+BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, bool quiet) {
+  // The kernels take the parameters as par[]; the header carries the file's values only as
+  // defaults (tests/e2e/test_cli.cpp, ParameterValuesReuseTheRunner).
+  Model file_model = fe.model;
+  for (std::size_t j = 0; j < file_model.params.size(); ++j)
+    file_model.params[j].value_d = fe.file_params[j];
+  HybridSystem file_sys = fe.sys;
+  file_sys.model = &file_model;
+  const GeneratedFiles files = emit(file_sys);  // stage 4: IR -> sources
+  BuildOptions opt = options;
+  opt.progress = !quiet;
+  if (!quiet) std::cerr << "hybgen: building the runner of '" << fe.model.name << "'...\n";
+  BuildResult b = build_runner(files, fe.model.name, opt);  // stage 5: sources -> runner
+  if (!quiet) {
+    char took[48];
+    std::snprintf(took, sizeof took, "(built in %.1f s) ", b.seconds);
+    std::cerr << "hybgen: runner " << (b.cached ? "(cached) " : took) << b.executable << "\n";
+  }
+  return b;
+}
+
+void check_runnable(const Frontend& fe) {
+  const Model& m = fe.model;
+  if (!m.sim.present)
+    throw ModelError(m.path, {1, 1},
+                     "the model has no simulation block, so there is nothing to run");
+  // The backward characteristics need the inverse of every reset; a reset injective on its
+  // guard only has none (derive.cpp): refuse before building, at the reset, with the methods
+  // that apply.
+  if (m.sim.settings.word<"method">() == "characteristics")
+    for (std::size_t gi = 0; gi < fe.sys.guards.size(); ++gi)
+      if (fe.sys.guards[gi].inverse_on_guard_only)
+        throw fe.src.error(m.guards[gi].reset_loc,
+                           "the reset of guard '" + m.guards[gi].name +
+                               "' has no inverse in the whole state space (it is locally "
+                               "injective on its guard only), which the characteristics method "
+                               "needs; use --set method=transfer, invariant or particles");
+}
+
+nlohmann::json run_config(const Model& m, const std::string& out_dir,
+                          const std::string& final_out_dir, bool quiet) {
+  nlohmann::json cfg;
+  cfg["model"] = m.name;
+  cfg["out_dir"] = out_dir;
+  cfg["final_out_dir"] = final_out_dir;
+  std::vector<double> params;
+  for (const auto& p : m.params) params.push_back(p.value_d);
+  cfg["params"] = params;
+  nlohmann::json axes = nlohmann::json::array();
+  for (std::size_t i = 0; i < m.state.size(); ++i)
+    axes.push_back(
+        {{"name", m.state[i]}, {"min", m.sim.lo[i]}, {"max", m.sim.hi[i]}, {"n", m.sim.grid[i]}});
+  cfg["axes"] = axes;
+  cfg.update(m.sim.settings.to_json());  // method, times, every method setting (settings.hpp)
+  cfg["quiet"] = quiet;
+  return cfg;
+}
+
+int run_model(const Frontend& fe, const RunOptions& options) {
+  check_runnable(fe);
+  const Model& m = fe.model;
+  const std::string out = options.out.empty() ? "out/" + m.name : options.out;
+  OutputTransaction tx(out, OutputKind::Run);
+  const BuildResult b = build_model_runner(fe, options.build, options.quiet);
+  // From here on an interrupt removes the staging directory instead of leaving it.
+  const InterruptGuard interrupt_guard;
+  const fs::path staging = tx.stage();
+
+  nlohmann::json cfg = run_config(m, staging.string(), out, options.quiet);
+  cfg["seconds"] = {{"derive", fe.seconds}, {"build", b.seconds}};
+  const std::string config = (staging / "config.json").string();
+  try {
+    write_file_atomic(config, cfg.dump(2) + "\n");
+  } catch (const std::runtime_error& e) {
+    throw UsageError(std::string(e.what()) + "; " + tx.unchanged());
+  }
+  int rc = run_process(b.executable, config, interrupt_guard);
+  if (rc == 0 && interrupt_signal()) rc = 128 + interrupt_signal();  // asked to stop: no swap
+  if (rc > 128) {
+    tx.abort();
+    if (::isatty(STDERR_FILENO)) std::cerr << '\n';  // end a progress bar's line
+    std::cerr << "hybgen: interrupted by signal " << rc - 128 << " (" << ::strsignal(rc - 128)
+              << "); " << tx.unchanged() << "\n";
+    die_by_signal(rc - 128);  // so that a calling shell or script stops too
+  }
+  if (rc != 0) {
+    tx.abort();
+    std::cerr << "hybgen: the run failed (exit " << rc << "); " << tx.unchanged() << "\n";
+    return rc;
+  }
+  // The config as it applies to OUT (the runner has finished with the staging path).
+  cfg["out_dir"] = out;
+  try {
+    write_file_atomic(config, cfg.dump(2) + "\n");
+  } catch (const std::runtime_error& e) {
+    throw InternalError(std::string(e.what()) + "; " + tx.unchanged());
+  }
+  tx.commit();
+  return 0;
+}
+
+int run_preflight(const Frontend& fe, const BuildOptions& build, bool quiet) {
+  const Model& m = fe.model;
+  if (!m.sim.present)
+    throw ModelError(m.path, {1, 1},
+                     "the model has no simulation block, so there is no grid "
+                     "for the pre-flight scan");
+  const BuildResult b = build_model_runner(fe, build, quiet);
+  const InterruptGuard interrupt_guard;
+  std::string tmpl = (fs::temp_directory_path() / "hybgen-preflight-XXXXXX").string();
+  if (::mkdtemp(tmpl.data()) == nullptr)
+    throw UsageError(std::string("cannot create a temporary directory: ") + std::strerror(errno));
+  const fs::path dir = tmpl;
+  nlohmann::json cfg = run_config(m, dir.string(), dir.string(), quiet);
+  cfg["preflight_only"] = true;
+  const std::string config = (dir / "config.json").string();
+  int rc = 70;
+  std::error_code ec;
+  try {
+    write_file_atomic(config, cfg.dump(2) + "\n");
+    rc = run_process(b.executable, config, interrupt_guard);
+  } catch (...) {
+    fs::remove_all(dir, ec);
+    throw;
+  }
+  fs::remove_all(dir, ec);
+  if (rc > 128) die_by_signal(rc - 128);
+  return rc;
+}
+
+}  // namespace hybgen::gen

@@ -1,0 +1,413 @@
+// `hybgen sweep` (sweep.hpp): the axes, the points, the parallel runs and the table.
+
+#include "hybgen/gen/sweep.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <deque>
+#include <filesystem>
+#include <iostream>
+#include <map>
+#include <set>
+#include <thread>
+
+#include "hybgen/gen/errors.hpp"
+#include "hybgen/gen/fs.hpp"
+#include "hybgen/gen/outputs.hpp"
+#include "hybgen/gen/process.hpp"
+
+namespace hybgen::gen {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string trim(std::string s) {
+  const auto b = s.find_first_not_of(" \t");
+  if (b == std::string::npos) return "";
+  return s.substr(b, s.find_last_not_of(" \t") - b + 1);
+}
+
+/// `text` as a whole number (std::from_chars: no sign prefix '+', no trailing characters).
+bool parse_number(const std::string& text, double& value) {
+  const char* end = text.data() + text.size();
+  const auto [p, ec] = std::from_chars(text.data(), end, value);
+  return ec == std::errc() && p == end && std::isfinite(value);
+}
+
+/// The shortest decimal that reads back as `v` (std::to_chars).
+std::string shortest(double v) {
+  char buf[64];
+  const auto [p, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, ec == std::errc() ? p : buf);
+}
+
+/// The N values of `A:B:N` for `key`.
+std::vector<std::string> range_values(const std::string& key, const std::string& value) {
+  const auto c1 = value.find(':'), c2 = value.find(':', c1 + 1);
+  double a = 0, b = 0, n = 0;
+  const bool ok = c2 != std::string::npos && value.find(':', c2 + 1) == std::string::npos &&
+                  parse_number(trim(value.substr(0, c1)), a) &&
+                  parse_number(trim(value.substr(c1 + 1, c2 - c1 - 1)), b) &&
+                  parse_number(trim(value.substr(c2 + 1)), n);
+  if (!ok || n < 1 || n != std::floor(n))
+    throw UsageError("--set " + key + "=" + value +
+                     ": a sweep range is A:B:N, N >= 1 equally spaced numbers from A to B");
+  if (n > static_cast<double>(kMaxSweepPoints))
+    throw UsageError("--set " + key + "=" + value + ": more than " +
+                     std::to_string(kMaxSweepPoints) + " values");
+  const auto count = static_cast<std::size_t>(n);
+  std::vector<std::string> out;
+  for (std::size_t i = 0; i < count; ++i) {
+    // Both ends exactly; the values between by one rounding each.
+    const double v =
+        i + 1 == count && count > 1
+            ? b
+            : a + (b - a) * static_cast<double>(i) / static_cast<double>(count - 1 + (count == 1));
+    out.push_back(shortest(v));
+  }
+  return out;
+}
+
+/// `value` split at its commas outside brackets (a domain [a,b] is one element).
+std::vector<std::string> split_top_level(const std::string& value) {
+  std::vector<std::string> out;
+  std::string cur;
+  int depth = 0;
+  for (const char c : value) {
+    if (c == '[' || c == '(' || c == '{') ++depth;
+    if (c == ']' || c == ')' || c == '}') --depth;
+    if (c == ',' && depth == 0) {
+      out.push_back(trim(cur));
+      cur.clear();
+    } else {
+      cur += c;
+    }
+  }
+  out.push_back(trim(cur));
+  return out;
+}
+
+/// The elements of the list `v1,v2,...` (or `{v1,v2,...}`) for `key`.
+std::vector<std::string> list_values(const std::string& key, const std::string& value) {
+  const bool braces = value.size() >= 2 && value.front() == '{' && value.back() == '}';
+  const std::vector<std::string> out =
+      split_top_level(braces ? value.substr(1, value.size() - 2) : value);
+  for (const auto& v : out)
+    if (v.empty())
+      throw UsageError("--set " + key + "=" + value +
+                       ": a sweep list is v1,v2,... with no empty element");
+  return out;
+}
+
+/// The last entry of the array `j[key]`, if it is a non-empty array of numbers.
+void put_last(nlohmann::ordered_json& row, const std::string& name, const nlohmann::json& j,
+              const std::string& key) {
+  if (j.is_object() && j.contains(key) && j[key].is_array() && !j[key].empty() &&
+      j[key].back().is_number())
+    row[name] = j[key].back();
+}
+
+/// `j[key]` if it is a number.
+void put_number(nlohmann::ordered_json& row, const std::string& name, const nlohmann::json& j,
+                const std::string& key) {
+  if (j.is_object() && j.contains(key) && j[key].is_number()) row[name] = j[key];
+}
+
+/// A CSV cell: numbers exactly, strings quoted when they hold a comma, quote or newline.
+std::string csv_cell(const nlohmann::ordered_json& v) {
+  if (v.is_null()) return "";
+  if (v.is_number_float()) return shortest(v.get<double>());
+  if (!v.is_string()) return v.dump();
+  const std::string s = v.get<std::string>();
+  if (s.find_first_of(",\"\n") == std::string::npos) return s;
+  std::string q = "\"";
+  for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return q + "\"";
+}
+
+/// The value of KEY=VALUE as the table shows it: a number when it reads as one.
+nlohmann::ordered_json table_value(const std::string& value) {
+  double d = 0;
+  if (parse_number(value, d)) return d;
+  return value;
+}
+
+/// One point of a sweep while it runs.
+struct Point {
+  std::vector<std::string> sets;  ///< The axes' KEY=VALUE.
+  std::string label;              ///< Its directory's name.
+  const Frontend* fe = nullptr;   ///< Derived with the fixed and the point's overrides.
+  BuildResult build;              ///< Its runner (the same for every point).
+  std::string config;             ///< Its configuration file.
+  int rc = -1;                    ///< Exit code (-1 while not run).
+};
+
+}  // namespace
+
+SweepSpec parse_sweep(const std::vector<std::string>& sets) {
+  SweepSpec spec;
+  std::set<std::string> keys;
+  for (const auto& s : sets) {
+    const auto eq = s.find('=');
+    if (eq == std::string::npos || eq == 0)
+      throw UsageError("--set expects KEY=VALUE, got '" + s + "'");
+    const std::string key = trim(s.substr(0, eq)), value = trim(s.substr(eq + 1));
+    if (!keys.insert(key).second)
+      throw UsageError("--set " + key + " is given twice (a list of values is " + key +
+                       "=v1,v2,...; a shell expands an unquoted {v1,v2} into two --set)");
+    if ((value.size() >= 2 && value.front() == '{' && value.back() == '}') ||
+        split_top_level(value).size() > 1)
+      spec.axes.push_back({key, list_values(key, value)});
+    else if (value.find(':') != std::string::npos)
+      spec.axes.push_back({key, range_values(key, value)});
+    else
+      spec.fixed.push_back(s);
+  }
+  if (spec.axes.empty())
+    throw UsageError(
+        "a sweep needs at least one --set KEY=A:B:N or KEY=v1,v2,... (hybgen sweep --help)");
+  double count = 1;
+  for (const auto& a : spec.axes) count *= static_cast<double>(a.values.size());
+  if (count > static_cast<double>(kMaxSweepPoints))
+    throw UsageError("the sweep has " + shortest(count) + " points, more than " +
+                     std::to_string(kMaxSweepPoints));
+  return spec;
+}
+
+std::vector<std::vector<std::string>> sweep_points(const SweepSpec& spec) {
+  std::vector<std::vector<std::string>> points{{}};
+  for (const auto& axis : spec.axes) {
+    std::vector<std::vector<std::string>> next;
+    for (const auto& p : points)
+      for (const auto& v : axis.values) {
+        next.push_back(p);
+        next.back().push_back(axis.key + "=" + v);
+      }
+    points = std::move(next);
+  }
+  return points;
+}
+
+std::string sweep_label(std::size_t index, std::size_t count,
+                        const std::vector<std::string>& point) {
+  const std::size_t width = std::to_string(count > 0 ? count - 1 : 0).size();
+  std::string label = std::to_string(index);
+  label.insert(0, width - std::min(width, label.size()), '0');
+  for (const auto& kv : point) {
+    label += '_';
+    for (char c : kv)
+      label += std::isalnum(static_cast<unsigned char>(c)) || std::strchr("._=+-", c) ? c : '_';
+  }
+  return label;
+}
+
+nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
+  nlohmann::ordered_json row = nlohmann::ordered_json::object();
+  if (s.contains("method")) row["method"] = s["method"];
+  put_last(row, "t", s, "times");
+  if (s.contains("mass") && s["mass"].is_array() && !s["mass"].empty())
+    put_number(row, "initial_mass", s, "initial_mass");
+  put_last(row, "mass", s, "mass");
+  put_last(row, "mass_error", s, "mass_error");  // particles: the 2-sigma estimate
+  put_last(row, "outflow", s, "outflow");
+  put_last(row, "atom", s, "atom");
+  put_last(row, "atom_error", s, "atom_error");
+  if (s.contains("budget")) {
+    put_last(row, "mass_error", s["budget"], "mass_error");
+    put_last(row, "outflow_error", s["budget"], "outflow_error");
+    put_last(row, "unaccounted", s["budget"], "defect");
+    put_last(row, "unaccounted_error", s["budget"], "defect_error");
+  }
+  if (s.contains("transfer")) put_number(row, "unaccounted", s["transfer"], "budget_defect");
+  if (s.contains("invariant")) {
+    const auto& inv = s["invariant"];
+    put_number(row, "spectral_gap", inv, "spectral_gap");
+    put_number(row, "decay_rate", inv, "decay_rate");
+    put_number(row, "leak_rate", inv, "leak_rate");
+    if (inv.contains("eigenvalues") && inv["eigenvalues"].is_array())
+      for (std::size_t k = 0; k < inv["eigenvalues"].size(); ++k)
+        put_number(row, "abs_lambda" + std::to_string(k + 1), inv["eigenvalues"][k], "abs");
+  }
+  if (s.contains("seconds"))
+    for (const char* k : {"derive", "build", "solve", "budget", "output"})
+      put_number(row, std::string("seconds_") + k, s["seconds"], k);
+  return row;
+}
+
+std::string sweep_csv(const nlohmann::ordered_json& rows) {
+  std::vector<std::string> columns;
+  std::set<std::string> seen;
+  for (const auto& r : rows)
+    for (const auto& [k, v] : r.items())
+      if (seen.insert(k).second) columns.push_back(k);
+  std::string out;
+  for (std::size_t c = 0; c < columns.size(); ++c) {
+    if (c) out += ',';
+    out += csv_cell(columns[c]);
+  }
+  out += '\n';
+  for (const auto& r : rows) {
+    for (std::size_t c = 0; c < columns.size(); ++c) {
+      if (c) out += ',';
+      if (r.contains(columns[c])) out += csv_cell(r[columns[c]]);
+    }
+    out += '\n';
+  }
+  return out;
+}
+
+int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions& options) {
+  const SourceText src = SourceText::load(path);
+  const auto combos = sweep_points(spec);
+  std::vector<Point> points(combos.size());
+  std::deque<Frontend> frontends;  // in place: a Frontend does not move (sys.model)
+
+  // Every point derived first, so that a value the model refuses stops the sweep before
+  // anything runs, with the point named.
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    Point& p = points[i];
+    p.sets = combos[i];
+    p.label = sweep_label(i, points.size(), p.sets);
+    FrontendOptions fo;
+    fo.target = options.target;
+    fo.sets = spec.fixed;
+    fo.sets.insert(fo.sets.end(), p.sets.begin(), p.sets.end());
+    fo.watchdog = true;
+    try {
+      const Frontend& fe = frontends.emplace_back(src, fo);
+      check_runnable(fe);
+      if (i == 0) fe.print_warnings(std::cerr);
+      p.fe = &fe;
+    } catch (const Error&) {
+      std::cerr << "hybgen: sweep point " << p.label << ":\n";
+      throw;
+    }
+  }
+  const Model& m0 = points.front().fe->model;
+  const std::string out = options.run.out.empty() ? "out/" + m0.name + "-sweep" : options.run.out;
+  OutputTransaction tx(out, OutputKind::Sweep);
+
+  // One runner: the first build compiles (or finds it cached), the others find it cached.
+  for (std::size_t i = 0; i < points.size(); ++i)
+    points[i].build =
+        build_model_runner(*points[i].fe, options.run.build, options.run.quiet || i > 0);
+  for (const auto& p : points)
+    if (p.build.key != points.front().build.key)
+      throw InternalError("sweep point " + p.label + " needs another runner than point " +
+                          points.front().label + " (a swept value changed the generated code)");
+
+  const std::size_t cores = std::max(1u, std::thread::hardware_concurrency());
+  const std::size_t jobs =
+      std::min({options.jobs ? options.jobs : cores, points.size(), kMaxChildren});
+  const Environment env{
+      {"OMP_NUM_THREADS", std::to_string(std::max<std::size_t>(1, cores / jobs))}};
+  if (!options.run.quiet)
+    std::cerr << "hybgen: sweep of " << points.size() << " points, " << jobs
+              << " runner(s) at a time, into '" << out << "'\n";
+
+  const InterruptGuard interrupt_guard;
+  const fs::path staging = tx.stage();
+  for (auto& p : points) {
+    const fs::path dir = staging / p.label;
+    std::error_code ec;
+    fs::create_directory(dir, ec);
+    if (ec) throw UsageError("cannot create '" + dir.string() + "': " + ec.message());
+    nlohmann::json cfg = run_config(p.fe->model, dir.string(), out + "/" + p.label, true);
+    cfg["seconds"] = {{"derive", p.fe->seconds}, {"build", p.build.seconds}};
+    p.config = (dir / "config.json").string();
+    write_file_atomic(p.config, cfg.dump(2) + "\n");
+  }
+
+  // Run `jobs` at a time; each line of progress says which point ended how.
+  std::map<pid_t, std::size_t> running;
+  std::size_t next = 0, done = 0;
+  int interrupted = 0;
+  while (done < points.size() && !interrupted) {
+    while (running.size() < jobs && next < points.size()) {
+      const pid_t pid =
+          start_process(points[next].build.executable, points[next].config, interrupt_guard, env);
+      if (pid < 0) break;  // interrupted: start nothing more
+      running[pid] = next++;
+    }
+    if (running.empty()) break;
+    const auto [pid, rc] = wait_process();
+    Point& p = points[running.at(pid)];
+    running.erase(pid);
+    p.rc = rc;
+    ++done;
+    if (rc > 128) interrupted = rc - 128;
+    if (!options.run.quiet && rc <= 128)
+      std::cerr << "hybgen: [" << done << "/" << points.size() << "] " << p.label << ": "
+                << (rc == 0 ? std::string("ok") : "failed (exit " + std::to_string(rc) + ")")
+                << "\n";
+  }
+  if (!interrupted && interrupt_signal()) interrupted = interrupt_signal();
+  if (interrupted) {
+    while (!running.empty()) running.erase(wait_process().first);  // forwarded the signal too
+    tx.abort();
+    if (::isatty(STDERR_FILENO)) std::cerr << '\n';
+    std::cerr << "hybgen: interrupted by signal " << interrupted << " (" << ::strsignal(interrupted)
+              << "); " << tx.unchanged() << "\n";
+    die_by_signal(interrupted);
+  }
+
+  // The table, from each point's summary.json; a failed point's directory goes (half-written).
+  nlohmann::ordered_json rows = nlohmann::ordered_json::array();
+  int first_failure = 0;
+  std::size_t failed = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Point& p = points[i];
+    nlohmann::ordered_json row = {{"point", i}, {"dir", p.label}};
+    for (const auto& kv : p.sets) {
+      const auto eq = kv.find('=');
+      row[kv.substr(0, eq)] = table_value(kv.substr(eq + 1));
+    }
+    row["status"] = p.rc == 0 ? "ok" : "failed";
+    row["exit"] = p.rc;
+    if (p.rc == 0) {
+      // The runner's config, rewritten for OUT as `hybgen run` does.
+      nlohmann::json cfg = nlohmann::json::parse(read_file(p.config));
+      cfg["out_dir"] = out + "/" + p.label;
+      write_file_atomic(p.config, cfg.dump(2) + "\n");
+      const nlohmann::json summary =
+          nlohmann::json::parse(read_file((staging / p.label / "summary.json").string()));
+      row.update(sweep_row(summary));
+    } else {
+      ++failed;
+      if (!first_failure) first_failure = p.rc;
+      std::error_code ec;
+      fs::remove_all(staging / p.label, ec);
+    }
+    rows.push_back(row);
+  }
+  if (failed == points.size()) {
+    std::cerr << "hybgen: every point of the sweep failed; " << tx.unchanged() << "\n";
+    return first_failure;
+  }
+  nlohmann::ordered_json axes = nlohmann::ordered_json::array();
+  for (const auto& a : spec.axes) {
+    nlohmann::ordered_json values = nlohmann::ordered_json::array();
+    for (const auto& v : a.values) values.push_back(table_value(v));
+    axes.push_back({{"key", a.key}, {"values", values}});
+  }
+  const nlohmann::ordered_json table = {
+      {"model", m0.name}, {"fixed", spec.fixed}, {"axes", axes}, {"rows", rows}};
+  write_file_atomic((staging / "sweep.json").string(), table.dump(2) + "\n");
+  write_file_atomic((staging / "sweep.csv").string(), sweep_csv(rows));
+  tx.commit();
+  if (!options.run.quiet || failed)
+    std::cerr << "hybgen: sweep of " << points.size() << " points: " << points.size() - failed
+              << " ran"
+              << (failed ? ", " + std::to_string(failed) + " failed (their rows say so)"
+                         : std::string())
+              << "; table in " << out << "/sweep.csv and sweep.json\n";
+  return first_failure;
+}
+
+}  // namespace hybgen::gen

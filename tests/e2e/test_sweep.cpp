@@ -1,0 +1,255 @@
+// End to end: `hybgen sweep` (generator/src/sweep.cpp). One runner for every point, the
+// table against separate runs and against closed forms of a model hybgen does not ship, a
+// point that fails, a value refused before anything runs, and an interrupted sweep.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "hybgen/gen/fs.hpp"
+#include "support/shell.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+const std::string kSrc = HYBGEN_SOURCE_DIR;
+const std::string kExe = HYBGEN_EXE;
+const fs::path kWork = fs::path(HYBGEN_BINARY_DIR) / "e2e_sweep";
+
+/// Run hybgen with `args` from the source directory with the cache `cache`; all output.
+hybgen::testing::ShellResult hybgen(const std::string& args, const fs::path& cache) {
+  fs::create_directories(kWork);
+  return hybgen::testing::run_shell("cd '" + kSrc + "' && HYBGEN_CACHE='" + cache.string() + "' '" +
+                                    kExe + "' " + args + " 2>&1");
+}
+
+std::string write_model(const std::string& name, const std::string& text) {
+  fs::create_directories(kWork / "models");
+  const std::string path = (kWork / "models" / name).string();
+  std::ofstream(path, std::ios::binary) << text;
+  return path;
+}
+
+json read_json(const fs::path& p) {
+  return json::parse(hybgen::gen::read_file(p.string()));
+}
+
+std::size_t count(const std::string& text, const std::string& what) {
+  std::size_t n = 0;
+  for (auto p = text.find(what); p != std::string::npos; p = text.find(what, p + 1)) ++n;
+  return n;
+}
+
+std::size_t lines(const fs::path& p) {
+  std::ifstream in(p);
+  std::size_t n = 0;
+  for (std::string l; std::getline(in, l);) ++n;
+  return n;
+}
+
+TEST(Sweep, SixValuesOfEShareOneRunner) {
+  // The issue's case: 6 values of e; the first point's build compiles (a private cache), no
+  // other compile happens, and each row is what `hybgen run` gives for that value.
+  const fs::path cache = kWork / "cache_six";
+  const fs::path out = kWork / "six";
+  fs::remove_all(cache);
+  fs::remove_all(out);
+  const auto r = hybgen(
+      "sweep models/bouncing_ball.model --set e=0.5:1.0:6 --set grid=21x21 "
+      "--set t_end=2 --set dt=0.5 --out '" +
+          out.string() + "'",
+      cache);
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(count(r.out, "runner (built in"), 1u) << r.out;
+  EXPECT_EQ(count(r.out, "ok"), 6u) << r.out;
+  std::size_t entries = 0;
+  for (const auto& e : fs::directory_iterator(cache)) entries += e.is_directory() ? 1 : 0;
+  EXPECT_EQ(entries, 1u);
+
+  const json table = read_json(out / "sweep.json");
+  EXPECT_EQ(table["model"], "bouncing_ball");
+  ASSERT_EQ(table["rows"].size(), 6u);
+  EXPECT_EQ(lines(out / "sweep.csv"), 7u);  // header + 6 rows
+  for (std::size_t i = 0; i < 6; ++i) {
+    const json& row = table["rows"][i];
+    const double e = 0.5 + 0.1 * static_cast<double>(i);
+    EXPECT_NEAR(row["e"].get<double>(), e, 1e-15) << i;
+    EXPECT_EQ(row["status"], "ok") << i;
+    EXPECT_EQ(row["t"], 2.0);
+    // The point's own outputs, run with that value.
+    const json s = read_json(out / row["dir"].get<std::string>() / "summary.json");
+    EXPECT_EQ(s["parameters"]["e"], row["e"]) << i;
+    EXPECT_EQ(s["mass"].back(), row["mass"]) << i;
+    EXPECT_TRUE(fs::exists(out / row["dir"].get<std::string>() / "u_0004.npy")) << i;
+  }
+  // Energy is lost at every bounce for e < 1, so mass collects in the Zeno atom as e falls:
+  // the atom column decreases along the sweep and is zero at e = 1 (no atom without loss).
+  for (std::size_t i = 1; i < 6; ++i)
+    EXPECT_LE(table["rows"][i]["atom"].get<double>(), table["rows"][i - 1]["atom"].get<double>())
+        << i;
+  EXPECT_EQ(table["rows"][5]["atom"].get<double>(), 0.0);
+
+  // A separate run of one value: the same runner (cached) and the same numbers.
+  const fs::path one = kWork / "six_one";
+  fs::remove_all(one);
+  const auto single = hybgen(
+      "run models/bouncing_ball.model --set e=0.7 --set grid=21x21 "
+      "--set t_end=2 --set dt=0.5 --out '" +
+          one.string() + "'",
+      cache);
+  ASSERT_EQ(single.code, 0) << single.out;
+  EXPECT_NE(single.out.find("runner (cached)"), std::string::npos) << single.out;
+  const json s = read_json(one / "summary.json");
+  const json& row = table["rows"][2];
+  for (const char* k : {"mass", "outflow", "atom"})
+    EXPECT_NEAR(s[k].back().get<double>(), row[k].get<double>(),
+                1e-12 * (1 + std::fabs(row[k].get<double>())))
+        << k;
+}
+
+// x' = k on [0, 1] with a Gaussian bump u0 = exp(-((x - c)/w)^2): every particle moves by kT,
+// so by t = T the mass that started in [1 - kT, 1] has left through x = 1 and nothing came in
+// through x = 0 (u0 is below e^-36 there). With E(a, b) = w·√π/2·(erf((b-c)/w) - erf((a-c)/w)),
+// the integral of u0 over [a, b]:
+//   initial mass = E(0, 1),  outflow(T) = E(1 - kT, 1),  mass(T) = E(0, 1 - kT).
+constexpr double kC = 0.3, kW = 0.05;
+double bump_integral(double a, double b) {
+  return kW * std::sqrt(M_PI) / 2 * (std::erf((b - kC) / kW) - std::erf((a - kC) / kW));
+}
+
+TEST(Sweep, TableAgreesWithTheClosedFormsOfADrift) {
+  const std::string model = write_model("drift.model", R"(model drift
+state x
+parameter k = 0.5
+mode go {
+  x' = k
+}
+simulation {
+  domain x in [0, 1]
+  grid 201
+  initial exp(-((x - 0.3)/0.05)^2)
+  t_end 1
+  dt 0.5
+}
+)");
+  const fs::path out = kWork / "drift";
+  fs::remove_all(out);
+  // 1 - kT = 0.5, 0.4, 0.3, 0.2, 0.1: none, a tail, half, nearly all and all of the bump out.
+  const auto r =
+      hybgen("sweep '" + model + "' --set k=0.5:0.9:5 --jobs 2 --out '" + out.string() + "'",
+             kWork / "cache_drift");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const json table = read_json(out / "sweep.json");
+  ASSERT_EQ(table["rows"].size(), 5u);
+  for (const json& row : table["rows"]) {
+    const double k = row["k"].get<double>(), edge = 1 - k * 1.0;
+    const double mass0 = bump_integral(0, 1), outflow = bump_integral(edge, 1),
+                 mass = bump_integral(0, edge);
+    std::printf(
+        "[ sweep ] k = %.1f: mass %.9f (exact %.9f +/- %.1e), outflow %.9f (exact %.9f "
+        "+/- %.1e)\n",
+        k, row["mass"].get<double>(), mass, row["mass_error"].get<double>(),
+        row["outflow"].get<double>(), outflow, row["outflow_error"].get<double>());
+    // The initial mass on the grid by the budget's cubature (fast: measured 5e-5 relative).
+    EXPECT_NEAR(row["initial_mass"].get<double>(), mass0, 1e-3 * mass0) << k;
+    // The error bars the table reports cover the error, and the error is small.
+    EXPECT_LE(std::fabs(row["mass"].get<double>() - mass), row["mass_error"].get<double>() + 1e-9)
+        << k;
+    EXPECT_LE(std::fabs(row["outflow"].get<double>() - outflow),
+              row["outflow_error"].get<double>() + 1e-9)
+        << k;
+    EXPECT_LT(std::fabs(row["mass"].get<double>() - mass), 1e-3 * mass0) << k;
+    EXPECT_LT(std::fabs(row["outflow"].get<double>() - outflow), 1e-3 * mass0) << k;
+  }
+}
+
+TEST(Sweep, AFailedPointKeepsItsRowAndTheExitCode) {
+  // k = 0 makes the flow 1/k infinite: that point's runner stops with a numerical failure
+  // (exit 3) at its pre-flight scan; the other point runs, the table says which failed, and
+  // the sweep exits 3.
+  const std::string model = write_model("inverse_speed.model", R"(model inverse_speed
+state x
+parameter k = 1
+mode go {
+  x' = 1/k
+}
+simulation {
+  domain x in [0, 1]
+  grid 41
+  initial exp(-((x - 0.3)/0.1)^2)
+  t_end 0.2
+  dt 0.1
+}
+)");
+  const fs::path out = kWork / "failed";
+  fs::remove_all(out);
+  const auto r = hybgen("sweep '" + model + "' --set k=1,0 --out '" + out.string() + "'",
+                        kWork / "cache_failed");
+  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_NE(r.out.find("1 failed"), std::string::npos) << r.out;
+  const json table = read_json(out / "sweep.json");
+  ASSERT_EQ(table["rows"].size(), 2u);
+  EXPECT_EQ(table["rows"][0]["status"], "ok");
+  EXPECT_TRUE(fs::exists(out / table["rows"][0]["dir"].get<std::string>() / "summary.json"));
+  EXPECT_EQ(table["rows"][1]["status"], "failed");
+  EXPECT_EQ(table["rows"][1]["exit"], 3);
+  EXPECT_FALSE(table["rows"][1].contains("mass"));
+  EXPECT_FALSE(fs::exists(out / table["rows"][1]["dir"].get<std::string>()));  // half-written
+}
+
+TEST(Sweep, AValueTheModelRefusesStopsItBeforeAnythingRuns) {
+  const fs::path out = kWork / "refused";
+  fs::remove_all(out);
+  const auto r =
+      hybgen("sweep models/bouncing_ball.model --set tol=1e-6,0.5 --out '" + out.string() + "'",
+             kWork / "cache_refused");
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("sweep point 1_tol=0.5"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("tol"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_FALSE(fs::exists(kWork / "cache_refused"));  // not even a build
+
+  const auto bad =
+      hybgen("sweep models/bouncing_ball.model --set e=0.5:1", kWork / "cache_refused");
+  EXPECT_EQ(bad.code, 2) << bad.out;
+  EXPECT_NE(bad.out.find("A:B:N"), std::string::npos) << bad.out;
+}
+
+TEST(Sweep, AnInterruptedSweepLeavesTheEarlierOutputsAsTheyWere) {
+  // A first sweep's outputs, then a long sweep stopped by SIGTERM while its runners run:
+  // hybgen stops them, removes its staging directory, leaves OUT as it was and ends by the
+  // signal. (SIGTERM: a shell's background job ignores SIGINT.)
+  const fs::path cache = kWork / "cache_interrupt";
+  const fs::path out = kWork / "interrupted";
+  fs::remove_all(out);
+  const auto first = hybgen(
+      "sweep models/bouncing_ball.model --set e=0.8,0.9 --set grid=11x11 "
+      "--set t_end=1 --out '" +
+          out.string() + "'",
+      cache);
+  ASSERT_EQ(first.code, 0) << first.out;
+  const std::string before = hybgen::gen::read_file((out / "sweep.csv").string());
+  const std::string cmd =
+      "cd '" + kSrc + "' && HYBGEN_CACHE='" + cache.string() + "' '" + kExe +
+      "' sweep models/bouncing_ball.model --set e=0.8,0.9 --set method=particles "
+      "--set particles=5e7 --set t_end=1 --out '" +
+      out.string() + "' 2>&1 & pid=$!; sleep 3; kill -TERM $pid; wait $pid; echo \"rc=$?\"";
+  const auto r = hybgen::testing::run_shell(cmd);
+  EXPECT_NE(r.out.find("interrupted by signal 15"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("rc=143"), std::string::npos) << r.out;  // 128 + SIGTERM
+  EXPECT_EQ(hybgen::gen::read_file((out / "sweep.csv").string()), before);
+  for (const auto& e : fs::directory_iterator(kWork)) {
+    const std::string n = e.path().filename().string();
+    EXPECT_EQ(n.find("interrupted.partial-"), std::string::npos) << n;
+    EXPECT_EQ(n.find("interrupted.old-"), std::string::npos) << n;
+  }
+}
+
+}  // namespace
