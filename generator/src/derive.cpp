@@ -626,8 +626,8 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
     sys.guards.push_back(std::move(g));
   }
 
-  // A reset without an inverse cannot run by characteristics (check_runnable, run.cpp, refuses it there):
-  // say so at `check` too when that is the model's method.
+  // A reset without an inverse cannot run by characteristics (check_runnable, run.cpp, refuses it
+  // there): say so at `check` too when that is the model's method.
   if (m.sim.present && m.sim.settings.word<"method">() == "characteristics")
     for (const auto& g : sys.guards)
       if (g.inverse_on_guard_only)

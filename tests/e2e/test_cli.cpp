@@ -133,10 +133,11 @@ TEST(Cli, BrokenModelsExitOneWithLocation) {
   }
 }
 
-// The "10-D inverse" of the derivation limits (docs/hardening.md): a reset x ↦ A x with a dense 10×10 matrix of parameters. Its
-// closed-form inverse needs det A, 10! = 3,628,800 terms, in one GiNaC call that the derivation's
-// own time checks cannot interrupt; the watchdog ends it at 1.5 · derive_seconds + 5 s with a
-// located error naming the object and the setting (everything before det A takes ~0.01 s).
+// The "10-D inverse" of the derivation limits (docs/hardening.md): a reset x ↦ A x with a dense
+// 10×10 matrix of parameters. Its closed-form inverse needs det A, 10! = 3,628,800 terms, in one
+// GiNaC call that the derivation's own time checks cannot interrupt; the watchdog ends it at 1.5 ·
+// derive_seconds + 5 s with a located error naming the object and the setting (everything before
+// det A takes ~0.01 s).
 TEST(Cli, DenseTenDimensionalInverseEndsAtTheWatchdog) {
   constexpr int n = 10;
   std::ostringstream m;

@@ -1,7 +1,7 @@
 // Tests of hybgen/rt/preflight.hpp and of the failure reports of the characteristics:
-// every numerical failure class (docs/hardening.md) provoked on hand-written models (variants of the
-// bouncing ball of bouncing_ball_model.hpp), with the place (guard, mode, state) and the
-// value of the report checked against hand computations.
+// every numerical failure class (docs/hardening.md) provoked on hand-written models (variants of
+// the bouncing ball of bouncing_ball_model.hpp), with the place (guard, mode, state) and the value
+// of the report checked against hand computations.
 
 #include <gtest/gtest.h>
 
