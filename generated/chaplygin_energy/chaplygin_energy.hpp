@@ -37,77 +37,89 @@ struct chaplygin_energy {
   static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, 1, true}, {1, 0, -1, true}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = 2.0*par[3] - par[0]*(x[0]*x[0]);
-        const double t1 = par[1] + par[2]*par[2]*par[0];
-        out[0] = par[2]*t0/t1;
+        const double v = state[0];
+        const double m = parameter[0];
+        const double I = parameter[1];
+        const double a = parameter[2];
+        const double E = parameter[3];
+        const double t0 = 2.0*E - m*(v*v);
+        const double t1 = I + a*a*m;
+        out[0] = a*t0/t1;
         out[1] = std::sqrt(t0/t1);
         break;
       }
       case 1: {
-        const double t0 = 2.0*par[3] - par[0]*(x[0]*x[0]);
-        const double t1 = par[1] + par[2]*par[2]*par[0];
-        out[0] = par[2]*t0/t1;
+        const double v = state[0];
+        const double m = parameter[0];
+        const double I = parameter[1];
+        const double a = parameter[2];
+        const double E = parameter[3];
+        const double t0 = 2.0*E - m*(v*v);
+        const double t1 = I + a*a*m;
+        out[0] = a*t0/t1;
         out[1] = -std::sqrt(t0/t1);
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = -2.0*par[2]*par[0]*x[0]/(par[1] + par[2]*par[2]*par[0]);
+        const double v = state[0];
+        const double m = parameter[0];
+        const double I = parameter[1];
+        const double a = parameter[2];
+        result = -2.0*a*m*v/(I + a*a*m);
         break;
       }
       case 1: {
-        r = -2.0*par[2]*par[0]*x[0]/(par[1] + par[2]*par[2]*par[0]);
+        const double v = state[0];
+        const double m = parameter[0];
+        const double I = parameter[1];
+        const double a = parameter[2];
+        result = -2.0*a*m*v/(I + a*a*m);
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[1] - par[4];
+        const double theta = state[1];
+        const double theta0_ = parameter[4];
+        result = theta - theta0_;
         break;
       }
       case 1: {
-        r = x[1] + par[4];
+        const double theta = state[1];
+        const double theta0_ = parameter[4];
+        result = theta + theta0_;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 0.0;
         out[1] = 1.0;
@@ -119,61 +131,60 @@ struct chaplygin_energy {
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double v = state[0];
+        const double theta = state[1];
+        out[0] = v;
+        out[1] = theta;
         break;
       }
       case 1: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double v = state[0];
+        const double theta = state[1];
+        out[0] = v;
+        out[1] = theta;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double v = state[0];
+        const double theta = state[1];
+        out[0] = v;
+        out[1] = theta;
         break;
       }
       case 1: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double v = state[0];
+        const double theta = state[1];
+        out[0] = v;
+        out[1] = theta;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 1.0;
         out[1] = 0.0;
@@ -189,61 +200,61 @@ struct chaplygin_energy {
         break;
       }
       default:
-        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 4; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double*, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = -1.0;
+        result = -1.0;
         break;
       }
       case 1: {
-        r = -1.0;
+        result = -1.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double* state, const double* parameter) {
+    const double theta = state[1];
+    const double theta0_ = parameter[4];
     double c0 = 0.0;
     double c1 = 0.0;
-    c0 = x[1] - par[4];
-    c1 = x[1] + par[4];
+    c0 = theta - theta0_;
+    c1 = theta + theta0_;
     return c0 <= 0.0 && c1 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = (1.0/2.0)*std::exp(-x[1]*x[1] - x[0]*x[0]);
+        const double v = state[0];
+        const double theta = state[1];
+        result = (1.0/2.0)*std::exp(-theta*theta - v*v);
         break;
       }
       case 1: {
-        r = (1.0/2.0)*std::exp(-x[1]*x[1] - x[0]*x[0]);
+        const double v = state[0];
+        const double theta = state[1];
+        result = (1.0/2.0)*std::exp(-theta*theta - v*v);
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

@@ -37,139 +37,142 @@ struct filippov {
   static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, -1, true}, {1, 0, 1, true}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[1]/par[0] - x[0];
-        out[1] = -x[1] - par[0]*x[0];
+        const double x = state[0];
+        const double y = state[1];
+        const double alpha = parameter[0];
+        out[0] = y/alpha - x;
+        out[1] = -y - alpha*x;
         break;
       }
       case 1: {
-        out[0] = par[0]*x[1] - x[0];
-        out[1] = -x[1] - x[0]/par[0];
+        const double x = state[0];
+        const double y = state[1];
+        const double alpha = parameter[0];
+        out[0] = alpha*y - x;
+        out[1] = -y - x/alpha;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double*, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = -2.0;
+        result = -2.0;
         break;
       }
       case 1: {
-        r = -2.0;
+        result = -2.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[0]*x[1];
+        const double x = state[0];
+        const double y = state[1];
+        result = x*y;
         break;
       }
       case 1: {
-        r = x[0]*x[1];
+        const double x = state[0];
+        const double y = state[1];
+        result = x*y;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[1];
-        out[1] = x[0];
+        const double x = state[0];
+        const double y = state[1];
+        out[0] = y;
+        out[1] = x;
         break;
       }
       case 1: {
-        out[0] = x[1];
-        out[1] = x[0];
+        const double x = state[0];
+        const double y = state[1];
+        out[0] = y;
+        out[1] = x;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double x = state[0];
+        const double y = state[1];
+        out[0] = x;
+        out[1] = y;
         break;
       }
       case 1: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double x = state[0];
+        const double y = state[1];
+        out[0] = x;
+        out[1] = y;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double x = state[0];
+        const double y = state[1];
+        out[0] = x;
+        out[1] = y;
         break;
       }
       case 1: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double x = state[0];
+        const double y = state[1];
+        out[0] = x;
+        out[1] = y;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 1.0;
         out[1] = 0.0;
@@ -185,52 +188,56 @@ struct filippov {
         break;
       }
       default:
-        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 4; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = (x[0]*(x[1] + x[0]/par[0]) + x[1]*(x[0] - par[0]*x[1]))/(par[0]*(x[0]*x[0]) + 2.0*x[0]*x[1] - x[1]*x[1]/par[0]);
+        const double x = state[0];
+        const double y = state[1];
+        const double alpha = parameter[0];
+        result = (x*(y + x/alpha) + y*(x - alpha*y))/(alpha*(x*x) + 2.0*x*y - y*y/alpha);
         break;
       }
       case 1: {
-        r = (x[0]*(x[1] + par[0]*x[0]) + x[1]*(x[0] - x[1]/par[0]))/(2.0*x[0]*x[1] + x[0]*x[0]/par[0] - par[0]*(x[1]*x[1]));
+        const double x = state[0];
+        const double y = state[1];
+        const double alpha = parameter[0];
+        result = (x*(y + alpha*x) + y*(x - y/alpha))/(2.0*x*y + x*x/alpha - alpha*(y*y));
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double*, const double*) {
     return true;
   }
 
   /// Whether x lies in the closure of mode k's region (its `where` relations, < read as <=
   /// and > as >=).
-  static bool in_region(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    switch (k) {
+  static bool in_region(int mode, const double* state, const double*) {
+    switch (mode) {
       case 0: {
+        const double x = state[0];
+        const double y = state[1];
         double w0 = 0.0;
-        w0 = x[0]*x[1];
+        w0 = x*y;
         return w0 >= 0.0;
       }
       case 1: {
+        const double x = state[0];
+        const double y = state[1];
         double w0 = 0.0;
-        w0 = x[0]*x[1];
+        w0 = x*y;
         return w0 <= 0.0;
       }
       default:
@@ -239,34 +246,36 @@ struct filippov {
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
+        const double x = state[0];
+        const double y = state[1];
         double w0 = 0.0;
-        w0 = x[0]*x[1];
+        w0 = x*y;
         if (!(w0 > 0.0)) return 0.0;
-        const double t0 = x[0] - 1.0;
-        const double t1 = x[1] - 1.0;
-        r = std::exp(-4.0*(t0*t0) - 4.0*(t1*t1));
+        const double t0 = x - 1.0;
+        const double t1 = y - 1.0;
+        result = std::exp(-4.0*(t0*t0) - 4.0*(t1*t1));
         break;
       }
       case 1: {
+        const double x = state[0];
+        const double y = state[1];
         double w0 = 0.0;
-        w0 = x[0]*x[1];
+        w0 = x*y;
         if (!(w0 < 0.0)) return 0.0;
-        const double t0 = x[0] - 1.0;
-        const double t1 = x[1] - 1.0;
-        r = std::exp(-4.0*(t0*t0) - 4.0*(t1*t1));
+        const double t0 = x - 1.0;
+        const double t1 = y - 1.0;
+        result = std::exp(-4.0*(t0*t0) - 4.0*(t1*t1));
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

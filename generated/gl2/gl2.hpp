@@ -37,66 +37,64 @@ struct gl2 {
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = x[2]*x[2];
-        const double t1 = x[1]*x[1];
-        const double t2 = x[0]*x[1] - x[0]*x[2] - x[1]*x[3] + x[2]*x[3];
+        const double zeta1_ = state[0];
+        const double zeta2_ = state[1];
+        const double zeta3_ = state[2];
+        const double zeta4_ = state[3];
+        const double q = state[4];
+        const double t0 = zeta3_*zeta3_;
+        const double t1 = zeta2_*zeta2_;
+        const double t2 = zeta1_*zeta2_ - zeta1_*zeta3_ - zeta2_*zeta4_ + zeta3_*zeta4_;
         out[0] = t0 - t1;
         out[1] = t2;
         out[2] = t2;
         out[3] = t1 - t0;
-        out[4] = (x[4] + 1.0)*(x[0] + x[3]);
+        out[4] = (q + 1.0)*(zeta1_ + zeta4_);
         break;
       }
       default:
-        for (int i = 0; i < 5; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 5; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double* state, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[0] + x[3];
+        const double zeta1_ = state[0];
+        const double zeta4_ = state[3];
+        result = zeta1_ + zeta4_;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[4];
+        const double q = state[4];
+        result = q;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 0.0;
         out[1] = 0.0;
@@ -106,65 +104,69 @@ struct gl2 {
         break;
       }
       default:
-        for (int i = 0; i < 5; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 5; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = (1.0/2.0)*x[0];
-        const double t1 = (1.0/2.0)*x[3];
-        const double t2 = (1.0/2.0)*par[0]*x[0];
-        const double t3 = (1.0/2.0)*par[0]*x[3];
+        const double zeta1_ = state[0];
+        const double zeta2_ = state[1];
+        const double zeta3_ = state[2];
+        const double zeta4_ = state[3];
+        const double q = state[4];
+        const double e = parameter[0];
+        const double t0 = (1.0/2.0)*zeta1_;
+        const double t1 = (1.0/2.0)*zeta4_;
+        const double t2 = (1.0/2.0)*e*zeta1_;
+        const double t3 = (1.0/2.0)*e*zeta4_;
         out[0] = t0 - t1 - t2 - t3;
-        out[1] = x[1];
-        out[2] = x[2];
+        out[1] = zeta2_;
+        out[2] = zeta3_;
         out[3] = t1 - t0 - t2 - t3;
-        out[4] = x[4];
+        out[4] = q;
         break;
       }
       default:
-        for (int i = 0; i < 5; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 5; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = par[0]*x[0];
-        const double t1 = par[0]*x[3];
-        out[0] = -(1.0/2.0)*(x[0] + x[3] - t0 + t1)/par[0];
-        out[1] = x[1];
-        out[2] = x[2];
-        out[3] = -(1.0/2.0)*(x[0] + x[3] + t0 - t1)/par[0];
-        out[4] = x[4];
+        const double zeta1_ = state[0];
+        const double zeta2_ = state[1];
+        const double zeta3_ = state[2];
+        const double zeta4_ = state[3];
+        const double q = state[4];
+        const double e = parameter[0];
+        const double t0 = e*zeta1_;
+        const double t1 = e*zeta4_;
+        out[0] = -(1.0/2.0)*(zeta1_ + zeta4_ - t0 + t1)/e;
+        out[1] = zeta2_;
+        out[2] = zeta3_;
+        out[3] = -(1.0/2.0)*(zeta1_ + zeta4_ + t0 - t1)/e;
+        out[4] = q;
         break;
       }
       default:
-        for (int i = 0; i < 5; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 5; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = (1.0/2.0)*par[0];
+        const double e = parameter[0];
+        const double t0 = (1.0/2.0)*e;
         const double t1 = (1.0/2.0) - t0;
         const double t2 = -t0 - (1.0/2.0);
         out[0] = t1;
@@ -195,52 +197,53 @@ struct gl2 {
         break;
       }
       default:
-        for (int i = 0; i < 25; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 25; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double*, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = par[0]*par[0];
+        const double e = parameter[0];
+        result = e*e;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double* state, const double*) {
+    const double q = state[4];
     double c0 = 0.0;
-    c0 = x[4];
+    c0 = q;
     return c0 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        const double t0 = 2.0*x[4] - 1.0;
-        r = std::exp(-2.0*(x[0]*x[0]) - 2.0*(x[1]*x[1]) - 2.0*(x[2]*x[2]) - 2.0*(x[3]*x[3]) - t0*t0);
+        const double zeta1_ = state[0];
+        const double zeta2_ = state[1];
+        const double zeta3_ = state[2];
+        const double zeta4_ = state[3];
+        const double q = state[4];
+        const double t0 = 2.0*q - 1.0;
+        result = std::exp(-2.0*(zeta1_*zeta1_) - 2.0*(zeta2_*zeta2_) - 2.0*(zeta3_*zeta3_) - 2.0*(zeta4_*zeta4_) - t0*t0);
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

@@ -37,21 +37,28 @@ struct gl3 {
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = x[3]*x[3];
-        const double t1 = x[6]*x[6];
-        const double t2 = x[1]*x[1];
-        const double t3 = x[2]*x[2];
-        const double t4 = x[0]*x[1] - x[0]*x[3] - x[1]*x[4] - x[2]*x[5] + x[3]*x[4] + x[6]*x[7];
-        const double t5 = x[0]*x[2] - x[0]*x[6] - x[1]*x[7] - x[2]*x[8] + x[3]*x[5] + x[6]*x[8];
-        const double t6 = x[5]*x[5];
-        const double t7 = x[7]*x[7];
-        const double t8 = x[1]*x[2] - x[3]*x[6] + x[4]*x[5] - x[4]*x[7] - x[5]*x[8] + x[7]*x[8];
+        const double zeta1_ = state[0];
+        const double zeta2_ = state[1];
+        const double zeta3_ = state[2];
+        const double zeta4_ = state[3];
+        const double zeta5_ = state[4];
+        const double zeta6_ = state[5];
+        const double zeta7_ = state[6];
+        const double zeta8_ = state[7];
+        const double zeta9_ = state[8];
+        const double q = state[9];
+        const double t0 = zeta4_*zeta4_;
+        const double t1 = zeta7_*zeta7_;
+        const double t2 = zeta2_*zeta2_;
+        const double t3 = zeta3_*zeta3_;
+        const double t4 = zeta1_*zeta2_ - zeta1_*zeta4_ - zeta2_*zeta5_ - zeta3_*zeta6_ + zeta4_*zeta5_ + zeta7_*zeta8_;
+        const double t5 = zeta1_*zeta3_ - zeta1_*zeta7_ - zeta2_*zeta8_ - zeta3_*zeta9_ + zeta4_*zeta6_ + zeta7_*zeta9_;
+        const double t6 = zeta6_*zeta6_;
+        const double t7 = zeta8_*zeta8_;
+        const double t8 = zeta2_*zeta3_ - zeta4_*zeta7_ + zeta5_*zeta6_ - zeta5_*zeta8_ - zeta6_*zeta9_ + zeta8_*zeta9_;
         out[0] = t0 + t1 - t2 - t3;
         out[1] = t4;
         out[2] = t5;
@@ -61,53 +68,50 @@ struct gl3 {
         out[6] = t5;
         out[7] = t8;
         out[8] = t3 + t6 - t1 - t7;
-        out[9] = (x[9] + 1.0)*(x[0] + x[4] + x[8]);
+        out[9] = (q + 1.0)*(zeta1_ + zeta5_ + zeta9_);
         break;
       }
       default:
-        for (int i = 0; i < 10; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 10; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double* state, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[0] + x[4] + x[8];
+        const double zeta1_ = state[0];
+        const double zeta5_ = state[4];
+        const double zeta9_ = state[8];
+        result = zeta1_ + zeta5_ + zeta9_;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[9];
+        const double q = state[9];
+        result = q;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 0.0;
         out[1] = 0.0;
@@ -122,73 +126,84 @@ struct gl3 {
         break;
       }
       default:
-        for (int i = 0; i < 10; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 10; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = (2.0/3.0)*x[4];
-        const double t1 = (2.0/3.0)*x[8];
-        const double t2 = (2.0/3.0)*x[0];
-        out[0] = (1.0/3.0)*x[0] - t0 - t1;
-        out[1] = x[1];
-        out[2] = x[2];
-        out[3] = x[3];
-        out[4] = (1.0/3.0)*x[4] - t2 - t1;
-        out[5] = x[5];
-        out[6] = x[6];
-        out[7] = x[7];
-        out[8] = (1.0/3.0)*x[8] - t2 - t0;
-        out[9] = x[9];
+        const double zeta1_ = state[0];
+        const double zeta2_ = state[1];
+        const double zeta3_ = state[2];
+        const double zeta4_ = state[3];
+        const double zeta5_ = state[4];
+        const double zeta6_ = state[5];
+        const double zeta7_ = state[6];
+        const double zeta8_ = state[7];
+        const double zeta9_ = state[8];
+        const double q = state[9];
+        const double t0 = (2.0/3.0)*zeta5_;
+        const double t1 = (2.0/3.0)*zeta9_;
+        const double t2 = (2.0/3.0)*zeta1_;
+        out[0] = (1.0/3.0)*zeta1_ - t0 - t1;
+        out[1] = zeta2_;
+        out[2] = zeta3_;
+        out[3] = zeta4_;
+        out[4] = (1.0/3.0)*zeta5_ - t2 - t1;
+        out[5] = zeta6_;
+        out[6] = zeta7_;
+        out[7] = zeta8_;
+        out[8] = (1.0/3.0)*zeta9_ - t2 - t0;
+        out[9] = q;
         break;
       }
       default:
-        for (int i = 0; i < 10; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 10; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = (2.0/3.0)*x[4];
-        const double t1 = (2.0/3.0)*x[8];
-        const double t2 = (2.0/3.0)*x[0];
-        out[0] = (1.0/3.0)*x[0] - t0 - t1;
-        out[1] = x[1];
-        out[2] = x[2];
-        out[3] = x[3];
-        out[4] = (1.0/3.0)*x[4] - t2 - t1;
-        out[5] = x[5];
-        out[6] = x[6];
-        out[7] = x[7];
-        out[8] = (1.0/3.0)*x[8] - t2 - t0;
-        out[9] = x[9];
+        const double zeta1_ = state[0];
+        const double zeta2_ = state[1];
+        const double zeta3_ = state[2];
+        const double zeta4_ = state[3];
+        const double zeta5_ = state[4];
+        const double zeta6_ = state[5];
+        const double zeta7_ = state[6];
+        const double zeta8_ = state[7];
+        const double zeta9_ = state[8];
+        const double q = state[9];
+        const double t0 = (2.0/3.0)*zeta5_;
+        const double t1 = (2.0/3.0)*zeta9_;
+        const double t2 = (2.0/3.0)*zeta1_;
+        out[0] = (1.0/3.0)*zeta1_ - t0 - t1;
+        out[1] = zeta2_;
+        out[2] = zeta3_;
+        out[3] = zeta4_;
+        out[4] = (1.0/3.0)*zeta5_ - t2 - t1;
+        out[5] = zeta6_;
+        out[6] = zeta7_;
+        out[7] = zeta8_;
+        out[8] = (1.0/3.0)*zeta9_ - t2 - t0;
+        out[9] = q;
         break;
       }
       default:
-        for (int i = 0; i < 10; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 10; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = (1.0/3.0);
         out[1] = 0.0;
@@ -293,49 +308,43 @@ struct gl3 {
         break;
       }
       default:
-        for (int i = 0; i < 100; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 100; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double*, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = 1.0;
+        result = 1.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double*, const double*) {
     return true;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = 0.0;
+        result = 0.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

@@ -37,66 +37,61 @@ struct heisenberg {
   static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 0, 1, true}, {0, 0, -1, true}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = -x[1]*x[2];
-        out[1] = x[0]*x[2];
+        const double zeta_x = state[0];
+        const double zeta_y = state[1];
+        const double zeta_z = state[2];
+        out[0] = -zeta_y*zeta_z;
+        out[1] = zeta_x*zeta_z;
         out[2] = 0.0;
-        out[3] = x[0];
+        out[3] = zeta_x;
         break;
       }
       default:
-        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 4; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double*, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = 0.0;
+        result = 0.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[3] - 1.0;
+        const double q = state[3];
+        result = q - 1.0;
         break;
       }
       case 1: {
-        r = x[3] + 1.0;
+        const double q = state[3];
+        result = q + 1.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 0.0;
         out[1] = 0.0;
@@ -112,71 +107,83 @@ struct heisenberg {
         break;
       }
       default:
-        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 4; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = -par[0]*x[0];
-        out[1] = x[1];
-        out[2] = x[2];
-        out[3] = x[3];
+        const double zeta_x = state[0];
+        const double zeta_y = state[1];
+        const double zeta_z = state[2];
+        const double q = state[3];
+        const double e = parameter[0];
+        out[0] = -e*zeta_x;
+        out[1] = zeta_y;
+        out[2] = zeta_z;
+        out[3] = q;
         break;
       }
       case 1: {
-        out[0] = -par[0]*x[0];
-        out[1] = x[1];
-        out[2] = x[2];
-        out[3] = x[3];
+        const double zeta_x = state[0];
+        const double zeta_y = state[1];
+        const double zeta_z = state[2];
+        const double q = state[3];
+        const double e = parameter[0];
+        out[0] = -e*zeta_x;
+        out[1] = zeta_y;
+        out[2] = zeta_z;
+        out[3] = q;
         break;
       }
       default:
-        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 4; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = -x[0]/par[0];
-        out[1] = x[1];
-        out[2] = x[2];
-        out[3] = x[3];
+        const double zeta_x = state[0];
+        const double zeta_y = state[1];
+        const double zeta_z = state[2];
+        const double q = state[3];
+        const double e = parameter[0];
+        out[0] = -zeta_x/e;
+        out[1] = zeta_y;
+        out[2] = zeta_z;
+        out[3] = q;
         break;
       }
       case 1: {
-        out[0] = -x[0]/par[0];
-        out[1] = x[1];
-        out[2] = x[2];
-        out[3] = x[3];
+        const double zeta_x = state[0];
+        const double zeta_y = state[1];
+        const double zeta_z = state[2];
+        const double q = state[3];
+        const double e = parameter[0];
+        out[0] = -zeta_x/e;
+        out[1] = zeta_y;
+        out[2] = zeta_z;
+        out[3] = q;
         break;
       }
       default:
-        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 4; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = -par[0];
+        const double e = parameter[0];
+        out[0] = -e;
         out[1] = 0.0;
         out[2] = 0.0;
         out[3] = 0.0;
@@ -195,7 +202,8 @@ struct heisenberg {
         break;
       }
       case 1: {
-        out[0] = -par[0];
+        const double e = parameter[0];
+        out[0] = -e;
         out[1] = 0.0;
         out[2] = 0.0;
         out[3] = 0.0;
@@ -214,59 +222,60 @@ struct heisenberg {
         break;
       }
       default:
-        for (int i = 0; i < 16; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 16; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double*, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = par[0]*par[0];
+        const double e = parameter[0];
+        result = e*e;
         break;
       }
       case 1: {
-        r = par[0]*par[0];
+        const double e = parameter[0];
+        result = e*e;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double* state, const double*) {
+    const double q = state[3];
     double c0 = 0.0;
     double c1 = 0.0;
-    c0 = x[3] + 1.0;
-    c1 = x[3] - 1.0;
+    c0 = q + 1.0;
+    c1 = q - 1.0;
     return c0 >= 0.0 && c1 <= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        const double t0 = 2.0*x[0] - 1.0;
-        const double t1 = 2.0*x[2] - 1.0;
-        r = std::exp(-4.0*(x[3]*x[3]) - 2.0*(x[1]*x[1]) - (1.0/2.0)*(t0*t0) - (1.0/2.0)*(t1*t1));
+        const double zeta_x = state[0];
+        const double zeta_y = state[1];
+        const double zeta_z = state[2];
+        const double q = state[3];
+        const double t0 = 2.0*zeta_x - 1.0;
+        const double t1 = 2.0*zeta_z - 1.0;
+        result = std::exp(-4.0*(q*q) - 2.0*(zeta_y*zeta_y) - (1.0/2.0)*(t0*t0) - (1.0/2.0)*(t1*t1));
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

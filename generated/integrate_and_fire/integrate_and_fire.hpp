@@ -37,111 +37,102 @@ struct integrate_and_fire {
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, 1, false}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = par[0] - x[0] - x[1];
-        out[1] = -x[1]/par[1];
+        const double v = state[0];
+        const double w = state[1];
+        const double I = parameter[0];
+        const double tau = parameter[1];
+        out[0] = I - v - w;
+        out[1] = -w/tau;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double*, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = -1.0/par[1] - 1.0;
+        const double tau = parameter[1];
+        result = -1.0/tau - 1.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[0] - 1.0;
+        const double v = state[0];
+        result = v - 1.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 1.0;
         out[1] = 0.0;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
+        const double w = state[1];
+        const double b = parameter[2];
         out[0] = 0.0;
-        out[1] = par[2] + x[1];
+        out[1] = b + w;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
-        out[1] = x[1];
+        const double v = state[0];
+        const double w = state[1];
+        out[0] = v;
+        out[1] = w;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 0.0;
         out[1] = 0.0;
@@ -150,51 +141,50 @@ struct integrate_and_fire {
         break;
       }
       default:
-        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 4; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = (par[0] - par[2] - x[1])/(par[0] - x[1] - 1.0);
+        const double w = state[1];
+        const double I = parameter[0];
+        const double b = parameter[2];
+        result = (I - b - w)/(I - w - 1.0);
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double*, const double*) {
     return true;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        const double t0 = 2.0*x[0] - 1.0;
-        const double t1 = 2.0*x[1] - 1.0;
-        r = std::exp(-(25.0/2.0)*(t0*t0) - (25.0/2.0)*(t1*t1));
+        const double v = state[0];
+        const double w = state[1];
+        const double t0 = 2.0*v - 1.0;
+        const double t1 = 2.0*w - 1.0;
+        result = std::exp(-(25.0/2.0)*(t0*t0) - (25.0/2.0)*(t1*t1));
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

@@ -37,155 +37,133 @@ struct sawtooth {
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, 1, false}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0] + 1.0;
+        const double x = state[0];
+        out[0] = x + 1.0;
         break;
       }
       default:
-        for (int i = 0; i < 1; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 1; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double*, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = 1.0;
+        result = 1.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[0] - 1.0;
+        const double x = state[0];
+        result = x - 1.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 1.0;
         break;
       }
       default:
-        for (int i = 0; i < 1; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 1; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 0.0;
         break;
       }
       default:
-        for (int i = 0; i < 1; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 1; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double*, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
+        const double x = state[0];
+        out[0] = x;
         break;
       }
       default:
-        for (int i = 0; i < 1; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 1; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 0.0;
         break;
       }
       default:
-        for (int i = 0; i < 1; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 1; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double*, const double*) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = (1.0/2.0);
+        result = (1.0/2.0);
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double*, const double*) {
     return true;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = 1.0;
+        result = 1.0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

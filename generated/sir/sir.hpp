@@ -37,172 +37,179 @@ struct sir {
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = par[3] - x[1]*x[0]*(par[0] - par[2]) - par[3]*x[0];
-        out[1] = par[0]*x[1]*x[0] + par[2]*(x[1]*x[1]) - x[1]*(par[2] + par[1] + par[3]);
+        const double s = state[0];
+        const double i = state[1];
+        const double beta = parameter[0];
+        const double gamma = parameter[1];
+        const double delta = parameter[2];
+        const double mu = parameter[3];
+        out[0] = mu - i*s*(beta - delta) - mu*s;
+        out[1] = beta*i*s + delta*(i*i) - i*(delta + gamma + mu);
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = par[0]*x[0] + 3.0*par[2]*x[1] - par[2] - par[1] - 2.0*par[3] - par[0]*x[1];
+        const double s = state[0];
+        const double i = state[1];
+        const double beta = parameter[0];
+        const double gamma = parameter[1];
+        const double delta = parameter[2];
+        const double mu = parameter[3];
+        result = beta*s + 3.0*delta*i - delta - gamma - 2.0*mu - beta*i;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[1] - par[5];
+        const double i = state[1];
+        const double alpha = parameter[5];
+        result = i - alpha;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double*, const double*, double* out) {
+    switch (mode) {
       case 0: {
         out[0] = 0.0;
         out[1] = 1.0;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
-        out[1] = x[1] - par[4]*x[1];
+        const double s = state[0];
+        const double i = state[1];
+        const double f = parameter[4];
+        out[0] = s;
+        out[1] = i - f*i;
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
-        out[1] = x[1]/(1.0 - par[4]);
+        const double s = state[0];
+        const double i = state[1];
+        const double f = parameter[4];
+        out[0] = s;
+        out[1] = i/(1.0 - f);
         break;
       }
       default:
-        for (int i = 0; i < 2; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 2; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
+        const double f = parameter[4];
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
-        out[3] = 1.0 - par[4];
+        out[3] = 1.0 - f;
         break;
       }
       default:
-        for (int i = 0; i < 4; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 4; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        const double t0 = par[5] - par[5]*par[4];
-        const double t1 = par[2] + par[1] + par[3];
-        r = (par[0]*x[0]*t0 + par[2]*(t0*t0) - t0*t1)/(par[5]*par[0]*x[0] - par[5]*t1 + par[5]*par[5]*par[2]);
+        const double s = state[0];
+        const double beta = parameter[0];
+        const double gamma = parameter[1];
+        const double delta = parameter[2];
+        const double mu = parameter[3];
+        const double f = parameter[4];
+        const double alpha = parameter[5];
+        const double t0 = alpha - alpha*f;
+        const double t1 = delta + gamma + mu;
+        result = (beta*s*t0 + delta*(t0*t0) - t0*t1)/(alpha*beta*s - alpha*t1 + alpha*alpha*delta);
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double* state, const double*) {
+    const double s = state[0];
+    const double i = state[1];
     double c0 = 0.0;
     double c1 = 0.0;
     double c2 = 0.0;
-    c0 = x[1] + x[0] - 1.0;
-    c1 = x[0];
-    c2 = x[1];
+    c0 = i + s - 1.0;
+    c1 = s;
+    c2 = i;
     return c0 <= 0.0 && c1 >= 0.0 && c2 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        const double t0 = x[1] + x[0] - 1.0;
-        const double t1 = 2.0*x[0] - 1.0;
-        r = std::exp(-10.0*(t0*t0) - (1.0/4.0)*(t1*t1));
+        const double s = state[0];
+        const double i = state[1];
+        const double t0 = i + s - 1.0;
+        const double t1 = 2.0*s - 1.0;
+        result = std::exp(-10.0*(t0*t0) - (1.0/4.0)*(t1*t1));
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

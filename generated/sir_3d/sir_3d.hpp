@@ -37,191 +37,208 @@ struct sir_3d {
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true}}};
 
   /// Vector field X of mode k.
-  static void flow(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void flow(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = x[2]*par[3];
-        const double t1 = x[1]*x[0]*par[0]/(x[1] + x[2] + x[0]);
-        out[0] = x[1]*par[3] + t0 - t1;
-        out[1] = t1 - x[1]*(par[2] + par[1] + par[3]);
-        out[2] = x[1]*par[1] - t0;
+        const double S = state[0];
+        const double I = state[1];
+        const double R = state[2];
+        const double beta = parameter[0];
+        const double gamma = parameter[1];
+        const double delta = parameter[2];
+        const double mu = parameter[3];
+        const double t0 = R*mu;
+        const double t1 = I*S*beta/(I + R + S);
+        out[0] = I*mu + t0 - t1;
+        out[1] = t1 - I*(delta + gamma + mu);
+        out[2] = I*gamma - t0;
         break;
       }
       default:
-        for (int i = 0; i < 3; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 3; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Divergence of X in mode k (Lebesgue measure in the state coordinates).
-  static double divergence(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double divergence(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        const double t0 = x[1] + x[2] + x[0];
-        r = x[0]*par[0]/t0 - par[2] - par[1] - 2.0*par[3] - x[1]*par[0]/t0;
+        const double S = state[0];
+        const double I = state[1];
+        const double R = state[2];
+        const double beta = parameter[0];
+        const double gamma = parameter[1];
+        const double delta = parameter[2];
+        const double mu = parameter[3];
+        const double t0 = I + R + S;
+        result = S*beta/t0 - delta - gamma - 2.0*mu - I*beta/t0;
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double guard_surface(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        r = x[1] - par[5]*(x[1] + x[2] + x[0]);
+        const double S = state[0];
+        const double I = state[1];
+        const double R = state[2];
+        const double alpha = parameter[5];
+        result = I - alpha*(I + R + S);
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void guard_gradient(int mode, const double*, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = -par[5];
-        out[1] = 1.0 - par[5];
-        out[2] = -par[5];
+        const double alpha = parameter[5];
+        out[0] = -alpha;
+        out[1] = 1.0 - alpha;
+        out[2] = -alpha;
         break;
       }
       default:
-        for (int i = 0; i < 3; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 3; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Reset map of guard k.
-  static void reset(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        const double t0 = x[1]*par[4];
-        out[0] = x[0];
-        out[1] = x[1] - t0;
-        out[2] = x[2] + t0;
+        const double S = state[0];
+        const double I = state[1];
+        const double R = state[2];
+        const double f = parameter[4];
+        const double t0 = I*f;
+        out[0] = S;
+        out[1] = I - t0;
+        out[2] = R + t0;
         break;
       }
       default:
-        for (int i = 0; i < 3; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 3; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
-        out[0] = x[0];
-        out[1] = x[1]/(1.0 - par[4]);
-        out[2] = (x[1]*par[4] + x[2]*par[4] - x[2])/(par[4] - 1.0);
+        const double S = state[0];
+        const double I = state[1];
+        const double R = state[2];
+        const double f = parameter[4];
+        out[0] = S;
+        out[1] = I/(1.0 - f);
+        out[2] = (I*f + R*f - R)/(f - 1.0);
         break;
       }
       default:
-        for (int i = 0; i < 3; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 3; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int k, const double* x, const double* par, double* out) {
-    (void)x;
-    (void)par;
-    (void)out;
-    switch (k) {
+  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
+    switch (mode) {
       case 0: {
+        const double f = parameter[4];
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
         out[3] = 0.0;
-        out[4] = 1.0 - par[4];
+        out[4] = 1.0 - f;
         out[5] = 0.0;
         out[6] = 0.0;
-        out[7] = par[4];
+        out[7] = f;
         out[8] = 1.0;
         break;
       }
       default:
-        for (int i = 0; i < 9; ++i) out[i] = std::nan("");
+        for (int slot = 0; slot < 9; ++slot) out[slot] = std::nan("");
         break;
     }
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    double r = 0.0;
-    switch (k) {
+  static double hybrid_jacobian(int mode, const double* state, const double* parameter) {
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        const double t0 = x[1]*par[5]*par[0];
-        const double t1 = x[1]*par[5]*par[2];
-        const double t2 = x[1]*par[0];
-        const double t3 = x[1]*par[2];
-        const double t4 = x[1]*par[1];
-        const double t5 = x[1]*par[3];
-        const double t6 = x[2]*par[5]*par[0];
-        r = (t0 - x[1]*par[5]*par[0]*par[4] - t1 + 2.0*x[1]*par[5]*par[2]*par[4] - x[1]*par[5]*par[2]*(par[4]*par[4]) - t2 + x[1]*par[0]*par[4] + t3 - x[1]*par[2]*par[4] - x[1]*par[4]*par[1] - x[1]*par[4]*par[3] + t4 + t5 + t6 - x[2]*par[5]*par[0]*par[4])/(t0 - t1 - t2 + t3 + t4 + t5 + t6);
+        const double I = state[1];
+        const double R = state[2];
+        const double beta = parameter[0];
+        const double gamma = parameter[1];
+        const double delta = parameter[2];
+        const double mu = parameter[3];
+        const double f = parameter[4];
+        const double alpha = parameter[5];
+        const double t0 = I*alpha*beta;
+        const double t1 = I*alpha*delta;
+        const double t2 = I*beta;
+        const double t3 = I*delta;
+        const double t4 = I*gamma;
+        const double t5 = I*mu;
+        const double t6 = R*alpha*beta;
+        result = (t0 - I*alpha*beta*f - t1 + 2.0*I*alpha*delta*f - I*alpha*delta*(f*f) - t2 + I*beta*f + t3 - I*delta*f - I*f*gamma - I*f*mu + t4 + t5 + t6 - R*alpha*beta*f)/(t0 - t1 - t2 + t3 + t4 + t5 + t6);
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double* x, const double* par) {
-    (void)x;
-    (void)par;
+  static bool in_support(const double* state, const double*) {
+    const double S = state[0];
+    const double I = state[1];
+    const double R = state[2];
     double c0 = 0.0;
     double c1 = 0.0;
     double c2 = 0.0;
-    c0 = x[0];
-    c1 = x[1];
-    c2 = x[2];
+    c0 = S;
+    c1 = I;
+    c2 = R;
     return c0 >= 0.0 && c1 >= 0.0 && c2 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
-  static double initial_density(int k, const double* x, const double* par) {
-    (void)x;
-    (void)par;
-    if (!in_support(x, par)) return 0.0;
-    double r = 0.0;
-    switch (k) {
+  static double initial_density(int mode, const double* state, const double* parameter) {
+    if (!in_support(state, parameter)) return 0.0;
+    double result = 0.0;
+    switch (mode) {
       case 0: {
-        const double t0 = 4.0*x[1] - 3.0;
-        const double t1 = 10.0*x[2] - 3.0;
-        const double t2 = 10.0*x[0] - 3.0;
-        r = std::exp(-(5.0/8.0)*(t0*t0) - (1.0/10.0)*(t1*t1) - (1.0/10.0)*(t2*t2));
+        const double S = state[0];
+        const double I = state[1];
+        const double R = state[2];
+        const double t0 = 4.0*I - 3.0;
+        const double t1 = 10.0*R - 3.0;
+        const double t2 = 10.0*S - 3.0;
+        result = std::exp(-(5.0/8.0)*(t0*t0) - (1.0/10.0)*(t1*t1) - (1.0/10.0)*(t2*t2));
         break;
       }
       default:
         break;
     }
-    return r;
+    return result;
   }
 
 };

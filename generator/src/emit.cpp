@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <set>
 #include <sstream>
 
 #include "hybgen/gen/dag.hpp"
@@ -78,62 +79,140 @@ class Printer {
   std::map<std::string, std::string> tex_;
 };
 
-/// The kernel-header builder: one buffer per kernel.
+/// Names in generated kernels that a state variable or parameter must not take: C++
+/// keywords, the kernels' arguments and locals, the generated struct's members, and the
+/// object-like macros of <cmath> (glibc's), <cerrno> and <cstdio>. Temporaries (t0, ct0, c0,
+/// w0, …) are matched by is_temporary_name. Every name here becomes a free one by appending
+/// '_' (none ends in '_'), so the renaming loop ends.
+const std::set<std::string>& c_reserved_names() {
+  static const std::set<std::string> r = {
+      // C++20 keywords and alternative tokens.
+      "alignas", "alignof", "and", "and_eq", "asm", "auto", "bitand", "bitor", "bool", "break",
+      "case", "catch", "char", "char8_t", "char16_t", "char32_t", "class", "compl", "concept",
+      "const", "consteval", "constexpr", "constinit", "const_cast", "continue", "co_await",
+      "co_return", "co_yield", "decltype", "default", "delete", "do", "double", "dynamic_cast",
+      "else", "enum", "explicit", "export", "extern", "false", "float", "for", "friend", "goto",
+      "if", "inline", "int", "long", "mutable", "namespace", "new", "noexcept", "not", "not_eq",
+      "nullptr", "operator", "or", "or_eq", "private", "protected", "public", "register",
+      "reinterpret_cast", "requires", "return", "short", "signed", "sizeof", "static",
+      "static_assert", "static_cast", "struct", "switch", "template", "this", "thread_local",
+      "throw", "true", "try", "typedef", "typeid", "typename", "union", "unsigned", "using",
+      "virtual", "void", "volatile", "wchar_t", "while", "xor", "xor_eq",
+      // The kernels' arguments and locals (mode, state and parameter are words of the model
+      // language, so no model name can clash with them), and the namespaces they name.
+      "mode", "state", "parameter", "out", "result", "slot", "std", "hybgen", "hybgen_model",
+      // The generated struct's members.
+      "name", "n_state", "n_param", "n_mode", "n_guard", "state_names", "param_names",
+      "param_defaults", "mode_names", "guard_names", "guards", "flow", "divergence",
+      "guard_surface", "guard_gradient", "reset", "reset_inverse", "reset_jacobian",
+      "hybrid_jacobian", "in_support", "in_region", "initial_density",
+      // Object-like macros of <cmath>, <cerrno> and <cstdio>.
+      "NAN", "INFINITY", "HUGE_VAL", "HUGE_VALF", "HUGE_VALL", "NULL", "EOF", "EDOM", "ERANGE",
+      "EILSEQ", "errno", "MATH_ERRNO", "MATH_ERREXCEPT", "math_errhandling", "FP_NAN",
+      "FP_INFINITE", "FP_ZERO", "FP_SUBNORMAL", "FP_NORMAL", "FP_ILOGB0", "FP_ILOGBNAN",
+      "FP_FAST_FMA", "FP_FAST_FMAF", "FP_FAST_FMAL", "M_E", "M_LOG2E", "M_LOG10E", "M_LN2",
+      "M_LN10", "M_PI", "M_PI_2", "M_PI_4", "M_1_PI", "M_2_PI", "M_2_SQRTPI", "M_SQRT2",
+      "M_SQRT1_2", "M_El", "M_LOG2El", "M_LOG10El", "M_LN2l", "M_LN10l", "M_PIl", "M_PI_2l",
+      "M_PI_4l", "M_1_PIl", "M_2_PIl", "M_2_SQRTPIl", "M_SQRT2l", "M_SQRT1_2l"};
+  return r;
+}
+
+/// Whether `n` is a name emit_c_block gives a temporary: a lower-case prefix and a number.
+/// (Appending '_' makes any name not one, so HeaderBuilder's renaming ends.)
+bool is_temporary_name(const std::string& n) {
+  std::size_t i = 0;
+  while (i < n.size() && std::islower(static_cast<unsigned char>(n[i]))) ++i;
+  if (i == 0 || i == n.size()) return false;
+  for (std::size_t j = i; j < n.size(); ++j)
+    if (!std::isdigit(static_cast<unsigned char>(n[j]))) return false;
+  return true;
+}
+
+/// Every symbol name in e.
+void collect_symbols(const ex& e, std::set<std::string>& out) {
+  if (GiNaC::is_a<GiNaC::symbol>(e)) {
+    out.insert(GiNaC::ex_to<GiNaC::symbol>(e).get_name());
+    return;
+  }
+  for (std::size_t i = 0; i < e.nops(); ++i) collect_symbols(e.op(i), out);
+}
+
+/// The kernel-header builder: one buffer per kernel. A kernel names the state variables
+/// and parameters it reads (`const double p = state[1];`) and leaves unread arguments unnamed,
+/// so that it compiles without warnings and reads like the model.
 class HeaderBuilder {
  public:
   HeaderBuilder(const HybridSystem& sys, Printer& pr) : sys_(sys), m_(*sys.model), pr_(pr) {
-    for (std::size_t i = 0; i < m_.state.size(); ++i)
-      bind_[m_.state[i]] = "x[" + std::to_string(i) + "]";
-    for (std::size_t j = 0; j < m_.params.size(); ++j)
-      bind_[m_.params[j].name] = "par[" + std::to_string(j) + "]";
+    // C names: the model's own, with '_' appended while one clashes (c_reserved_names) or
+    // repeats an earlier one.
+    std::set<std::string> taken;
+    auto c_name = [&](std::string n) {
+      while (c_reserved_names().count(n) || is_temporary_name(n) || taken.count(n)) n += '_';
+      taken.insert(n);
+      return n;
+    };
+    for (std::size_t i = 0; i < m_.state.size(); ++i) {
+      bind_[m_.state[i]] = c_name(m_.state[i]);
+      source_[m_.state[i]] = "state[" + std::to_string(i) + "]";
+    }
+    for (std::size_t j = 0; j < m_.params.size(); ++j) {
+      bind_[m_.params[j].name] = c_name(m_.params[j].name);
+      source_[m_.params[j].name] = "parameter[" + std::to_string(j) + "]";
+    }
   }
 
-  /// A kernel `static void NAME(int k, const double* x, const double* par, double* out)`
-  /// switching on k; `outputs(k)` gives the expressions for case k.
+  /// A kernel `static void NAME(int mode, const double* state, const double* parameter, double*
+  /// out)` switching on k; `outputs(k)` gives the expressions for case k.
   void vector_kernel(const std::string& doc, const std::string& name, std::size_t cases,
                      std::size_t n_out,
                      const std::function<std::vector<ex>(std::size_t)>& outputs) {
-    std::ostringstream os;
-    os << "  /// " << doc << "\n";
-    os << "  static void " << name
-       << "(int k, const double* x, const double* par, double* out) {\n";
-    os << "    (void)x;\n    (void)par;\n    (void)out;\n";
-    os << "    switch (k) {\n";
+    begin_kernel();
+    std::ostringstream body;
+    body << "    switch (mode) {\n";
     for (std::size_t c = 0; c < cases; ++c) {
       std::vector<CAssignment> as;
-      auto es = outputs(c);
+      const auto es = outputs(c);
       for (std::size_t i = 0; i < es.size(); ++i)
         as.push_back({"out[" + std::to_string(i) + "]", pr_.node(es[i])});
-      os << "      case " << c << ": {\n"
-         << emit_c_block(pr_.dag(), as, bind_, "        ") << "        break;\n      }\n";
+      begin_case();
+      body << "      case " << c << ": {\n"
+           << name_values(es, "        ") << emit_c_block(pr_.dag(), as, bind_, "        ")
+           << "        break;\n      }\n";
     }
     // An invalid index yields NaN in every output, never stale memory.
-    os << "      default:\n        for (int i = 0; i < " << n_out
-       << "; ++i) out[i] = std::nan(\"\");\n        break;\n    }\n  }\n\n";
-    kernels_ += os.str();
+    body << "      default:\n        for (int slot = 0; slot < " << n_out
+         << "; ++slot) out[slot] = std::nan(\"\");\n        break;\n    }\n  }\n\n";
+    kernels_ += "  /// " + doc + "\n  static void " + name + "(int mode, " + arguments() +
+                ", double* out) {\n" + body.str();
   }
 
-  /// A kernel `static double NAME(int k, const double* x, const double* par)`.
+  /// A kernel `static double NAME(int mode, const double* state, const double* parameter)`.
   void scalar_kernel(const std::string& doc, const std::string& name, std::size_t cases,
                      const std::function<ex(std::size_t)>& value) {
-    std::ostringstream os;
-    os << "  /// " << doc << "\n";
-    os << "  static double " << name << "(int k, const double* x, const double* par) {\n";
-    os << "    (void)x;\n    (void)par;\n";
-    os << "    double r = 0.0;\n    switch (k) {\n";
+    begin_kernel();
+    std::ostringstream body;
+    body << "    double result = 0.0;\n    switch (mode) {\n";
     for (std::size_t c = 0; c < cases; ++c) {
-      std::vector<CAssignment> as{{"r", pr_.node(value(c))}};
-      os << "      case " << c << ": {\n"
-         << emit_c_block(pr_.dag(), as, bind_, "        ") << "        break;\n      }\n";
+      const ex v = value(c);
+      std::vector<CAssignment> as{{"result", pr_.node(v)}};
+      begin_case();
+      body << "      case " << c << ": {\n"
+           << name_values({v}, "        ") << emit_c_block(pr_.dag(), as, bind_, "        ")
+           << "        break;\n      }\n";
     }
-    os << "      default:\n        break;\n    }\n    return r;\n  }\n\n";
-    kernels_ += os.str();
+    body << "      default:\n        break;\n    }\n    return result;\n  }\n\n";
+    kernels_ += "  /// " + doc + "\n  static double " + name + "(int mode, " + arguments() +
+                ") {\n" + body.str();
   }
 
-  /// Emit `conds` as a boolean test into `os` (returns the C condition).
+  /// Emit `conds` as a boolean test into `os`, after naming the values they read (returns
+  /// the C condition).
   std::string conditions(std::ostringstream& os, const std::vector<Condition>& conds,
                          const std::string& indent, const std::string& var) {
     if (conds.empty()) return "true";
+    std::vector<ex> es;
+    for (const auto& c : conds) es.push_back(c.expr);
+    os << name_values(es, indent);
     std::vector<CAssignment> as;
     for (std::size_t i = 0; i < conds.size(); ++i) {
       os << indent << "double " << var << i << " = 0.0;\n";
@@ -148,49 +227,60 @@ class HeaderBuilder {
 
   void density_kernels() {
     const auto& sim = m_.sim;
-    std::ostringstream os;
-    os << "  /// Whether x lies in the state space (the model's `support` relations).\n";
-    os << "  static bool in_support(const double* x, const double* par) {\n";
-    os << "    (void)x;\n    (void)par;\n";
-    std::string test = conditions(os, sim.support, "    ", "c");
-    os << "    return " << test << ";\n  }\n\n";
+    {
+      begin_kernel();
+      std::ostringstream body;
+      const std::string test = conditions(body, sim.support, "    ", "c");
+      kernels_ +=
+          "  /// Whether x lies in the state space (the model's `support` relations).\n"
+          "  static bool in_support(" +
+          arguments() + ") {\n" + body.str() + "    return " + test + ";\n  }\n\n";
+    }
     // The modes' regions (`where`), for the forward methods to keep each mode's mass inside
     // its own region (runtime/include/hybgen/rt/transfer.hpp); only for models that have any.
     bool any_region = false;
     for (const auto& md : sys_.modes) any_region = any_region || !md.where.empty();
     if (any_region) {
-      os << "  /// Whether x lies in the closure of mode k's region (its `where` relations, < read "
-            "as"
-            " <=\n  /// and > as >=).\n";
-      os << "  static bool in_region(int k, const double* x, const double* par) {\n";
-      os << "    (void)x;\n    (void)par;\n    switch (k) {\n";
+      begin_kernel();
+      std::ostringstream body;
+      body << "    switch (mode) {\n";
       for (std::size_t c = 0; c < sys_.modes.size(); ++c) {
         std::vector<Condition> closed = sys_.modes[c].where;
         for (auto& cond : closed) {
           if (cond.op == "<") cond.op = "<=";
           if (cond.op == ">") cond.op = ">=";
         }
-        os << "      case " << c << ": {\n";
-        std::string region = conditions(os, closed, "        ", "w");
-        os << "        return " << region << ";\n      }\n";
+        begin_case();
+        body << "      case " << c << ": {\n";
+        const std::string region = conditions(body, closed, "        ", "w");
+        body << "        return " << region << ";\n      }\n";
       }
-      os << "      default:\n        return false;\n    }\n  }\n\n";
+      body << "      default:\n        return false;\n    }\n  }\n\n";
+      kernels_ +=
+          "  /// Whether x lies in the closure of mode k's region (its `where` relations, < read "
+          "as <=\n  /// and > as >=).\n  static bool in_region(int mode, " +
+          arguments() + ") {\n" + body.str();
     }
-    os << "  /// Initial density of mode k at x (0 outside the support and the mode's region).\n";
-    os << "  static double initial_density(int k, const double* x, const double* par) {\n";
-    os << "    (void)x;\n    (void)par;\n";
-    os << "    if (!in_support(x, par)) return 0.0;\n";
-    os << "    double r = 0.0;\n    switch (k) {\n";
+    begin_kernel();
+    uses_x_ = uses_par_ = true;  // in_support(state, parameter)
+    std::ostringstream body;
+    body << "    if (!in_support(state, parameter)) return 0.0;\n";
+    body << "    double result = 0.0;\n    switch (mode) {\n";
     for (std::size_t c = 0; c < sys_.modes.size(); ++c) {
-      os << "      case " << c << ": {\n";
-      std::string region = conditions(os, sys_.modes[c].where, "        ", "w");
-      ex u0 = c < sim.initial.size() ? sim.initial[c] : ex(0);
-      if (region != "true") os << "        if (!(" << region << ")) return 0.0;\n";
-      os << emit_c_block(pr_.dag(), {{"r", pr_.node(u0)}}, bind_, "        ")
-         << "        break;\n      }\n";
+      begin_case();
+      body << "      case " << c << ": {\n";
+      const std::string region = conditions(body, sys_.modes[c].where, "        ", "w");
+      const ex u0 = c < sim.initial.size() ? sim.initial[c] : ex(0);
+      if (region != "true") body << "        if (!(" << region << ")) return 0.0;\n";
+      body << name_values({u0}, "        ")
+           << emit_c_block(pr_.dag(), {{"result", pr_.node(u0)}}, bind_, "        ")
+           << "        break;\n      }\n";
     }
-    os << "      default:\n        break;\n    }\n    return r;\n  }\n\n";
-    kernels_ += os.str();
+    body << "      default:\n        break;\n    }\n    return result;\n  }\n\n";
+    kernels_ +=
+        "  /// Initial density of mode k at x (0 outside the support and the mode's region).\n"
+        "  static double initial_density(int mode, " +
+        arguments() + ") {\n" + body.str();
   }
 
   std::string assemble() {
@@ -259,8 +349,42 @@ class HeaderBuilder {
   const HybridSystem& sys_;
   const Model& m_;
   Printer& pr_;
-  std::map<std::string, std::string> bind_;
+  std::map<std::string, std::string> bind_;    ///< Symbol -> its C name in kernels.
+  std::map<std::string, std::string> source_;  ///< Symbol -> "state[i]" or "parameter[j]".
   std::string kernels_;
+  bool uses_x_ = false, uses_par_ = false;  ///< Whether the kernel reads state, parameter.
+  std::set<std::string> declared_;          ///< Symbols named in the current scope.
+
+  /// Start a kernel: nothing read yet.
+  void begin_kernel() {
+    uses_x_ = uses_par_ = false;
+    declared_.clear();
+  }
+
+  /// Start a `case` block: a new scope.
+  void begin_case() { declared_.clear(); }
+
+  /// The state and parameter arguments, named only where the kernel reads them.
+  [[nodiscard]] std::string arguments() const {
+    return std::string("const double*") + (uses_x_ ? " state" : "") + ", const double*" +
+           (uses_par_ ? " parameter" : "");
+  }
+
+  /// `const double NAME = state[i];` (or `= parameter[j];`) for every state variable and parameter
+  /// that `exprs` read, in model order; records that the kernel reads x or par.
+  std::string name_values(const std::vector<ex>& exprs, const std::string& indent) {
+    std::set<std::string> used;
+    for (const auto& e : exprs) collect_symbols(e, used);
+    std::string out;
+    auto declare = [&](const std::string& sym, bool& flag) {
+      if (!used.count(sym) || !declared_.insert(sym).second) return;
+      out += indent + "const double " + bind_.at(sym) + " = " + source_.at(sym) + ";\n";
+      flag = true;
+    };
+    for (const auto& st : m_.state) declare(st, uses_x_);
+    for (const auto& p : m_.params) declare(p.name, uses_par_);
+    return out;
+  }
 };
 
 /// A name inside \\mathrm{}: underscores escaped.
@@ -487,13 +611,14 @@ std::string report_markdown(const HybridSystem& sys, Printer& pr) {
   os << "<!-- Generated by hybgen " << generator_version()
      << " -- DO NOT EDIT. model sha256: " << m.source_hash << " -->\n";
   os << "# Derivation report: `" << m.name << "`\n\n";
+  // One math span per formula (a `$` inside a `$…$` span breaks every Markdown renderer),
+  // and the reference measure written out, not called μ (a model may have a parameter μ).
   os << "State $x = (";
-  for (std::size_t i = 0; i < m.state.size(); ++i)
-    os << (i ? ", " : "") << "$" << m.tex.at(m.state[i]) << "$";
-  os << ")$ with reference measure $\\mu = ";
+  for (std::size_t i = 0; i < m.state.size(); ++i) os << (i ? ", " : "") << m.tex.at(m.state[i]);
+  os << ")$; densities are with respect to the Lebesgue measure $";
   for (std::size_t i = 0; i < m.state.size(); ++i)
     os << (i ? " \\wedge " : "") << "d" << m.tex.at(m.state[i]);
-  os << "$.\n\nParameters (defaults): ";
+  os << "$ in these coordinates.\n\nParameters (defaults): ";
   for (std::size_t j = 0; j < m.params.size(); ++j)
     os << (j ? ", " : "") << "$" << m.tex.at(m.params[j].name) << " = "
        << pr.latex(m.params[j].value) << "$";

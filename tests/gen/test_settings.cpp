@@ -13,6 +13,7 @@
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/parse.hpp"
+#include "hybgen/gen/run.hpp"
 #include "hybgen/rt/settings.hpp"
 
 namespace hybgen::gen {
@@ -65,12 +66,12 @@ TEST(Settings, EveryRowTravelsFromSetToTheRunner) {
     ASSERT_NO_THROW(apply_overrides(m, {name + "=" + value})) << name << "=" << value;
     EXPECT_TRUE(m.sim.settings.given(name)) << name;
     if (s.methods == "derive") continue;  // the symbolic stage's: not in the runner's config
-    // What the generator writes (main.cpp's run_config) is what the runner reads.
-    const nlohmann::json config = m.sim.settings.to_json();
+    // What the generator writes (run_config, generator/src/run.cpp) is what the runner reads.
+    const nlohmann::json config = run_config(m, "out", "out", true);
     ASSERT_TRUE(config.contains(name)) << name;
     rt::Settings runner;
     ASSERT_NO_THROW(runner = rt::Settings::from_json(config)) << name;
-    EXPECT_EQ(runner.to_json(), config) << name;
+    EXPECT_EQ(runner.to_json(), m.sim.settings.to_json()) << name;
     if (s.type == rt::SettingType::word)
       EXPECT_EQ(config[name].get<std::string>(), value) << name;
     else
