@@ -47,8 +47,8 @@
 
 #include "chaplygin/chaplygin.hpp"
 #include "gl2/gl2.hpp"
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 #include "sir_3d/sir_3d.hpp"
 
 #if defined(__GLIBC__)

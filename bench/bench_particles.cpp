@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "bouncing_ball/bouncing_ball.hpp"
-#include "hybgen/rt/particles.hpp"
+#include "hybgen/rt/methods/particles.hpp"
 #include "support/ball_closed_form.hpp"
 
 namespace {

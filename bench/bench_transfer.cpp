@@ -22,8 +22,8 @@
 #include <vector>
 
 #include "bouncing_ball/bouncing_ball.hpp"
-#include "hybgen/rt/invariant.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/invariant.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 #include "support/ball_closed_form.hpp"
 
 namespace {

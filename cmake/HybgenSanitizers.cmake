@@ -30,7 +30,7 @@ if(HYBGEN_SANITIZE)
     # of false positive warnings ... We recommend against combining -Werror and
     # [the use of] sanitizers." GCC 12 + ASan reports -Warray-bounds in the
     # dead >16-element branch of std::sort on a 2-element std::array
-    # (runtime/include/hybgen/rt/ode.hpp, EventLocator::scan), in the bench and
+    # (runtime/include/hybgen/rt/core/ode.hpp, EventLocator::scan), in the bench and
     # in every runner. The flow-sensitive warnings stay errors in the normal
     # -Werror build; here they are off or only warnings (ASan checks bounds at
     # run time anyway). Runners are compiled by the same compiler.

@@ -1,5 +1,8 @@
 // Stage 2 (check): AST -> Model.
 //
+// Size: the Checker, one method per statement kind, the expression converter with its
+// bounds (fuzzing findings), and the --set overrides, which apply the same rules.
+//
 // Invariants of the result: every symbol in every expression is a state
 // variable or a parameter of the model (parameter defaults use earlier
 // parameters only); every number is an exact rational; every default is a
@@ -291,28 +294,375 @@ GiNaC::numeric exact_number(const std::string& literal) {
   return value;
 }
 
-Model check(const ModelAst& ast, const SourceText& src) {
-  Model m;
-  m.path = src.path();
-  m.source_hash = sha256_hex(src.text());
+namespace {
 
-  // model name: `model NAME`, else the file stem.
-  if (ast.name) {
-    m.name = ast.name->name;
-  } else {
-    std::string stem = src.path();
-    auto slash = stem.find_last_of('/');
-    if (slash != std::string::npos) stem = stem.substr(slash + 1);
-    auto dot = stem.find('.');
-    if (dot != std::string::npos) stem = stem.substr(0, dot);
-    std::string clean;
-    for (char c : stem) clean += (std::isalnum(static_cast<unsigned char>(c)) ? c : '_');
-    if (clean.empty() || std::isdigit(static_cast<unsigned char>(clean[0]))) clean = "m_" + clean;
-    m.name = clean;
+/// Stage 2 for a general model, one method per statement kind in the order check() runs
+/// them; each refuses what the paper's hypotheses or the language forbid with a located error.
+/// A struct: its fields are the model being checked and the scopes the methods share.
+struct Checker {
+  /// A checker of `src`'s model.
+  explicit Checker(const SourceText& source) : src(source) {
+    m.path = source.path();
+    m.source_hash = sha256_hex(source.text());
   }
 
-  std::map<std::string, SourceLoc> declared;  // states and parameters share a namespace
-  auto declare = [&](const std::string& name, SourceLoc loc, const char* what) {
+  /// The model's name: `model NAME`, else the file stem.
+  void name(const ModelAst& ast) {
+    if (ast.name) {
+      m.name = ast.name->name;
+    } else {
+      std::string stem = src.path();
+      auto slash = stem.find_last_of('/');
+      if (slash != std::string::npos) stem = stem.substr(slash + 1);
+      auto dot = stem.find('.');
+      if (dot != std::string::npos) stem = stem.substr(0, dot);
+      std::string clean;
+      for (char c : stem) clean += (std::isalnum(static_cast<unsigned char>(c)) ? c : '_');
+      if (clean.empty() || std::isdigit(static_cast<unsigned char>(clean[0]))) clean = "m_" + clean;
+      m.name = clean;
+    }
+  }
+
+  /// States and parameters share a namespace; checked in source order so that an error
+  /// points at the later of two declarations.
+  void names(const ModelAst& ast) {
+    {
+      std::vector<std::pair<SourceLoc, std::pair<std::string, const char*>>> decls;
+      for (const auto& st : ast.states) decls.push_back({st.loc, {st.name, "state variable"}});
+      for (const auto& p : ast.params) decls.push_back({p.loc, {p.name, "parameter"}});
+      std::stable_sort(decls.begin(), decls.end(), [](const auto& a, const auto& b) {
+        return a.first.line != b.first.line ? a.first.line < b.first.line
+                                            : a.first.col < b.first.col;
+      });
+      for (const auto& [loc, d] : decls) declare(d.first, loc, d.second);
+    }
+  }
+
+  /// The state variables, as real symbols.
+  void states(const ModelAst& ast) {
+    if (ast.states.empty())
+      throw src.error({1, 1}, "the model declares no state variables (write e.g. 'state x, p')");
+    for (const auto& s : ast.states) {
+      ex sym = GiNaC::realsymbol(s.name);
+      m.state.push_back(s.name);
+      m.state_symbols.push_back(sym);
+      state_scope[s.name] = sym;
+    }
+  }
+
+  /// The parameters: defaults may use earlier parameters only.
+  void parameters(const ModelAst& ast) {
+    for (const auto& p : ast.params) {
+      Converter conv(src, param_values, "the default of parameter '" + p.name + "'");
+      ex value = conv.convert(p.value);
+      auto d = to_finite_double(value);
+      if (!d)
+        throw src.error(p.value->loc,
+                        "the default of parameter '" + p.name + "' is not a finite real number");
+      ex sym = GiNaC::realsymbol(p.name);
+      m.params.push_back({p.name, sym, value, *d, p.loc});
+      param_scope[p.name] = sym;
+      param_values[p.name] = value;
+    }
+    full_scope = state_scope;
+    full_scope.insert(param_scope.begin(), param_scope.end());
+    state_syms = m.state_symbols;
+  }
+
+  /// The modes: a vector field, or a Hamiltonian with its coordinates and momenta, and the
+  /// mode's region (`where`).
+  void modes(const ModelAst& ast) {
+    if (ast.modes.empty())
+      throw src.error({1, 1}, "the model declares no mode (write 'mode NAME { x' = ... }')");
+    for (const auto& md : ast.modes) {
+      if (mode_index.count(md.name.name))
+        throw src.error(md.name.loc, "mode '" + md.name.name + "' is already declared");
+      mode_index[md.name.name] = static_cast<int>(m.modes.size());
+      ModeSpec spec;
+      spec.name = md.name.name;
+      spec.loc = md.name.loc;
+      const std::string where = "mode '" + md.name.name + "'";
+      if (md.hamiltonian && !md.flows.empty())
+        throw src.error(md.flows.front().var.loc,
+                        where + " has both a Hamiltonian and flow equations; give one of them");
+      if (!md.hamiltonian && (!md.coordinates.empty() || !md.momenta.empty()))
+        throw src.error(md.name.loc, where + " names coordinates/momenta but has no Hamiltonian");
+      if (md.hamiltonian) {
+        Converter conv(src, full_scope, "the Hamiltonian of " + where);
+        spec.hamiltonian = conv.convert(md.hamiltonian);
+        const std::size_t n = m.state.size();
+        auto resolve = [&](const std::vector<Name>& names, std::vector<int>& out,
+                           const char* what) {
+          for (const auto& nm : names) {
+            auto it = std::find(m.state.begin(), m.state.end(), nm.name);
+            if (it == m.state.end())
+              throw src.error(nm.loc,
+                              std::string(what) + " '" + nm.name + "' is not a state variable");
+            out.push_back(static_cast<int>(it - m.state.begin()));
+          }
+        };
+        resolve(md.coordinates, spec.coordinates, "coordinate");
+        resolve(md.momenta, spec.momenta, "momentum");
+        if (spec.coordinates.empty() && spec.momenta.empty()) {
+          if (n % 2 != 0)
+            throw src.error(md.hamiltonian_loc,
+                            where +
+                                ": a Hamiltonian needs as many momenta as coordinates, but the "
+                                "state has " +
+                                std::to_string(n) +
+                                " variables (name them with 'coordinates' and 'momenta')");
+          for (std::size_t i = 0; i < n / 2; ++i) spec.coordinates.push_back(static_cast<int>(i));
+          for (std::size_t i = n / 2; i < n; ++i) spec.momenta.push_back(static_cast<int>(i));
+        }
+        std::set<int> all(spec.coordinates.begin(), spec.coordinates.end());
+        all.insert(spec.momenta.begin(), spec.momenta.end());
+        if (spec.coordinates.size() != spec.momenta.size() || all.size() != n ||
+            spec.coordinates.size() + spec.momenta.size() != n)
+          throw src.error(md.hamiltonian_loc,
+                          where +
+                              ": 'coordinates' and 'momenta' must split the state into two "
+                              "lists of equal length covering every state variable once");
+      } else {
+        if (md.flows.empty())
+          throw src.error(md.name.loc, where +
+                                           " has no flow equations (write x' = ... for every "
+                                           "state variable, or a hamiltonian)");
+        std::vector<std::optional<ex>> flow(m.state.size());
+        Converter conv(src, full_scope, "the flow of " + where);
+        for (const auto& f : md.flows) {
+          auto it = std::find(m.state.begin(), m.state.end(), f.var.name);
+          if (it == m.state.end())
+            throw src.error(f.var.loc, "'" + f.var.name + "' in " + where +
+                                           " is not a state variable" +
+                                           suggestion(f.var.name, m.state));
+          auto i = static_cast<std::size_t>(it - m.state.begin());
+          if (flow[i]) throw src.error(f.var.loc, where + " gives " + f.var.name + "' twice");
+          flow[i] = conv.convert(f.rhs);
+        }
+        for (std::size_t i = 0; i < flow.size(); ++i) {
+          if (!flow[i])
+            throw src.error(md.name.loc, where + " has no equation for " + m.state[i] + "'");
+          spec.flow.push_back(*flow[i]);
+        }
+      }
+      Converter cconv(src, full_scope, "a 'where' condition of " + where);
+      for (const auto& r : md.where)
+        spec.where.push_back({cconv.convert(r.lhs) - cconv.convert(r.rhs), r.op, r.loc});
+      m.modes.push_back(std::move(spec));
+    }
+  }
+
+  /// The guards: surface, direction, source and target modes, and the reset.
+  void guards(const ModelAst& ast) {
+    std::set<std::string> guard_names;
+    for (const auto& g : ast.guards) {
+      if (!guard_names.insert(g.name.name).second)
+        throw src.error(g.name.loc, "guard '" + g.name.name + "' is already declared");
+      GuardSpec spec;
+      spec.name = g.name.name;
+      spec.loc = g.name.loc;
+      const std::string where = "guard '" + g.name.name + "'";
+      auto find_mode = [&](const Name& n) {
+        auto it = mode_index.find(n.name);
+        if (it == mode_index.end()) {
+          std::vector<std::string> names;
+          for (const auto& [k, v] : mode_index) names.push_back(k);
+          throw src.error(n.loc,
+                          "unknown mode '" + n.name + "' in " + where + suggestion(n.name, names));
+        }
+        return it->second;
+      };
+      if (g.from) {
+        spec.from = find_mode(*g.from);
+      } else if (m.modes.size() == 1) {
+        spec.from = 0;
+      } else {
+        throw src.error(g.name.loc, where + " needs 'from MODE' (the model has " +
+                                        std::to_string(m.modes.size()) + " modes)");
+      }
+      spec.to = g.to ? find_mode(*g.to) : spec.from;
+      if (!g.has_when)
+        throw src.error(g.name.loc, where + " has no surface (write 'when s = 0 decreasing')");
+      Converter conv(src, full_scope, "the surface of " + where);
+      spec.surface = conv.convert(g.when.lhs) - conv.convert(g.when.rhs);
+      spec.surface_loc = g.when.loc;
+      if (!depends_on_any(spec.surface, state_syms))
+        throw src.error(g.when.loc, "the surface of " + where + " does not depend on the state");
+      spec.direction = g.direction;
+      if (!g.has_reset)
+        throw src.error(g.name.loc, where +
+                                        " has no reset (write 'reset identity', 'reset "
+                                        "elastic', 'reset restitution e' or 'reset (...)')");
+      spec.reset_kind = g.reset.kind;
+      spec.reset_loc = g.reset.loc;
+      switch (g.reset.kind) {
+        case ResetDecl::Kind::Identity:
+          break;
+        case ResetDecl::Kind::Elastic:
+          spec.restitution = 1;
+          break;
+        case ResetDecl::Kind::Restitution: {
+          Converter rconv(src, full_scope, "the restitution coefficient of " + where);
+          spec.restitution = rconv.convert(g.reset.coefficient);
+          break;
+        }
+        case ResetDecl::Kind::Explicit: {
+          if (g.reset.components.size() != m.state.size()) {
+            std::string names;
+            for (std::size_t i = 0; i < m.state.size(); ++i) names += (i ? ", " : "") + m.state[i];
+            throw src.error(
+                g.reset.components_loc,
+                "the reset of " + where + " has " + std::to_string(g.reset.components.size()) +
+                    " component" + (g.reset.components.size() == 1 ? "" : "s") + ", expected " +
+                    std::to_string(m.state.size()) + " (one per state variable: " + names + ")");
+          }
+          Converter rconv(src, full_scope, "the reset of " + where);
+          for (const auto& c : g.reset.components) spec.reset.push_back(rconv.convert(c));
+          break;
+        }
+      }
+      if ((spec.reset_kind == ResetDecl::Kind::Elastic ||
+           spec.reset_kind == ResetDecl::Kind::Restitution)) {
+        const auto& src_mode = m.modes[static_cast<std::size_t>(spec.from)];
+        if (!src_mode.hamiltonian)
+          throw src.error(g.reset.loc,
+                          "an elastic/restitution reset needs a Hamiltonian in mode '" +
+                              src_mode.name + "' (or write the reset explicitly)");
+      }
+      m.guards.push_back(std::move(spec));
+    }
+  }
+
+  /// The simulation block: domain, grid, initial density, support and every setting.
+  void simulation(const ModelAst& ast) {
+    if (ast.simulation) {
+      const auto& s = *ast.simulation;
+      Simulation& sim = m.sim;
+      sim.present = true;
+      sim.loc = s.loc;
+      const std::size_t n = m.state.size();
+      sim.lo.assign(n, std::nan(""));
+      sim.hi.assign(n, std::nan(""));
+      Converter pconv(src, param_values, "a simulation setting");
+      auto number = [&](const ExprPtr& e, const std::string& what) {
+        ex v = pconv.convert(e);
+        auto d = to_finite_double(v);
+        if (!d) throw src.error(e->loc, what + " is not a finite real number");
+        return *d;
+      };
+      for (const auto& d : s.domains) {
+        auto it = std::find(m.state.begin(), m.state.end(), d.var.name);
+        if (it == m.state.end())
+          throw src.error(d.var.loc, "'" + d.var.name + "' is not a state variable" +
+                                         suggestion(d.var.name, m.state));
+        auto i = static_cast<std::size_t>(it - m.state.begin());
+        if (!std::isnan(sim.lo[i]))
+          throw src.error(d.var.loc, "the domain of '" + d.var.name + "' is given twice");
+        sim.lo[i] = number(d.lo, "the lower end of the domain of " + d.var.name);
+        sim.hi[i] = number(d.hi, "the upper end of the domain of " + d.var.name);
+        if (!(sim.lo[i] < sim.hi[i]))
+          throw src.error(d.lo->loc,
+                          "the domain of '" + d.var.name + "' is empty (lower end >= upper end)");
+      }
+      for (std::size_t i = 0; i < n; ++i)
+        if (std::isnan(sim.lo[i]))
+          throw src.error(s.loc, "the simulation block has no domain for '" + m.state[i] +
+                                     "' (write 'domain " + m.state[i] + " in [a, b]')");
+      if (s.grid) {
+        if (s.grid->counts.size() != n)
+          throw src.error(s.grid->loc, "the grid has " + std::to_string(s.grid->counts.size()) +
+                                           " axes, the state has " + std::to_string(n));
+        for (long c : s.grid->counts)
+          if (c < 2) throw src.error(s.grid->loc, "every grid axis needs at least 2 nodes");
+        if (const std::string why = grid_size_problem(s.grid->counts); !why.empty())
+          throw src.error(s.grid->loc, why);
+        sim.grid = s.grid->counts;
+      } else {
+        sim.grid.assign(n, 65);
+      }
+      sim.initial.assign(m.modes.size(), ex(0));
+      std::vector<bool> has_initial(m.modes.size(), false);
+      Converter iconv(src, full_scope, "the initial density");
+      for (const auto& ini : s.initial) {
+        ex dens = iconv.convert(ini.density);
+        if (ini.mode) {
+          auto it = mode_index.find(ini.mode->name);
+          if (it == mode_index.end())
+            throw src.error(ini.mode->loc, "unknown mode '" + ini.mode->name + "'");
+          auto k = static_cast<std::size_t>(it->second);
+          if (has_initial[k])
+            throw src.error(ini.loc, "mode '" + ini.mode->name + "' has two initial densities");
+          sim.initial[k] = dens;
+          has_initial[k] = true;
+        } else {
+          // Without a mode: modes with 'where' regions share it (each keeps its
+          // region); otherwise it belongs to the first mode.
+          bool any_region = false;
+          for (std::size_t k = 0; k < m.modes.size(); ++k)
+            if (!m.modes[k].where.empty()) any_region = true;
+          for (std::size_t k = 0; k < m.modes.size(); ++k) {
+            if (any_region ? !m.modes[k].where.empty() : k == 0) {
+              if (has_initial[k])
+                throw src.error(ini.loc,
+                                "mode '" + m.modes[k].name + "' has two initial densities");
+              sim.initial[k] = dens;
+              has_initial[k] = true;
+            }
+          }
+        }
+      }
+      if (s.initial.empty())
+        throw src.error(s.loc,
+                        "the simulation block has no initial density (write 'initial EXPR')");
+      Converter sconv(src, full_scope, "a 'support' condition");
+      for (const auto& r : s.support)
+        sim.support.push_back({sconv.convert(r.lhs) - sconv.convert(r.rhs), r.op, r.loc});
+      std::set<std::string> seen;
+      for (const auto& st : s.settings) {
+        const std::string& k = st.key.name;
+        if (!seen.insert(k).second)
+          throw src.error(st.key.loc, "setting '" + k + "' is given twice");
+        if (is_simulation_setting(k)) {
+          SettingValue v;
+          v.word = st.word;
+          if (st.value && st.word.empty())
+            v.number = number(st.value, "setting '" + k + "'"), v.has_number = true;
+          if (const std::string why = set_simulation_setting(m, k, v); !why.empty())
+            throw src.error(st.value_loc, "setting '" + k + "': " + why);
+        } else {
+          std::vector<std::string> keys = setting_names();
+          throw src.error(st.key.loc,
+                          "unknown simulation setting '" + k + "'" + suggestion(k, keys));
+        }
+      }
+      if (!sim.settings.given("dt")) sim.settings.put<"dt">(sim.settings.real<"t_end">() / 10);
+    }
+  }
+
+  /// TeX names for Greek-letter symbols.
+  void tex_names() {
+    static const std::set<std::string> greek = {
+        "alpha",  "beta",  "gamma",  "delta", "epsilon", "zeta",  "eta",   "theta",
+        "iota",   "kappa", "lambda", "mu",    "nu",      "xi",    "rho",   "sigma",
+        "tau",    "phi",   "chi",    "psi",   "omega",   "Gamma", "Delta", "Theta",
+        "Lambda", "Xi",    "Pi",     "Sigma", "Phi",     "Psi",   "Omega"};
+    auto texname = [&](const std::string& nm) {
+      // theta0 -> \theta_{0}; zeta1 -> \zeta_{1}
+      std::size_t k = nm.size();
+      while (k > 0 && std::isdigit(static_cast<unsigned char>(nm[k - 1]))) --k;
+      std::string base = nm.substr(0, k), sub = nm.substr(k);
+      std::string t = greek.count(base) ? "\\" + base : base;
+      if (!greek.count(base) && base.size() > 1) t = "\\mathrm{" + base + "}";
+      if (!sub.empty()) t += "_{" + sub + "}";
+      return t;
+    };
+    for (const auto& s : m.state) m.tex[s] = texname(s);
+    for (const auto& p : m.params) m.tex[p.name] = texname(p.name);
+  }
+
+  /// Declare a state or parameter name (they share a namespace): refuse a function name, a
+  /// reserved word or a second declaration.
+  void declare(const std::string& name, SourceLoc loc, const char* what) {
     if (function_names().count(name))
       throw src.error(
           loc, std::string("a ") + what + " cannot be named '" + name + "': it is a function name");
@@ -325,327 +675,32 @@ Model check(const ModelAst& ast, const SourceText& src) {
                                std::to_string(it->second.line) + ":" +
                                std::to_string(it->second.col));
     declared[name] = loc;
-  };
-
-  // Names of states and parameters, checked in source order so that an error
-  // points at the later of two declarations.
-  {
-    std::vector<std::pair<SourceLoc, std::pair<std::string, const char*>>> decls;
-    for (const auto& st : ast.states) decls.push_back({st.loc, {st.name, "state variable"}});
-    for (const auto& p : ast.params) decls.push_back({p.loc, {p.name, "parameter"}});
-    std::stable_sort(decls.begin(), decls.end(), [](const auto& a, const auto& b) {
-      return a.first.line != b.first.line ? a.first.line < b.first.line : a.first.col < b.first.col;
-    });
-    for (const auto& [loc, d] : decls) declare(d.first, loc, d.second);
   }
 
-  // States.
-  if (ast.states.empty())
-    throw src.error({1, 1}, "the model declares no state variables (write e.g. 'state x, p')");
-  std::map<std::string, ex> state_scope;
-  for (const auto& s : ast.states) {
-    ex sym = GiNaC::realsymbol(s.name);
-    m.state.push_back(s.name);
-    m.state_symbols.push_back(sym);
-    state_scope[s.name] = sym;
-  }
+  const SourceText& src;                      ///< The model text.
+  Model m;                                    ///< The model being checked.
+  std::map<std::string, SourceLoc> declared;  ///< States and parameters.
+  std::map<std::string, ex> state_scope;      ///< State names -> symbols.
+  std::map<std::string, ex> param_scope;      ///< Parameter names -> symbols.
+  std::map<std::string, ex> param_values;     ///< Parameter names -> defaults.
+  std::map<std::string, ex> full_scope;       ///< States and parameters.
+  std::vector<ex> state_syms;                 ///< The state symbols, in order.
+  std::map<std::string, int> mode_index;      ///< Mode names -> indices.
+};
 
-  // Parameters: defaults may use earlier parameters only.
-  std::map<std::string, ex> param_scope, param_values;
-  for (const auto& p : ast.params) {
-    Converter conv(src, param_values, "the default of parameter '" + p.name + "'");
-    ex value = conv.convert(p.value);
-    auto d = to_finite_double(value);
-    if (!d)
-      throw src.error(p.value->loc,
-                      "the default of parameter '" + p.name + "' is not a finite real number");
-    ex sym = GiNaC::realsymbol(p.name);
-    m.params.push_back({p.name, sym, value, *d, p.loc});
-    param_scope[p.name] = sym;
-    param_values[p.name] = value;
-  }
+}  // namespace
 
-  std::map<std::string, ex> full_scope = state_scope;
-  full_scope.insert(param_scope.begin(), param_scope.end());
-  std::vector<ex> state_syms = m.state_symbols;
-
-  // Modes.
-  if (ast.modes.empty())
-    throw src.error({1, 1}, "the model declares no mode (write 'mode NAME { x' = ... }')");
-  std::map<std::string, int> mode_index;
-  for (const auto& md : ast.modes) {
-    if (mode_index.count(md.name.name))
-      throw src.error(md.name.loc, "mode '" + md.name.name + "' is already declared");
-    mode_index[md.name.name] = static_cast<int>(m.modes.size());
-    ModeSpec spec;
-    spec.name = md.name.name;
-    spec.loc = md.name.loc;
-    const std::string where = "mode '" + md.name.name + "'";
-    if (md.hamiltonian && !md.flows.empty())
-      throw src.error(md.flows.front().var.loc,
-                      where + " has both a Hamiltonian and flow equations; give one of them");
-    if (!md.hamiltonian && (!md.coordinates.empty() || !md.momenta.empty()))
-      throw src.error(md.name.loc, where + " names coordinates/momenta but has no Hamiltonian");
-    if (md.hamiltonian) {
-      Converter conv(src, full_scope, "the Hamiltonian of " + where);
-      spec.hamiltonian = conv.convert(md.hamiltonian);
-      const std::size_t n = m.state.size();
-      auto resolve = [&](const std::vector<Name>& names, std::vector<int>& out, const char* what) {
-        for (const auto& nm : names) {
-          auto it = std::find(m.state.begin(), m.state.end(), nm.name);
-          if (it == m.state.end())
-            throw src.error(nm.loc,
-                            std::string(what) + " '" + nm.name + "' is not a state variable");
-          out.push_back(static_cast<int>(it - m.state.begin()));
-        }
-      };
-      resolve(md.coordinates, spec.coordinates, "coordinate");
-      resolve(md.momenta, spec.momenta, "momentum");
-      if (spec.coordinates.empty() && spec.momenta.empty()) {
-        if (n % 2 != 0)
-          throw src.error(md.hamiltonian_loc,
-                          where +
-                              ": a Hamiltonian needs as many momenta as coordinates, but the "
-                              "state has " +
-                              std::to_string(n) +
-                              " variables (name them with 'coordinates' and 'momenta')");
-        for (std::size_t i = 0; i < n / 2; ++i) spec.coordinates.push_back(static_cast<int>(i));
-        for (std::size_t i = n / 2; i < n; ++i) spec.momenta.push_back(static_cast<int>(i));
-      }
-      std::set<int> all(spec.coordinates.begin(), spec.coordinates.end());
-      all.insert(spec.momenta.begin(), spec.momenta.end());
-      if (spec.coordinates.size() != spec.momenta.size() || all.size() != n ||
-          spec.coordinates.size() + spec.momenta.size() != n)
-        throw src.error(md.hamiltonian_loc,
-                        where +
-                            ": 'coordinates' and 'momenta' must split the state into two "
-                            "lists of equal length covering every state variable once");
-    } else {
-      if (md.flows.empty())
-        throw src.error(md.name.loc, where +
-                                         " has no flow equations (write x' = ... for every "
-                                         "state variable, or a hamiltonian)");
-      std::vector<std::optional<ex>> flow(m.state.size());
-      Converter conv(src, full_scope, "the flow of " + where);
-      for (const auto& f : md.flows) {
-        auto it = std::find(m.state.begin(), m.state.end(), f.var.name);
-        if (it == m.state.end())
-          throw src.error(f.var.loc, "'" + f.var.name + "' in " + where +
-                                         " is not a state variable" +
-                                         suggestion(f.var.name, m.state));
-        auto i = static_cast<std::size_t>(it - m.state.begin());
-        if (flow[i]) throw src.error(f.var.loc, where + " gives " + f.var.name + "' twice");
-        flow[i] = conv.convert(f.rhs);
-      }
-      for (std::size_t i = 0; i < flow.size(); ++i) {
-        if (!flow[i])
-          throw src.error(md.name.loc, where + " has no equation for " + m.state[i] + "'");
-        spec.flow.push_back(*flow[i]);
-      }
-    }
-    Converter cconv(src, full_scope, "a 'where' condition of " + where);
-    for (const auto& r : md.where)
-      spec.where.push_back({cconv.convert(r.lhs) - cconv.convert(r.rhs), r.op, r.loc});
-    m.modes.push_back(std::move(spec));
-  }
-
-  // Guards.
-  std::set<std::string> guard_names;
-  for (const auto& g : ast.guards) {
-    if (!guard_names.insert(g.name.name).second)
-      throw src.error(g.name.loc, "guard '" + g.name.name + "' is already declared");
-    GuardSpec spec;
-    spec.name = g.name.name;
-    spec.loc = g.name.loc;
-    const std::string where = "guard '" + g.name.name + "'";
-    auto find_mode = [&](const Name& n) {
-      auto it = mode_index.find(n.name);
-      if (it == mode_index.end()) {
-        std::vector<std::string> names;
-        for (const auto& [k, v] : mode_index) names.push_back(k);
-        throw src.error(n.loc,
-                        "unknown mode '" + n.name + "' in " + where + suggestion(n.name, names));
-      }
-      return it->second;
-    };
-    if (g.from) {
-      spec.from = find_mode(*g.from);
-    } else if (m.modes.size() == 1) {
-      spec.from = 0;
-    } else {
-      throw src.error(g.name.loc, where + " needs 'from MODE' (the model has " +
-                                      std::to_string(m.modes.size()) + " modes)");
-    }
-    spec.to = g.to ? find_mode(*g.to) : spec.from;
-    if (!g.has_when)
-      throw src.error(g.name.loc, where + " has no surface (write 'when s = 0 decreasing')");
-    Converter conv(src, full_scope, "the surface of " + where);
-    spec.surface = conv.convert(g.when.lhs) - conv.convert(g.when.rhs);
-    spec.surface_loc = g.when.loc;
-    if (!depends_on_any(spec.surface, state_syms))
-      throw src.error(g.when.loc, "the surface of " + where + " does not depend on the state");
-    spec.direction = g.direction;
-    if (!g.has_reset)
-      throw src.error(g.name.loc, where +
-                                      " has no reset (write 'reset identity', 'reset "
-                                      "elastic', 'reset restitution e' or 'reset (...)')");
-    spec.reset_kind = g.reset.kind;
-    spec.reset_loc = g.reset.loc;
-    switch (g.reset.kind) {
-      case ResetDecl::Kind::Identity:
-        break;
-      case ResetDecl::Kind::Elastic:
-        spec.restitution = 1;
-        break;
-      case ResetDecl::Kind::Restitution: {
-        Converter rconv(src, full_scope, "the restitution coefficient of " + where);
-        spec.restitution = rconv.convert(g.reset.coefficient);
-        break;
-      }
-      case ResetDecl::Kind::Explicit: {
-        if (g.reset.components.size() != m.state.size()) {
-          std::string names;
-          for (std::size_t i = 0; i < m.state.size(); ++i) names += (i ? ", " : "") + m.state[i];
-          throw src.error(
-              g.reset.components_loc,
-              "the reset of " + where + " has " + std::to_string(g.reset.components.size()) +
-                  " component" + (g.reset.components.size() == 1 ? "" : "s") + ", expected " +
-                  std::to_string(m.state.size()) + " (one per state variable: " + names + ")");
-        }
-        Converter rconv(src, full_scope, "the reset of " + where);
-        for (const auto& c : g.reset.components) spec.reset.push_back(rconv.convert(c));
-        break;
-      }
-    }
-    if ((spec.reset_kind == ResetDecl::Kind::Elastic ||
-         spec.reset_kind == ResetDecl::Kind::Restitution)) {
-      const auto& src_mode = m.modes[static_cast<std::size_t>(spec.from)];
-      if (!src_mode.hamiltonian)
-        throw src.error(g.reset.loc, "an elastic/restitution reset needs a Hamiltonian in mode '" +
-                                         src_mode.name + "' (or write the reset explicitly)");
-    }
-    m.guards.push_back(std::move(spec));
-  }
-
-  // Simulation block.
-  if (ast.simulation) {
-    const auto& s = *ast.simulation;
-    Simulation& sim = m.sim;
-    sim.present = true;
-    sim.loc = s.loc;
-    const std::size_t n = m.state.size();
-    sim.lo.assign(n, std::nan(""));
-    sim.hi.assign(n, std::nan(""));
-    Converter pconv(src, param_values, "a simulation setting");
-    auto number = [&](const ExprPtr& e, const std::string& what) {
-      ex v = pconv.convert(e);
-      auto d = to_finite_double(v);
-      if (!d) throw src.error(e->loc, what + " is not a finite real number");
-      return *d;
-    };
-    for (const auto& d : s.domains) {
-      auto it = std::find(m.state.begin(), m.state.end(), d.var.name);
-      if (it == m.state.end())
-        throw src.error(d.var.loc, "'" + d.var.name + "' is not a state variable" +
-                                       suggestion(d.var.name, m.state));
-      auto i = static_cast<std::size_t>(it - m.state.begin());
-      if (!std::isnan(sim.lo[i]))
-        throw src.error(d.var.loc, "the domain of '" + d.var.name + "' is given twice");
-      sim.lo[i] = number(d.lo, "the lower end of the domain of " + d.var.name);
-      sim.hi[i] = number(d.hi, "the upper end of the domain of " + d.var.name);
-      if (!(sim.lo[i] < sim.hi[i]))
-        throw src.error(d.lo->loc,
-                        "the domain of '" + d.var.name + "' is empty (lower end >= upper end)");
-    }
-    for (std::size_t i = 0; i < n; ++i)
-      if (std::isnan(sim.lo[i]))
-        throw src.error(s.loc, "the simulation block has no domain for '" + m.state[i] +
-                                   "' (write 'domain " + m.state[i] + " in [a, b]')");
-    if (s.grid) {
-      if (s.grid->counts.size() != n)
-        throw src.error(s.grid->loc, "the grid has " + std::to_string(s.grid->counts.size()) +
-                                         " axes, the state has " + std::to_string(n));
-      for (long c : s.grid->counts)
-        if (c < 2) throw src.error(s.grid->loc, "every grid axis needs at least 2 nodes");
-      if (const std::string why = grid_size_problem(s.grid->counts); !why.empty())
-        throw src.error(s.grid->loc, why);
-      sim.grid = s.grid->counts;
-    } else {
-      sim.grid.assign(n, 65);
-    }
-    sim.initial.assign(m.modes.size(), ex(0));
-    std::vector<bool> has_initial(m.modes.size(), false);
-    Converter iconv(src, full_scope, "the initial density");
-    for (const auto& ini : s.initial) {
-      ex dens = iconv.convert(ini.density);
-      if (ini.mode) {
-        auto it = mode_index.find(ini.mode->name);
-        if (it == mode_index.end())
-          throw src.error(ini.mode->loc, "unknown mode '" + ini.mode->name + "'");
-        auto k = static_cast<std::size_t>(it->second);
-        if (has_initial[k])
-          throw src.error(ini.loc, "mode '" + ini.mode->name + "' has two initial densities");
-        sim.initial[k] = dens;
-        has_initial[k] = true;
-      } else {
-        // Without a mode: modes with 'where' regions share it (each keeps its
-        // region); otherwise it belongs to the first mode.
-        bool any_region = false;
-        for (std::size_t k = 0; k < m.modes.size(); ++k)
-          if (!m.modes[k].where.empty()) any_region = true;
-        for (std::size_t k = 0; k < m.modes.size(); ++k) {
-          if (any_region ? !m.modes[k].where.empty() : k == 0) {
-            if (has_initial[k])
-              throw src.error(ini.loc, "mode '" + m.modes[k].name + "' has two initial densities");
-            sim.initial[k] = dens;
-            has_initial[k] = true;
-          }
-        }
-      }
-    }
-    if (s.initial.empty())
-      throw src.error(s.loc, "the simulation block has no initial density (write 'initial EXPR')");
-    Converter sconv(src, full_scope, "a 'support' condition");
-    for (const auto& r : s.support)
-      sim.support.push_back({sconv.convert(r.lhs) - sconv.convert(r.rhs), r.op, r.loc});
-    std::set<std::string> seen;
-    for (const auto& st : s.settings) {
-      const std::string& k = st.key.name;
-      if (!seen.insert(k).second) throw src.error(st.key.loc, "setting '" + k + "' is given twice");
-      if (is_simulation_setting(k)) {
-        SettingValue v;
-        v.word = st.word;
-        if (st.value && st.word.empty())
-          v.number = number(st.value, "setting '" + k + "'"), v.has_number = true;
-        if (const std::string why = set_simulation_setting(m, k, v); !why.empty())
-          throw src.error(st.value_loc, "setting '" + k + "': " + why);
-      } else {
-        std::vector<std::string> keys = setting_names();
-        throw src.error(st.key.loc, "unknown simulation setting '" + k + "'" + suggestion(k, keys));
-      }
-    }
-    if (!sim.settings.given("dt")) sim.settings.put<"dt">(sim.settings.real<"t_end">() / 10);
-  }
-
-  // TeX names for Greek-letter symbols.
-  static const std::set<std::string> greek = {
-      "alpha",  "beta",  "gamma",  "delta", "epsilon", "zeta",  "eta",   "theta",
-      "iota",   "kappa", "lambda", "mu",    "nu",      "xi",    "rho",   "sigma",
-      "tau",    "phi",   "chi",    "psi",   "omega",   "Gamma", "Delta", "Theta",
-      "Lambda", "Xi",    "Pi",     "Sigma", "Phi",     "Psi",   "Omega"};
-  auto texname = [&](const std::string& nm) {
-    // theta0 -> \theta_{0}; zeta1 -> \zeta_{1}
-    std::size_t k = nm.size();
-    while (k > 0 && std::isdigit(static_cast<unsigned char>(nm[k - 1]))) --k;
-    std::string base = nm.substr(0, k), sub = nm.substr(k);
-    std::string t = greek.count(base) ? "\\" + base : base;
-    if (!greek.count(base) && base.size() > 1) t = "\\mathrm{" + base + "}";
-    if (!sub.empty()) t += "_{" + sub + "}";
-    return t;
-  };
-  for (const auto& s : m.state) m.tex[s] = texname(s);
-  for (const auto& p : m.params) m.tex[p.name] = texname(p.name);
-  return m;
+Model check(const ModelAst& ast, const SourceText& src) {
+  Checker c(src);
+  c.name(ast);
+  c.names(ast);
+  c.states(ast);
+  c.parameters(ast);
+  c.modes(ast);
+  c.guards(ast);
+  c.simulation(ast);
+  c.tex_names();
+  return std::move(c.m);
 }
 
 const std::vector<std::string>& setting_names() {
@@ -724,7 +779,7 @@ bool is_simulation_setting(const std::string& key) {
 
 std::string set_simulation_setting(Model& model, const std::string& key, const SettingValue& v) {
   // The backward interpolating scheme created mass at resets with |J| != 1 and was
-  // withdrawn; its spelling gets the reason (runtime/include/hybgen/rt/transfer.hpp).
+  // withdrawn; its spelling gets the reason (runtime/include/hybgen/rt/methods/transfer.hpp).
   if (key == "scheme" && (v.word == "interpolate" || v.word == "conservative"))
     return "'" + v.word +
            "' was withdrawn: use 'hat' (the default: forward samples "

@@ -153,10 +153,12 @@ bool is_lie_model(const ModelAst& ast) {
   return ast.lie.has_value();
 }
 
-LieModel check_lie(const ModelAst& ast, const SourceText& src) {
-  if (!ast.lie) throw InternalError("check_lie called on a general model");
-  const LieDecl& lie = *ast.lie;
+/// The combinations of Lie statements a model may have: no `state` or modes, a group, its
+/// momenta or (constrained) velocities, one way of giving the kinetic energy, and a reduced
+/// coordinate. Throws a located error naming what is missing or given twice.
+void check_lie_statements(const ModelAst& ast, const LieDecl& lie, const SourceText& src) {
   const SourceLoc at = first_lie_loc(lie);
+  const bool constrained = !lie.velocities.empty() || !lie.constraints.empty();
   if (!ast.states.empty())
     throw src.error(ast.states.front().loc,
                     "a Lie-group model has no 'state' statement: its state is the momenta "
@@ -170,7 +172,6 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
     throw src.error(at,
                     "a Lie-group model needs a group (write 'group A = gl(2)' or "
                     "'group g(x, y) = [[...]] at (0, 0)')");
-  const bool constrained = !lie.velocities.empty() || !lie.constraints.empty();
   if (lie.momenta.empty() && lie.velocities.empty())
     throw src.error(lie.group.loc,
                     "a Lie-group model needs its momenta (write 'momenta zeta1, ..., zetaN', "
@@ -204,7 +205,14 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
     throw src.error(lie.group.loc,
                     "a Lie-group model needs its reduced coordinate: write 'reduced q = "
                     "PHI - c' with PHI a homomorphism such as det(A) or an angle");
+}
 
+/// The general part of a Lie-group model, checked by `check` on the reduced state: the
+/// momenta (or the velocities no constraint eliminates) and q, one mode `flow` whose vector
+/// field reduce() derives, and the guards with their mechanical resets left to reduce()
+/// (recorded in `impacts`).
+Model check_general_part(const ModelAst& ast, const LieDecl& lie, const SourceText& src,
+                         bool constrained, std::vector<LieImpact>& impacts) {
   // The general part, checked by `check` on the reduced state (ζ, q).
   ModelAst general = ast;
   general.lie.reset();
@@ -231,7 +239,6 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
   flow.name = {"flow", lie.group.loc};
   for (const auto& s : general.states) flow.flows.push_back({s, zero_at(lie.group.loc)});
   general.modes = {flow};
-  std::vector<LieImpact> impacts;
   for (auto& g : general.guards) {
     if (g.from) throw src.error(g.from->loc, "a Lie-group model has one mode: omit 'from'");
     if (g.to) throw src.error(g.to->loc, "a Lie-group model has one mode: omit 'to'");
@@ -243,32 +250,17 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
     }
     impacts.push_back(imp);
   }
-  Model base = check(general, src);
+  return check(general, src);
+}
 
-  // Scopes: parameters, momenta, q.
-  std::map<std::string, ex> params, names;
-  for (const auto& p : base.params) params[p.name] = p.symbol;
-  names = params;
-  for (std::size_t i = 0; i < base.state.size(); ++i) names[base.state[i]] = base.state_symbols[i];
-  const std::size_t n = constrained ? lie.velocities.size() : lie.momenta.size();
-  const std::size_t n_red = base.state.size() - 1;  // momenta, or unconstrained velocities
-  const std::vector<ex> zeta(base.state_symbols.begin(),
-                             base.state_symbols.begin() + static_cast<long>(n_red));
-  const ex q = base.state_symbols[n_red];
-
-  // Restitution coefficients (parameters only).
-  for (std::size_t k = 0; k < ast.guards.size(); ++k) {
-    const GuardDecl& g = ast.guards[k];
-    if (g.reset.kind == ResetDecl::Kind::Restitution)
-      impacts[k].restitution = detail::convert_expression(
-          src, params, "the restitution coefficient of guard '" + g.name.name + "'",
-          g.reset.coefficient);
-  }
-
-  // The group.
+/// The group of `lie` (gl(N), a matrix parametrisation g(c) at an identity point, or
+/// structure constants), its coordinates' names appended to `coord_names` after checking
+/// they clash with no parameter, momentum, q or the group's name. Throws a located error.
+LieGroup make_group(const LieDecl& lie, const std::map<std::string, ex>& params,
+                    const std::map<std::string, ex>& names, const SourceText& src,
+                    std::vector<std::string>& coord_names) {
   const GroupDecl& gd = lie.group;
   const std::string gname = gd.name.name;
-  std::vector<std::string> coord_names;
   auto declare_coordinate = [&](const std::string& name, SourceLoc loc) {
     if (names.count(name) || name == "pi" || name == gname)
       throw src.error(loc, "the coordinate '" + name +
@@ -335,6 +327,43 @@ LieModel check_lie(const ModelAst& ast, const SourceText& src) {
   } catch (const LieError& e) {
     throw hypothesis_error(src, gd.loc, e);
   }
+  return std::move(*group);
+}
+
+LieModel check_lie(const ModelAst& ast, const SourceText& src) {
+  if (!ast.lie) throw InternalError("check_lie called on a general model");
+  const LieDecl& lie = *ast.lie;
+  check_lie_statements(ast, lie, src);
+  const bool constrained = !lie.velocities.empty() || !lie.constraints.empty();
+  std::vector<LieImpact> impacts;
+  Model base = check_general_part(ast, lie, src, constrained, impacts);
+
+  // Scopes: parameters, momenta, q.
+  std::map<std::string, ex> params, names;
+  for (const auto& p : base.params) params[p.name] = p.symbol;
+  names = params;
+  for (std::size_t i = 0; i < base.state.size(); ++i) names[base.state[i]] = base.state_symbols[i];
+  const std::size_t n = constrained ? lie.velocities.size() : lie.momenta.size();
+  const std::size_t n_red = base.state.size() - 1;  // momenta, or unconstrained velocities
+  const std::vector<ex> zeta(base.state_symbols.begin(),
+                             base.state_symbols.begin() + static_cast<long>(n_red));
+  const ex q = base.state_symbols[n_red];
+
+  // Restitution coefficients (parameters only).
+  for (std::size_t k = 0; k < ast.guards.size(); ++k) {
+    const GuardDecl& g = ast.guards[k];
+    if (g.reset.kind == ResetDecl::Kind::Restitution)
+      impacts[k].restitution = detail::convert_expression(
+          src, params, "the restitution coefficient of guard '" + g.name.name + "'",
+          g.reset.coefficient);
+  }
+
+  // The group.
+  const GroupDecl& gd = lie.group;
+  const std::string gname = gd.name.name;
+  std::vector<std::string> coord_names;
+  std::optional<LieGroup> group;
+  group.emplace(make_group(lie, params, names, src, coord_names));
   const unsigned dim = group->algebra().dim();
   if (n != dim)
     throw src.error(constrained ? lie.velocities_loc : lie.momenta_loc,

@@ -1,3 +1,9 @@
+// The expression DAG (dag.hpp): hash-consed nodes in a canonical order, and its printers.
+//
+// Size: the store, the exact numbers, the three printers (GiNaC input, LaTeX, C with CSE) share
+// the file-local types Node, DagStore and Num; splitting the file would make those part of
+// the library's interface. Sections: numbers, store, shared printing, GiNaC, LaTeX, C.
+
 #include "hybgen/gen/dag.hpp"
 
 #include <ginac/ginac.h>

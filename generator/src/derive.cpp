@@ -1,4 +1,8 @@
 // Stage 3 (derive): Model -> HybridSystem IR. See derive.hpp for the maths.
+//
+// Size: derive_mode, derive_guard (reset, inverse, injectivity on the guard, J) and
+// sample_guard (the numerical checks of the hypotheses) with the exact-zero test and the
+// simplifier they share.
 
 #include "hybgen/gen/derive.hpp"
 
@@ -338,16 +342,18 @@ HybridSystem derive(const Model& m, const SourceText& src) {
 
 namespace {
 
-HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitScope& scope) {
-  HybridSystem sys;
-  sys.model = &m;
-  const auto& X = m.state_symbols;
-  const std::size_t n = X.size();
-  std::vector<ex> all_symbols = X;
-  for (const auto& p : m.params) all_symbols.push_back(p.symbol);
+/// The derivation of one model's parts: what they share, and one method per part. A struct:
+/// its fields are read by every method (the names the derivation's formulas use).
+struct Deriver {
+  const Model& m;                      ///< The checked model.
+  const SourceText& src;               ///< Its text, for located errors.
+  LimitScope& scope;                   ///< The derivation limits and the object being derived.
+  const std::vector<ex>& X;            ///< The state symbols.
+  const std::vector<ex>& all_symbols;  ///< The state symbols and the parameters.
+  std::size_t n = X.size();            ///< The state's dimension.
 
-  // Modes: vector field and divergence.
-  for (const auto& ms : m.modes) {
+  /// Mode `ms`: its vector field (Hamilton's equations for a Hamiltonian) and divergence.
+  IrMode derive_mode(const ModeSpec& ms) const {
     scope.object("the vector field of mode '" + ms.name + "'", ms.loc);
     IrMode mode;
     mode.name = ms.name;
@@ -369,11 +375,73 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
     for (std::size_t i = 0; i < n; ++i) div += mode.flow[i].diff(GiNaC::ex_to<GiNaC::symbol>(X[i]));
     mode.divergence = simplify(div);
     if (is_identically_zero(mode.divergence, all_symbols)) mode.divergence = 0;
-    sys.modes.push_back(std::move(mode));
+    return mode;
   }
 
-  // Guards.
-  for (const auto& gs : m.guards) {
+  /// The elastic or restitution reset of `gs` (surface `surface`, named `where` in messages):
+  /// the momenta's normal component, in the kinetic metric M⁻¹ = ∂²H/∂p∂p, reversed and scaled
+  /// by the restitution coefficient. Needs a natural Hamiltonian and a surface in q only.
+  std::vector<ex> mechanical_reset(const GuardSpec& gs, const ex& surface,
+                                   const std::string& where) const {
+    std::vector<ex> reset;
+    const ModeSpec& ms = m.modes[static_cast<std::size_t>(gs.from)];
+    const ex& H = *ms.hamiltonian;
+    const std::size_t k = ms.momenta.size();
+    std::vector<ex> q, p;
+    for (int i : ms.coordinates) q.push_back(X[static_cast<std::size_t>(i)]);
+    for (int i : ms.momenta) p.push_back(X[static_cast<std::size_t>(i)]);
+    // M⁻¹ = ∂²H/∂p∂p must not depend on p, and H − ½pᵀM⁻¹p must not either.
+    matrix Minv(static_cast<unsigned>(k), static_cast<unsigned>(k));
+    for (std::size_t i = 0; i < k; ++i)
+      for (std::size_t j = 0; j < k; ++j)
+        Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) = simplify(
+            H.diff(GiNaC::ex_to<GiNaC::symbol>(p[i])).diff(GiNaC::ex_to<GiNaC::symbol>(p[j])));
+    ex kinetic = 0;
+    for (std::size_t i = 0; i < k; ++i)
+      for (std::size_t j = 0; j < k; ++j)
+        kinetic += p[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * p[j] / 2;
+    ex potential = simplify(H - kinetic);
+    bool natural = true;
+    for (const auto& pk : p) {
+      for (std::size_t i = 0; i < k * k; ++i)
+        if (!is_identically_zero(Minv.op(i).diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
+          natural = false;
+      if (!is_identically_zero(potential.diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
+        natural = false;
+    }
+    if (!natural)
+      throw src.error(gs.reset_loc,
+                      "an elastic/restitution reset needs a natural Hamiltonian "
+                      "½ pᵀM(q)⁻¹p + V(q) in mode '" +
+                          ms.name + "' (quadratic in the momenta with no linear terms)");
+    for (const auto& pk : p)
+      if (!is_identically_zero(surface.diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
+        throw src.error(gs.surface_loc,
+                        "the surface of " + where +
+                            " depends on the momenta; an elastic/restitution reset needs a "
+                            "surface in the coordinates only");
+    std::vector<ex> ds;
+    for (const auto& qi : q) ds.push_back(surface.diff(GiNaC::ex_to<GiNaC::symbol>(qi)));
+    ex den = 0, vn = 0;
+    for (std::size_t i = 0; i < k; ++i)
+      for (std::size_t j = 0; j < k; ++j) {
+        den += ds[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * ds[j];
+        vn += ds[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * p[j];
+      }
+    if (is_identically_zero(den, all_symbols))
+      throw src.error(gs.surface_loc, "the surface of " + where + " has M⁻¹(ds, ds) ≡ 0");
+    reset = X;
+    for (std::size_t i = 0; i < k; ++i)
+      reset[static_cast<std::size_t>(ms.momenta[i])] =
+          simplify(p[i] - (1 + gs.restitution) * vn / den * ds[i]);
+    return reset;
+  }
+
+  /// Guard `gs` of the model whose modes `sys` holds (warnings are appended to it): surface and
+  /// gradient, reset Δ, its inverse (closed form when Δ is affine in what it changes), its
+  /// injectivity on the guard, and the hybrid Jacobian J (restricted to the surface where s can be
+  /// solved for a state).
+  IrGuard derive_guard(HybridSystem& sys, const GuardSpec& gs) const {
     scope.object("the surface of guard '" + gs.name + "'", gs.surface_loc);
     IrGuard g;
     g.name = gs.name;
@@ -397,59 +465,9 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         for (const auto& c : gs.reset) g.reset.push_back(simplify(c));
         break;
       case ResetDecl::Kind::Elastic:
-      case ResetDecl::Kind::Restitution: {
-        const ModeSpec& ms = m.modes[static_cast<std::size_t>(gs.from)];
-        const ex& H = *ms.hamiltonian;
-        const std::size_t k = ms.momenta.size();
-        std::vector<ex> q, p;
-        for (int i : ms.coordinates) q.push_back(X[static_cast<std::size_t>(i)]);
-        for (int i : ms.momenta) p.push_back(X[static_cast<std::size_t>(i)]);
-        // M⁻¹ = ∂²H/∂p∂p must not depend on p, and H − ½pᵀM⁻¹p must not either.
-        matrix Minv(static_cast<unsigned>(k), static_cast<unsigned>(k));
-        for (std::size_t i = 0; i < k; ++i)
-          for (std::size_t j = 0; j < k; ++j)
-            Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) = simplify(
-                H.diff(GiNaC::ex_to<GiNaC::symbol>(p[i])).diff(GiNaC::ex_to<GiNaC::symbol>(p[j])));
-        ex kinetic = 0;
-        for (std::size_t i = 0; i < k; ++i)
-          for (std::size_t j = 0; j < k; ++j)
-            kinetic += p[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * p[j] / 2;
-        ex potential = simplify(H - kinetic);
-        bool natural = true;
-        for (const auto& pk : p) {
-          for (std::size_t i = 0; i < k * k; ++i)
-            if (!is_identically_zero(Minv.op(i).diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
-              natural = false;
-          if (!is_identically_zero(potential.diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
-            natural = false;
-        }
-        if (!natural)
-          throw src.error(gs.reset_loc,
-                          "an elastic/restitution reset needs a natural Hamiltonian "
-                          "½ pᵀM(q)⁻¹p + V(q) in mode '" +
-                              ms.name + "' (quadratic in the momenta with no linear terms)");
-        for (const auto& pk : p)
-          if (!is_identically_zero(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(pk)), all_symbols))
-            throw src.error(gs.surface_loc,
-                            "the surface of " + where +
-                                " depends on the momenta; an elastic/restitution reset needs a "
-                                "surface in the coordinates only");
-        std::vector<ex> ds;
-        for (const auto& qi : q) ds.push_back(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(qi)));
-        ex den = 0, vn = 0;
-        for (std::size_t i = 0; i < k; ++i)
-          for (std::size_t j = 0; j < k; ++j) {
-            den += ds[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * ds[j];
-            vn += ds[i] * Minv(static_cast<unsigned>(i), static_cast<unsigned>(j)) * p[j];
-          }
-        if (is_identically_zero(den, all_symbols))
-          throw src.error(gs.surface_loc, "the surface of " + where + " has M⁻¹(ds, ds) ≡ 0");
-        g.reset = X;
-        for (std::size_t i = 0; i < k; ++i)
-          g.reset[static_cast<std::size_t>(ms.momenta[i])] =
-              simplify(p[i] - (1 + gs.restitution) * vn / den * ds[i]);
+      case ResetDecl::Kind::Restitution:
+        g.reset = mechanical_reset(gs, g.surface, where);
         break;
-      }
     }
     g.reset_jacobian = jacobian(g.reset, X);
 
@@ -489,7 +507,7 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
         }
       }
       // G = DΔᵀDΔ + σ²∇s∇sᵀ, σ = ‖DΔ‖_F/‖∇s‖: the two terms on one scale.
-      return !singular_at_sampled_points(E, n, all_symbols, [n](const auto& v) {
+      return !singular_at_sampled_points(E, n, all_symbols, [n = n](const auto& v) {
         GiNaC::numeric fd = 0, fg = 0;
         for (std::size_t i = 0; i < n * n; ++i) fd += v[i] * v[i];
         for (std::size_t i = 0; i < n; ++i) fg += v[n * n + i] * v[n * n + i];
@@ -506,7 +524,7 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
       });
     };
     auto singular_everywhere = [&] {
-      return singular_at_sampled_points(g.reset_jacobian, n, all_symbols, [n](const auto& v) {
+      return singular_at_sampled_points(g.reset_jacobian, n, all_symbols, [n = n](const auto& v) {
         matrix D(static_cast<unsigned>(n), static_cast<unsigned>(n));
         for (std::size_t i = 0; i < n * n; ++i)
           D(static_cast<unsigned>(i / n), static_cast<unsigned>(i % n)) = v[i];
@@ -623,8 +641,234 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
       } catch (const std::exception&) {
       }
     }
-    sys.guards.push_back(std::move(g));
+    return g;
   }
+
+  /// The sampled checks of guard `gi` (parameters at their defaults, points inside the domain):
+  /// it fires somewhere, J does not vanish there, the reset does not land on a guard that fires
+  /// at once, and no mass leaves the state space unnoticed. Appends warnings to `sys`; throws
+  /// a located error for a broken hypothesis.
+  void sample_guard(HybridSystem& sys, std::size_t gi, Evaluator& eval,
+                    std::mt19937_64& rng) const {
+    const IrGuard& g = sys.guards[gi];
+    const GuardSpec& gs = m.guards[gi];
+    const std::string where = "guard '" + g.name + "'";
+    const IrMode& before = sys.modes[static_cast<std::size_t>(g.from)];
+    const IrMode& after = sys.modes[static_cast<std::size_t>(g.to)];
+    ex lie = 0;
+    for (std::size_t i = 0; i < n; ++i) lie += g.gradient[i] * before.flow[i];
+    int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0, leaks = 0, wall = 0;
+    std::vector<double> leak_point;
+    // The rate of change of each support condition along the flow of `before`: where the
+    // surface lies on the support's boundary and the guard does not fire, a negative
+    // rate (for ≥ / >; positive for ≤ / <) means the flow leaves the state space there.
+    std::vector<ex> support_rate;
+    std::vector<std::vector<ex>> support_grad;
+    for (const auto& c : m.sim.support) {
+      ex r = 0;
+      support_grad.emplace_back();
+      for (std::size_t i = 0; i < n; ++i) {
+        support_grad.back().push_back(c.expr.diff(GiNaC::ex_to<GiNaC::symbol>(X[i])));
+        r += support_grad.back().back() * before.flow[i];
+      }
+      support_rate.push_back(r);
+    }
+    for (int trial = 0; trial < 400 && crossing < 60; ++trial) {
+      LimitScope::check_time();
+      std::vector<double> x(n);
+      for (std::size_t i = 0; i < n; ++i)
+        x[i] = std::uniform_real_distribution<double>(m.sim.lo[i], m.sim.hi[i])(rng);
+      std::size_t axis = std::uniform_int_distribution<std::size_t>(0, n - 1)(rng);
+      // Scan the axis for a sign change of s, then bisect.
+      const int pieces = 16;
+      double a = m.sim.lo[axis], fa = std::nan("");
+      bool found = false;
+      for (int k = 0; k <= pieces && !found; ++k) {
+        double b = m.sim.lo[axis] + (m.sim.hi[axis] - m.sim.lo[axis]) * k / pieces;
+        x[axis] = b;
+        double fb = eval(g.surface, x);
+        if (fb == 0.0) {  // exactly on the surface (e.g. a surface on the domain's edge)
+          found = true;
+        } else if (k > 0 && std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 &&
+                   (fa < 0) != (fb < 0)) {
+          double lo = a, hi = b, flo = fa;
+          for (int it = 0; it < 60; ++it) {
+            double mid = 0.5 * (lo + hi);
+            x[axis] = mid;
+            double fm = eval(g.surface, x);
+            if ((fm < 0) == (flo < 0))
+              lo = mid, flo = fm;
+            else
+              hi = mid;
+          }
+          x[axis] = 0.5 * (lo + hi);
+          found = true;
+        }
+        a = b;
+        fa = fb;
+      }
+      if (!found) continue;
+      bool inside = true;
+      for (const auto& c : m.sim.support)
+        if (!holds_closure(c, eval(c.expr, x))) inside = false;
+      for (const auto& c : before.where)
+        if (!holds_closure(c, eval(c.expr, x))) inside = false;
+      if (!inside) continue;
+      ++on_surface;
+      double rate = eval(lie, x);
+      if (!(g.direction == Direction::Decreasing ? rate < 0 : rate > 0)) {
+        // The guard does not fire here: does the flow leave the support through S here,
+        // with no other guard of this mode firing at x to catch it?
+        double scale = 1;
+        for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(x[i]));
+        bool caught = false;
+        for (std::size_t hj = 0; hj < sys.guards.size() && !caught; ++hj) {
+          const IrGuard& h = sys.guards[hj];
+          if (hj == gi || h.from != g.from) continue;
+          double gn = 0, r = 0;
+          for (std::size_t i = 0; i < n; ++i) {
+            const double d = eval(h.gradient[i], x);
+            gn += d * d;
+            r += d * eval(before.flow[i], x);
+          }
+          caught = std::fabs(eval(h.surface, x)) <= 1e-9 * std::sqrt(gn) * scale &&
+                   (h.direction == Direction::Decreasing ? r < 0 : r > 0);
+        }
+        for (std::size_t ci = 0; ci < m.sim.support.size() && rate != 0 && !caught; ++ci) {
+          const Condition& c = m.sim.support[ci];
+          double cn = 0;
+          for (std::size_t i = 0; i < n; ++i) {
+            const double d = eval(support_grad[ci][i], x);
+            cn += d * d;
+          }
+          if (!(std::fabs(eval(c.expr, x)) <= 1e-9 * std::sqrt(cn) * scale)) continue;
+          const double out = eval(support_rate[ci], x);
+          if (c.op == "<" || c.op == "<=" ? out > 0 : out < 0) {
+            if (leaks++ == 0) leak_point = x;
+            break;
+          }
+        }
+        continue;
+      }
+      ++crossing;
+      std::vector<double> y(n);
+      for (std::size_t i = 0; i < n; ++i) y[i] = eval(g.reset[i], x);
+      {
+        // A wall: the reset maps the crossing back onto the surface, into the same mode.
+        double scale = 1;
+        for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(y[i]));
+        if (g.to == g.from && std::fabs(eval(g.surface, y)) <= 1e-9 * scale) ++wall;
+      }
+      double J = eval(g.hybrid_jacobian, x);
+      if (std::isfinite(J) && std::fabs(J) < 1e-300) ++jzero;
+      // H.5: does Δ(x) lie on a guard of the target mode that fires at once?
+      for (std::size_t hj = 0; hj < sys.guards.size(); ++hj) {
+        const IrGuard& h = sys.guards[hj];
+        if (h.from != g.to) continue;
+        double sv = eval(h.surface, y);
+        double scale = 1;
+        for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(y[i]));
+        if (!(std::fabs(sv) <= 1e-9 * scale)) continue;
+        double r = 0;
+        for (std::size_t i = 0; i < n; ++i) {
+          r += eval(h.gradient[i], y) * eval(after.flow[i], y);
+        }
+        if (h.direction == Direction::Decreasing ? r < 0 : r > 0) {
+          ++retrigger;
+          break;
+        }
+      }
+    }
+    // Behind a wall: if every sampled crossing is a wall's, states on its far side (where s
+    // has the sign the guard fires into) are never reached from the front; a domain that
+    // holds such states (in the support and the mode's region) is most likely a mistake.
+    // (Not when the flow leaks through the surface: the declared direction is then in doubt,
+    // and with it which side is behind; that warning comes below.)
+    bool other_entry = false;  // another guard's reset leads into this mode
+    for (std::size_t hj = 0; hj < sys.guards.size(); ++hj)
+      if (hj != gi && sys.guards[hj].to == g.from) other_entry = true;
+    if (crossing > 0 && wall == crossing && leaks == 0 && !other_entry) {
+      std::vector<double> behind;
+      for (int trial = 0; trial < 400 && behind.empty(); ++trial) {
+        LimitScope::check_time();
+        std::vector<double> x(n);
+        double scale = 1;
+        for (std::size_t i = 0; i < n; ++i) {
+          x[i] = std::uniform_real_distribution<double>(m.sim.lo[i], m.sim.hi[i])(rng);
+          scale = std::max(scale, std::fabs(x[i]));
+        }
+        const double sv = eval(g.surface, x);
+        if (!(g.direction == Direction::Decreasing ? sv < -1e-9 * scale : sv > 1e-9 * scale))
+          continue;
+        bool inside = true;
+        for (const auto& c : m.sim.support)
+          if (!holds_closure(c, eval(c.expr, x))) inside = false;
+        for (const auto& c : before.where)
+          if (!holds_closure(c, eval(c.expr, x))) inside = false;
+        if (inside) behind = x;
+      }
+      if (!behind.empty()) {
+        const std::string point = point_text(m.state, behind);
+        sys.warnings.push_back(
+            where +
+            " is a wall (its reset maps the surface onto itself), and the domain "
+            "reaches behind it, e.g. (" +
+            point +
+            "): no state there is reached from the "
+            "front of the wall, so mass placed there is not a state of the system; bound the "
+            "domain at the wall or add a `support` relation");
+      }
+    }
+    if (leaks > 0) {
+      const std::string point = point_text(m.state, leak_point);
+      const bool dec = g.direction == Direction::Decreasing;
+      sys.warnings.push_back(
+          where + ": at (" + point + ") and " + std::to_string(leaks - 1) +
+          " more sampled points the flow of mode '" + before.name +
+          "' leaves the support through the surface in the direction the guard does not fire "
+          "(declared " +
+          (dec ? "decreasing" : "increasing") +
+          "): that mass leaves the state space unnoticed; did you mean '" +
+          (dec ? "increasing" : "decreasing") + "'?");
+    }
+    if (on_surface == 0) {
+      sys.warnings.push_back(where +
+                             ": the surface does not meet the simulation domain (with the "
+                             "parameters at their defaults)");
+    } else if (crossing == 0) {
+      sys.warnings.push_back(where +
+                             ": at every sampled point of the surface inside the domain "
+                             "the flow of mode '" +
+                             before.name +
+                             "' crosses it in the "
+                             "other direction, so the guard never fires there");
+    } else {
+      if (jzero == crossing)
+        throw src.error(gs.reset_loc, "the hybrid Jacobian of " + where +
+                                          " is zero at every sampled crossing point");
+      if (retrigger == crossing)
+        throw src.error(gs.reset_loc,
+                        "the reset of " + where +
+                            " lands on a guard surface where the flow triggers that guard "
+                            "again at once (beating: the paper's hypothesis H.5, S ∩ Δ(S) = ∅, "
+                            "fails)");
+      if (retrigger > 0)
+        sys.warnings.push_back(where + ": at " + std::to_string(retrigger) + " of " +
+                               std::to_string(crossing) +
+                               " sampled crossings the reset lands on a guard that fires again "
+                               "at once (H.5)");
+    }
+  }
+};
+
+HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitScope& scope) {
+  HybridSystem sys;
+  sys.model = &m;
+  std::vector<ex> all_symbols = m.state_symbols;
+  for (const auto& p : m.params) all_symbols.push_back(p.symbol);
+  const Deriver d{m, src, scope, m.state_symbols, all_symbols};
+  for (const auto& ms : m.modes) sys.modes.push_back(d.derive_mode(ms));
+  for (const auto& gs : m.guards) sys.guards.push_back(d.derive_guard(sys, gs));
 
   // A reset without an inverse cannot run by characteristics (check_runnable, run.cpp, refuses it
   // there): say so at `check` too when that is the model's method.
@@ -642,216 +886,7 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
     scope.object("the sampled checks of the guards", m.sim.loc);
     Evaluator eval(m);
     std::mt19937_64 rng(12345);
-    for (std::size_t gi = 0; gi < sys.guards.size(); ++gi) {
-      const IrGuard& g = sys.guards[gi];
-      const GuardSpec& gs = m.guards[gi];
-      const std::string where = "guard '" + g.name + "'";
-      const IrMode& before = sys.modes[static_cast<std::size_t>(g.from)];
-      const IrMode& after = sys.modes[static_cast<std::size_t>(g.to)];
-      ex lie = 0;
-      for (std::size_t i = 0; i < n; ++i) lie += g.gradient[i] * before.flow[i];
-      int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0, leaks = 0, wall = 0;
-      std::vector<double> leak_point;
-      // The rate of change of each support condition along the flow of `before`: where the
-      // surface lies on the support's boundary and the guard does not fire, a negative
-      // rate (for ≥ / >; positive for ≤ / <) means the flow leaves the state space there.
-      std::vector<ex> support_rate;
-      std::vector<std::vector<ex>> support_grad;
-      for (const auto& c : m.sim.support) {
-        ex r = 0;
-        support_grad.emplace_back();
-        for (std::size_t i = 0; i < n; ++i) {
-          support_grad.back().push_back(c.expr.diff(GiNaC::ex_to<GiNaC::symbol>(X[i])));
-          r += support_grad.back().back() * before.flow[i];
-        }
-        support_rate.push_back(r);
-      }
-      for (int trial = 0; trial < 400 && crossing < 60; ++trial) {
-        LimitScope::check_time();
-        std::vector<double> x(n);
-        for (std::size_t i = 0; i < n; ++i)
-          x[i] = std::uniform_real_distribution<double>(m.sim.lo[i], m.sim.hi[i])(rng);
-        std::size_t axis = std::uniform_int_distribution<std::size_t>(0, n - 1)(rng);
-        // Scan the axis for a sign change of s, then bisect.
-        const int pieces = 16;
-        double a = m.sim.lo[axis], fa = std::nan("");
-        bool found = false;
-        for (int k = 0; k <= pieces && !found; ++k) {
-          double b = m.sim.lo[axis] + (m.sim.hi[axis] - m.sim.lo[axis]) * k / pieces;
-          x[axis] = b;
-          double fb = eval(g.surface, x);
-          if (fb == 0.0) {  // exactly on the surface (e.g. a surface on the domain's edge)
-            found = true;
-          } else if (k > 0 && std::isfinite(fa) && std::isfinite(fb) && fa != 0.0 &&
-                     (fa < 0) != (fb < 0)) {
-            double lo = a, hi = b, flo = fa;
-            for (int it = 0; it < 60; ++it) {
-              double mid = 0.5 * (lo + hi);
-              x[axis] = mid;
-              double fm = eval(g.surface, x);
-              if ((fm < 0) == (flo < 0))
-                lo = mid, flo = fm;
-              else
-                hi = mid;
-            }
-            x[axis] = 0.5 * (lo + hi);
-            found = true;
-          }
-          a = b;
-          fa = fb;
-        }
-        if (!found) continue;
-        bool inside = true;
-        for (const auto& c : m.sim.support)
-          if (!holds_closure(c, eval(c.expr, x))) inside = false;
-        for (const auto& c : before.where)
-          if (!holds_closure(c, eval(c.expr, x))) inside = false;
-        if (!inside) continue;
-        ++on_surface;
-        double rate = eval(lie, x);
-        if (!(g.direction == Direction::Decreasing ? rate < 0 : rate > 0)) {
-          // The guard does not fire here: does the flow leave the support through S here,
-          // with no other guard of this mode firing at x to catch it?
-          double scale = 1;
-          for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(x[i]));
-          bool caught = false;
-          for (std::size_t hj = 0; hj < sys.guards.size() && !caught; ++hj) {
-            const IrGuard& h = sys.guards[hj];
-            if (hj == gi || h.from != g.from) continue;
-            double gn = 0, r = 0;
-            for (std::size_t i = 0; i < n; ++i) {
-              const double d = eval(h.gradient[i], x);
-              gn += d * d;
-              r += d * eval(before.flow[i], x);
-            }
-            caught = std::fabs(eval(h.surface, x)) <= 1e-9 * std::sqrt(gn) * scale &&
-                     (h.direction == Direction::Decreasing ? r < 0 : r > 0);
-          }
-          for (std::size_t ci = 0; ci < m.sim.support.size() && rate != 0 && !caught; ++ci) {
-            const Condition& c = m.sim.support[ci];
-            double cn = 0;
-            for (std::size_t i = 0; i < n; ++i) {
-              const double d = eval(support_grad[ci][i], x);
-              cn += d * d;
-            }
-            if (!(std::fabs(eval(c.expr, x)) <= 1e-9 * std::sqrt(cn) * scale)) continue;
-            const double out = eval(support_rate[ci], x);
-            if (c.op == "<" || c.op == "<=" ? out > 0 : out < 0) {
-              if (leaks++ == 0) leak_point = x;
-              break;
-            }
-          }
-          continue;
-        }
-        ++crossing;
-        std::vector<double> y(n);
-        for (std::size_t i = 0; i < n; ++i) y[i] = eval(g.reset[i], x);
-        {
-          // A wall: the reset maps the crossing back onto the surface, into the same mode.
-          double scale = 1;
-          for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(y[i]));
-          if (g.to == g.from && std::fabs(eval(g.surface, y)) <= 1e-9 * scale) ++wall;
-        }
-        double J = eval(g.hybrid_jacobian, x);
-        if (std::isfinite(J) && std::fabs(J) < 1e-300) ++jzero;
-        // H.5: does Δ(x) lie on a guard of the target mode that fires at once?
-        for (std::size_t hj = 0; hj < sys.guards.size(); ++hj) {
-          const IrGuard& h = sys.guards[hj];
-          if (h.from != g.to) continue;
-          double sv = eval(h.surface, y);
-          double scale = 1;
-          for (std::size_t i = 0; i < n; ++i) scale = std::max(scale, std::fabs(y[i]));
-          if (!(std::fabs(sv) <= 1e-9 * scale)) continue;
-          double r = 0;
-          for (std::size_t i = 0; i < n; ++i) {
-            r += eval(h.gradient[i], y) * eval(after.flow[i], y);
-          }
-          if (h.direction == Direction::Decreasing ? r < 0 : r > 0) {
-            ++retrigger;
-            break;
-          }
-        }
-      }
-      // Behind a wall: if every sampled crossing is a wall's, states on its far side (where s
-      // has the sign the guard fires into) are never reached from the front; a domain that
-      // holds such states (in the support and the mode's region) is most likely a mistake.
-      // (Not when the flow leaks through the surface: the declared direction is then in doubt,
-      // and with it which side is behind; that warning comes below.)
-      bool other_entry = false;  // another guard's reset leads into this mode
-      for (std::size_t hj = 0; hj < sys.guards.size(); ++hj)
-        if (hj != gi && sys.guards[hj].to == g.from) other_entry = true;
-      if (crossing > 0 && wall == crossing && leaks == 0 && !other_entry) {
-        std::vector<double> behind;
-        for (int trial = 0; trial < 400 && behind.empty(); ++trial) {
-          LimitScope::check_time();
-          std::vector<double> x(n);
-          double scale = 1;
-          for (std::size_t i = 0; i < n; ++i) {
-            x[i] = std::uniform_real_distribution<double>(m.sim.lo[i], m.sim.hi[i])(rng);
-            scale = std::max(scale, std::fabs(x[i]));
-          }
-          const double sv = eval(g.surface, x);
-          if (!(g.direction == Direction::Decreasing ? sv < -1e-9 * scale : sv > 1e-9 * scale))
-            continue;
-          bool inside = true;
-          for (const auto& c : m.sim.support)
-            if (!holds_closure(c, eval(c.expr, x))) inside = false;
-          for (const auto& c : before.where)
-            if (!holds_closure(c, eval(c.expr, x))) inside = false;
-          if (inside) behind = x;
-        }
-        if (!behind.empty()) {
-          const std::string point = point_text(m.state, behind);
-          sys.warnings.push_back(
-              where +
-              " is a wall (its reset maps the surface onto itself), and the domain "
-              "reaches behind it, e.g. (" +
-              point +
-              "): no state there is reached from the "
-              "front of the wall, so mass placed there is not a state of the system; bound the "
-              "domain at the wall or add a `support` relation");
-        }
-      }
-      if (leaks > 0) {
-        const std::string point = point_text(m.state, leak_point);
-        const bool dec = g.direction == Direction::Decreasing;
-        sys.warnings.push_back(
-            where + ": at (" + point + ") and " + std::to_string(leaks - 1) +
-            " more sampled points the flow of mode '" + before.name +
-            "' leaves the support through the surface in the direction the guard does not fire "
-            "(declared " +
-            (dec ? "decreasing" : "increasing") +
-            "): that mass leaves the state space unnoticed; did you mean '" +
-            (dec ? "increasing" : "decreasing") + "'?");
-      }
-      if (on_surface == 0) {
-        sys.warnings.push_back(where +
-                               ": the surface does not meet the simulation domain (with the "
-                               "parameters at their defaults)");
-      } else if (crossing == 0) {
-        sys.warnings.push_back(where +
-                               ": at every sampled point of the surface inside the domain "
-                               "the flow of mode '" +
-                               before.name +
-                               "' crosses it in the "
-                               "other direction, so the guard never fires there");
-      } else {
-        if (jzero == crossing)
-          throw src.error(gs.reset_loc, "the hybrid Jacobian of " + where +
-                                            " is zero at every sampled crossing point");
-        if (retrigger == crossing)
-          throw src.error(gs.reset_loc,
-                          "the reset of " + where +
-                              " lands on a guard surface where the flow triggers that guard "
-                              "again at once (beating: the paper's hypothesis H.5, S ∩ Δ(S) = ∅, "
-                              "fails)");
-        if (retrigger > 0)
-          sys.warnings.push_back(where + ": at " + std::to_string(retrigger) + " of " +
-                                 std::to_string(crossing) +
-                                 " sampled crossings the reset lands on a guard that fires again "
-                                 "at once (H.5)");
-      }
-    }
+    for (std::size_t gi = 0; gi < sys.guards.size(); ++gi) d.sample_guard(sys, gi, eval, rng);
   }
   return sys;
 }

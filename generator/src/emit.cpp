@@ -1,5 +1,8 @@
 // Stage 4 (emit): IR -> kernel header + report, and the derive renderings.
 //
+// Size: the header, report.md and derive's text, LaTeX and JSON forms print through one
+// Printer (one DAG, so one naming of subexpressions); the emitter owns the layout.
+//
 // Builder in the style of CasADi's code generator: separate buffers for the
 // provenance header, the static tables and each kernel, assembled at the end.
 
@@ -237,7 +240,8 @@ class HeaderBuilder {
           arguments() + ") {\n" + body.str() + "    return " + test + ";\n  }\n\n";
     }
     // The modes' regions (`where`), for the forward methods to keep each mode's mass inside
-    // its own region (runtime/include/hybgen/rt/transfer.hpp); only for models that have any.
+    // its own region (runtime/include/hybgen/rt/methods/transfer.hpp); only for models that have
+    // any.
     bool any_region = false;
     for (const auto& md : sys_.modes) any_region = any_region || !md.where.empty();
     if (any_region) {

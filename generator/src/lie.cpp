@@ -2,6 +2,9 @@
 // conventions. Every identity test is exact: expand()/normal() for polynomial
 // and rational data, is_identically_zero (random rational points, evalf for
 // transcendental ones) where the data may contain sin/cos.
+//
+// Size: matrix groups, Lie algebras from brackets, ad*, the Lie–Poisson and Suslov
+// equations and the corollary's momentum jump, each tested against the others.
 
 #include "hybgen/gen/lie.hpp"
 

@@ -16,7 +16,7 @@
 #include <thread>
 
 #include "hybgen/gen/fs.hpp"
-#include "hybgen/rt/npy.hpp"
+#include "hybgen/rt/io/npy.hpp"
 #include "hybgen/rt/settings.hpp"
 #include "support/ball_closed_form.hpp"
 #include "support/shell.hpp"

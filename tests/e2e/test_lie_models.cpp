@@ -13,7 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "hybgen/gen/fs.hpp"
-#include "hybgen/rt/npy.hpp"
+#include "hybgen/rt/io/npy.hpp"
 #include "support/shell.hpp"
 
 namespace {

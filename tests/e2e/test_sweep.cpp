@@ -12,6 +12,7 @@
 #include <string>
 
 #include "hybgen/gen/fs.hpp"
+#include "hybgen/rt/io/npy.hpp"
 #include "support/shell.hpp"
 
 namespace {
@@ -249,6 +250,40 @@ TEST(Sweep, AnInterruptedSweepLeavesTheEarlierOutputsAsTheyWere) {
     const std::string n = e.path().filename().string();
     EXPECT_EQ(n.find("interrupted.partial-"), std::string::npos) << n;
     EXPECT_EQ(n.find("interrupted.old-"), std::string::npos) << n;
+  }
+}
+
+TEST(Sweep, TheThreadCountDoesNotChangeTheDensities) {
+  // The setting `threads` (settings.hpp), swept: the characteristics densities (one
+  // characteristic per node) and the particles' histograms (counter-based streams, one per
+  // particle) are bit-identical on 1 and 2 threads.
+  const fs::path out = kWork / "threads";
+  fs::remove_all(out);
+  const auto r = hybgen(
+      "sweep models/bouncing_ball.model --set method=characteristics,particles "
+      "--set threads=1,2 --set particles=20000 --set grid=21x21 --set t_end=2 "
+      "--set dt=1 --jobs 1 --out '" +
+          out.string() + "'",
+      kWork / "cache_threads");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const json table = read_json(out / "sweep.json");
+  ASSERT_EQ(table["rows"].size(), 4u);  // (characteristics, 1), (characteristics, 2), ...
+  for (std::size_t m = 0; m < 2; ++m) {
+    const std::string one = table["rows"][2 * m]["dir"], two = table["rows"][2 * m + 1]["dir"];
+    EXPECT_EQ(table["rows"][2 * m]["threads"], 1.0);
+    EXPECT_EQ(table["rows"][2 * m + 1]["threads"], 2.0);
+    // The runs had the threads they were given (summary.json records them).
+    EXPECT_EQ(read_json(out / one / "summary.json")["threads"], 1);
+    EXPECT_EQ(read_json(out / two / "summary.json")["threads"], 2);
+    for (const char* frame : {"u_0001.npy", "u_0002.npy"}) {
+      const auto a = hybgen::rt::read_npy((out / one / frame).string());
+      const auto b = hybgen::rt::read_npy((out / two / frame).string());
+      ASSERT_EQ(a.data.size(), b.data.size());
+      double peak = 0;
+      for (double v : a.data) peak = std::max(peak, v);
+      EXPECT_GT(peak, 0.1) << one;
+      EXPECT_EQ(a.data, b.data) << one << " vs " << two << ", " << frame;
+    }
   }
 }
 

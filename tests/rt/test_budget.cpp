@@ -1,4 +1,4 @@
-// Tests of hybgen/rt/budget.hpp: the adaptive mass budget against closed forms — the Zeno
+// Tests of hybgen/rt/methods/budget.hpp: the adaptive mass budget against closed forms — the Zeno
 // mass of the bouncing ball (e < 1), a zero atom (e = 1), an exactly Gaussian spiral, a 1-D
 // two-mode switching system — plus failure propagation, the point cap and speed.
 
@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/budget.hpp"
+#include "hybgen/rt/methods/budget.hpp"
 #include "support/ball_closed_form.hpp"
 #include "support/rt_setup.hpp"
 

@@ -21,7 +21,7 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/methods.hpp"
+#include "hybgen/rt/methods/methods.hpp"
 #include "support/ball_closed_form.hpp"
 
 namespace {

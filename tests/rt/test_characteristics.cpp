@@ -1,4 +1,4 @@
-// Tests of hybgen/rt/characteristics.hpp against closed-form solutions derived by hand
+// Tests of hybgen/rt/methods/characteristics.hpp against closed-form solutions derived by hand
 // (independently of the ODE code) for the bouncing ball, a 1-D linear flow and a 1-D
 // two-mode switching system; mass budgets; failure reporting.
 
@@ -16,7 +16,8 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/mass_budget.hpp"
 #include "support/ball_closed_form.hpp"
 #include "support/rt_setup.hpp"
 

@@ -1,4 +1,4 @@
-// Tests of hybgen/rt/preflight.hpp and of the failure reports of the characteristics:
+// Tests of hybgen/rt/methods/preflight.hpp and of the failure reports of the characteristics:
 // every numerical failure class (docs/hardening.md) provoked on hand-written models (variants of
 // the bouncing ball of bouncing_ball_model.hpp), with the place (guard, mode, state) and the value
 // of the report checked against hand computations.
@@ -14,9 +14,9 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/forward.hpp"
-#include "hybgen/rt/preflight.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/forward.hpp"
+#include "hybgen/rt/methods/preflight.hpp"
 
 namespace {
 

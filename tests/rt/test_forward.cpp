@@ -1,4 +1,4 @@
-// Tests of hybgen/rt/forward.hpp (the forward hybrid flow) against closed forms derived by
+// Tests of hybgen/rt/methods/forward.hpp (the forward hybrid flow) against closed forms derived by
 // hand: the bouncing ball (elastic and e = 0.8 with its Zeno point), an oscillator with
 // direction-filtered guards, a chattering model (event cap), a non-finite vector field, a
 // model leaving its support, and a start on a guard surface.
@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/forward.hpp"
+#include "hybgen/rt/methods/forward.hpp"
 
 namespace {
 

@@ -1,4 +1,4 @@
-// Tests of hybgen/rt/invariant.hpp: a 1-D cyclic hybrid system whose invariant density is
+// Tests of hybgen/rt/methods/invariant.hpp: a 1-D cyclic hybrid system whose invariant density is
 // known in closed form, reproduced by the leading eigenvector of the transfer operator (both
 // schemes).
 
@@ -11,7 +11,7 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/invariant.hpp"
+#include "hybgen/rt/methods/invariant.hpp"
 
 namespace {
 

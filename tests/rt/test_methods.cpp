@@ -1,4 +1,4 @@
-// The runner's method interface (runtime/include/hybgen/rt/methods.hpp): every method on
+// The runner's method interface (runtime/include/hybgen/rt/methods/methods.hpp): every method on
 // the same problem (the paper's bouncing ball on a small grid) returns frames, times and a
 // budget that obey the interface's invariants, and the densities of the four methods agree
 // with the closed form within each method's own accuracy.
@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/methods.hpp"
+#include "hybgen/rt/methods/methods.hpp"
 #include "support/ball_closed_form.hpp"
 
 namespace {

@@ -1,4 +1,4 @@
-// Tests of hybgen/rt/ode.hpp: Dormand–Prince 5(4) with dense output and event location.
+// Tests of hybgen/rt/core/ode.hpp: Dormand–Prince 5(4) with dense output and event location.
 
 #include <gtest/gtest.h>
 
@@ -7,7 +7,7 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/ode.hpp"
+#include "hybgen/rt/core/ode.hpp"
 
 namespace {
 

@@ -23,10 +23,10 @@
 #include <string>
 #include <vector>
 
-#include "hybgen/rt/atomic_file.hpp"
-#include "hybgen/rt/npy.hpp"
-#include "hybgen/rt/png.hpp"
-#include "hybgen/rt/vti.hpp"
+#include "hybgen/rt/io/atomic_file.hpp"
+#include "hybgen/rt/io/npy.hpp"
+#include "hybgen/rt/io/png.hpp"
+#include "hybgen/rt/io/vti.hpp"
 
 namespace fs = std::filesystem;
 using namespace hybgen::rt;

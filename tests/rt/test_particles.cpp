@@ -1,4 +1,4 @@
-// Tests of hybgen/rt/particles.hpp: particle bin masses against the characteristics method
+// Tests of hybgen/rt/methods/particles.hpp: particle bin masses against the characteristics method
 // (an independent method: backward characteristics + adaptive cubature) on the bouncing ball,
 // elastic and with e = 0.8; the Zeno atom against its closed form; the budget identity; the
 // deposit; reproducibility across runs and thread counts; and the power of the statistical
@@ -16,8 +16,8 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/budget.hpp"
-#include "hybgen/rt/particles.hpp"
+#include "hybgen/rt/methods/budget.hpp"
+#include "hybgen/rt/methods/particles.hpp"
 #include "support/ball_closed_form.hpp"
 #include "support/rt_setup.hpp"
 

@@ -1,4 +1,4 @@
-// Progress reporting (runtime/include/hybgen/rt/progress.hpp): silent for short
+// Progress reporting (runtime/include/hybgen/rt/io/progress.hpp): silent for short
 // or quiet runs, a line per 10 % on a non-terminal stderr, from many threads. The time is
 // a fake clock that the tests advance themselves: nothing here sleeps or depends on the
 // machine's speed.
@@ -15,7 +15,7 @@
 #include <string>
 #include <thread>
 
-#include "hybgen/rt/progress.hpp"
+#include "hybgen/rt/io/progress.hpp"
 
 namespace hybgen::rt {
 namespace {

@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/methods.hpp"
+#include "hybgen/rt/methods/methods.hpp"
 #include "hybgen/rt/table_model.hpp"
 
 namespace {

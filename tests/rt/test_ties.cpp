@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "bouncing_ball/bouncing_ball.hpp"
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 #include "support/ball_closed_form.hpp"
 
 namespace {

@@ -1,5 +1,5 @@
-// Tests of hybgen/rt/transfer.hpp: the mass-moving transfer operators (`hat`, `cell`) on the
-// bouncing ball — conservation column by column and step by step (checked against quantities
+// Tests of hybgen/rt/methods/transfer.hpp: the mass-moving transfer operators (`hat`, `cell`) on
+// the bouncing ball — conservation column by column and step by step (checked against quantities
 // computed here, not by the code under test), accuracy against the closed-form elastic
 // density, the restitution case that the withdrawn interpolating scheme blew up, Zeno atoms,
 // the detection of a broken budget, step/time validation and failure reporting.
@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "bouncing_ball_model.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 #include "support/ball_closed_form.hpp"
 #include "support/rt_setup.hpp"
 

@@ -10,7 +10,7 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 
 namespace hybgen::testing {
 

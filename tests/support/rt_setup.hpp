@@ -6,7 +6,7 @@
 #include <chrono>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 
 namespace hybgen::testing {
 

@@ -57,11 +57,11 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/budget.hpp"
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/methods.hpp"
-#include "hybgen/rt/particles.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/budget.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/methods.hpp"
+#include "hybgen/rt/methods/particles.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 
 namespace {
 

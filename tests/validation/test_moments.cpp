@@ -18,8 +18,8 @@
 #include <vector>
 
 #include "filippov/filippov.hpp"
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 #include "sir_3d/sir_3d.hpp"
 
 namespace {

@@ -18,7 +18,7 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 
 namespace {
 

@@ -42,10 +42,10 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/invariant.hpp"
-#include "hybgen/rt/particles.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/invariant.hpp"
+#include "hybgen/rt/methods/particles.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 
 namespace {
 

@@ -49,11 +49,12 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/budget.hpp"
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/methods.hpp"
-#include "hybgen/rt/particles.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/budget.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/mass_budget.hpp"
+#include "hybgen/rt/methods/methods.hpp"
+#include "hybgen/rt/methods/particles.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 
 namespace {
 

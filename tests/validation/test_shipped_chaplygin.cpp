@@ -57,7 +57,7 @@
 #include <vector>
 
 #include "chaplygin/chaplygin.hpp"
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 
 namespace {
 

@@ -56,7 +56,7 @@
 #include <vector>
 
 #include "chaplygin_energy/chaplygin_energy.hpp"
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 
 namespace {
 

@@ -64,7 +64,7 @@
 #include <vector>
 
 #include "gl2/gl2.hpp"
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 
 namespace {
 

@@ -73,7 +73,7 @@
 #include <vector>
 
 #include "heisenberg/heisenberg.hpp"
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 
 namespace {
 

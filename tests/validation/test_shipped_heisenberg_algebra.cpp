@@ -36,7 +36,7 @@
 
 #include "heisenberg/heisenberg.hpp"
 #include "heisenberg_algebra/heisenberg_algebra.hpp"
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 
 namespace {
 

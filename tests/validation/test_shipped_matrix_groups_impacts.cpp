@@ -54,7 +54,7 @@
 #include <string>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 #include "matrix_groups_impacts/matrix_groups_impacts.hpp"
 
 namespace {

@@ -55,7 +55,7 @@
 #include <random>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 #include "sir/sir.hpp"
 
 namespace {

@@ -17,7 +17,7 @@
 #include <cmath>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 
 namespace {
 

@@ -49,9 +49,9 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/particles.hpp"
-#include "hybgen/rt/transfer.hpp"  // detail::trapezoid_weights
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/particles.hpp"
+#include "hybgen/rt/methods/transfer.hpp"  // detail::trapezoid_weights
 
 namespace {
 

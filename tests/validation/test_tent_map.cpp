@@ -45,11 +45,11 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/invariant.hpp"
-#include "hybgen/rt/particles.hpp"
-#include "hybgen/rt/preflight.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/invariant.hpp"
+#include "hybgen/rt/methods/particles.hpp"
+#include "hybgen/rt/methods/preflight.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 
 namespace {
 

@@ -25,8 +25,8 @@
 #include <numbers>
 #include <vector>
 
-#include "hybgen/rt/invariant.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/invariant.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 
 namespace {
 

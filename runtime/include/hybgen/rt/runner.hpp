@@ -13,6 +13,7 @@
 /// the staging directory `hybgen run` gives it, so on any non-zero exit the
 /// previous outputs are untouched and `hybgen run` says so.
 
+#include <omp.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -26,16 +27,16 @@
 #include <string>
 #include <vector>
 
-#include "hybgen/rt/atomic_file.hpp"
-#include "hybgen/rt/characteristics.hpp"
 #include "hybgen/rt/exit_codes.hpp"
-#include "hybgen/rt/methods.hpp"
+#include "hybgen/rt/io/atomic_file.hpp"
+#include "hybgen/rt/io/npy.hpp"
+#include "hybgen/rt/io/png.hpp"
+#include "hybgen/rt/io/progress.hpp"
+#include "hybgen/rt/io/vti.hpp"
+#include "hybgen/rt/methods/methods.hpp"
+#include "hybgen/rt/methods/preflight.hpp"
 #include "hybgen/rt/model.hpp"
-#include "hybgen/rt/npy.hpp"
-#include "hybgen/rt/png.hpp"
-#include "hybgen/rt/preflight.hpp"
 #include "hybgen/rt/settings.hpp"
-#include "hybgen/rt/vti.hpp"
 
 namespace hybgen::rt {
 
@@ -139,6 +140,11 @@ int run_model(const RunConfig& c) {
   constexpr std::size_t N = state_dim_v<M>;
   using Clock = std::chrono::steady_clock;
   const double* par = c.params.data();
+  // Worker threads: the setting when given, else OpenMP's default ($OMP_NUM_THREADS, or one
+  // per core). Particles are the same for any count (counter-based streams); sums over
+  // threads (the budget's cubatures) may differ in the last digits.
+  if (const long long threads = c.settings.integer<"threads">(); threads > 0)
+    omp_set_num_threads(static_cast<int>(threads));
   TensorGrid<N> grid;
   for (std::size_t a = 0; a < N; ++a) grid.axes[a] = c.axes[a];
   const double dt = c.settings.real<"dt">();
@@ -308,6 +314,7 @@ int run_model(const RunConfig& c) {
   for (std::size_t j = 0; j < static_cast<std::size_t>(M::n_param); ++j)
     params[M::param_names[j]] = c.params[j];
   s["parameters"] = params;
+  s["threads"] = omp_get_max_threads();  // the worker threads this run had (setting `threads`)
   s["initial_mass"] = mb.mass0;
   s["mass"] = mb.mass;
   s["outflow"] = mb.outflow;
@@ -331,15 +338,16 @@ int run_model(const RunConfig& c) {
         before += b;
       }
     // The last line repeats the whole time, build included, so that it is seen last.
-    double total = res.solve_s + res.budget_s + output_s;
+    double all_seconds = res.solve_s + res.budget_s + output_s;
     for (const char* key : {"derive", "build"})
-      if (secs.contains(key) && secs[key].is_number()) total += secs[key].template get<double>();
+      if (secs.contains(key) && secs[key].is_number())
+        all_seconds += secs[key].template get<double>();
     char took_buf[96];
     if (secs.contains("build") && secs["build"].is_number())
-      std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all, the build %.2f s)", total,
+      std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all, the build %.2f s)", all_seconds,
                     secs["build"].template get<double>());
     else
-      std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all)", total);
+      std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all)", all_seconds);
     const std::string took = took_buf;
     std::printf("%s: %s on %zu nodes, %zu frame(s): %ssolve %.3f s, budget %.3f s, output %.3f s\n",
                 c.model.c_str(), method.c_str(), n_node, sol.n_time, before.c_str(), res.solve_s,

@@ -86,6 +86,8 @@ inline constexpr std::array kSettings = {
     SettingSpec{"seed", SettingType::integer, 1, "", 0, kMaxExactInteger, false, "", "particles",
                 "random seed (counter-based streams: results do not depend on "
                 "the number of threads)"},
+    SettingSpec{"threads", SettingType::integer, 0, "", 0, 4096, false, "", "all",
+                "worker threads of the runner (0: $OMP_NUM_THREADS, else one per core)"},
     SettingSpec{"max_expr_nodes", SettingType::integer, 200000, "", 100, 1e12, false, "", "derive",
                 "largest derived expression, in tree nodes"},
     SettingSpec{"max_expand_terms", SettingType::real, 1e5, "", 1, 1e300, false, "", "derive",

@@ -64,8 +64,13 @@
 #include <string>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/forward.hpp"
+#include "hybgen/rt/core/geometry.hpp"
+#include "hybgen/rt/core/grid.hpp"
+#include "hybgen/rt/core/names.hpp"
+#include "hybgen/rt/core/ode.hpp"
+#include "hybgen/rt/core/solution.hpp"
+#include "hybgen/rt/io/progress.hpp"
+#include "hybgen/rt/methods/forward.hpp"
 #include "hybgen/rt/model.hpp"
 
 #ifdef _OPENMP

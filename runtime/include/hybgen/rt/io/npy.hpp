@@ -25,7 +25,7 @@
 #include <utility>
 #include <vector>
 
-#include "hybgen/rt/atomic_file.hpp"
+#include "hybgen/rt/io/atomic_file.hpp"
 
 namespace hybgen::rt {
 

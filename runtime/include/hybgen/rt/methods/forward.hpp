@@ -22,7 +22,7 @@
 ///  * `in_support` is checked at step ends (as in the tracer): the first step end outside it
 ///    stops the flow with `left_support` at that time; outputs inside that step are delivered.
 ///  * Grazing: a crossing where the flow is tangent to the guard and the orbit crosses it (the
-///    pre-flight's criterion, `detail::grazing` of characteristics.hpp, with δ = 1e-3·t_end)
+///    pre-flight's criterion, `detail::grazing` of core/geometry.hpp, with δ = 1e-3·t_end)
 ///    ends the flow `failed` with TraceError::grazing at the crossing (state, time, guard).
 ///    The ball's Zeno bounces pass: at |p| ≤ graze_tol·g the orbit does not cross x = 0 over
 ///    ±δ (it would need δ < 2|p|/g).
@@ -60,9 +60,12 @@
 #include <stdexcept>
 #include <string>
 
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/core/geometry.hpp"
+#include "hybgen/rt/core/grid.hpp"
+#include "hybgen/rt/core/names.hpp"
+#include "hybgen/rt/core/ode.hpp"
+#include "hybgen/rt/core/solution.hpp"
 #include "hybgen/rt/model.hpp"
-#include "hybgen/rt/ode.hpp"
 
 namespace hybgen::rt {
 

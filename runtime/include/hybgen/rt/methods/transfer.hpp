@@ -55,6 +55,8 @@
 /// Zeno points: the cell of a Zeno point is re-spread uniformly every step and only its
 /// samples with t_Z ≤ h drain into the atom; t_Z ~ √Δx there, so for small h the mass sits
 /// in that cell as density and the atom lags (tests/rt/test_transfer.cpp: ZenoMassBecomesAnAtom).
+/// Size: the two schemes (hat, cell), the sampling of each cell by the forward flow, the
+/// CSR assembly and the per-column outflow and atom bookkeeping that keep the mass exact.
 
 // GCC 12's flow-sensitive warnings (null-dereference, use-after-free, maybe-uninitialized
 // with AVX-512) misfire inside Eigen's and Spectra's headers after inlining, despite
@@ -83,8 +85,13 @@
 #include <utility>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/forward.hpp"
+#include "hybgen/rt/core/geometry.hpp"
+#include "hybgen/rt/core/grid.hpp"
+#include "hybgen/rt/core/names.hpp"
+#include "hybgen/rt/core/ode.hpp"
+#include "hybgen/rt/core/solution.hpp"
+#include "hybgen/rt/io/progress.hpp"
+#include "hybgen/rt/methods/forward.hpp"
 #include "hybgen/rt/model.hpp"
 
 #ifdef _OPENMP

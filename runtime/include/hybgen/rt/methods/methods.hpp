@@ -29,15 +29,16 @@
 #include <string>
 #include <vector>
 
-#include "hybgen/rt/budget.hpp"
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/io/progress.hpp"
+#include "hybgen/rt/methods/budget.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/mass_budget.hpp"
+#include "hybgen/rt/methods/particles.hpp"
 #include "hybgen/rt/model.hpp"
-#include "hybgen/rt/particles.hpp"
-#include "hybgen/rt/progress.hpp"
 #include "hybgen/rt/settings.hpp"
 
-#include "hybgen/rt/invariant.hpp"
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/invariant.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 
 namespace hybgen::rt {
 

@@ -71,6 +71,8 @@
 /// tests them: within the sum of their estimates it says the budget is closed; beyond, it
 /// is mass no term measures (a reset carrying mass across the box boundary, or an error
 /// the estimates missed).
+/// Size: the adaptive cubatures in space (box mass) and on the faces over time (outflow),
+/// their error estimates and the atom's forward flow share the refinement machinery.
 
 #include <algorithm>
 #include <array>
@@ -85,10 +87,15 @@
 #include <utility>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
-#include "hybgen/rt/forward.hpp"
+#include "hybgen/rt/core/geometry.hpp"
+#include "hybgen/rt/core/grid.hpp"
+#include "hybgen/rt/core/names.hpp"
+#include "hybgen/rt/core/ode.hpp"
+#include "hybgen/rt/core/solution.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/forward.hpp"
+#include "hybgen/rt/methods/mass_budget.hpp"
 #include "hybgen/rt/model.hpp"
-#include "hybgen/rt/ode.hpp"
 
 namespace hybgen::rt {
 

@@ -24,7 +24,7 @@
 #include <string_view>
 #include <vector>
 
-#include "hybgen/rt/atomic_file.hpp"
+#include "hybgen/rt/io/atomic_file.hpp"
 
 namespace hybgen::rt {
 

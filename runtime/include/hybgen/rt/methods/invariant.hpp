@@ -49,7 +49,7 @@
 #include <string>
 #include <vector>
 
-#include "hybgen/rt/transfer.hpp"
+#include "hybgen/rt/methods/transfer.hpp"
 
 namespace hybgen::rt {
 

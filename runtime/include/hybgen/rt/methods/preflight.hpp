@@ -28,12 +28,14 @@
 ///     ill-conditioned and J's denominator ∇s·X vanishes — and that is reported. A tangency the
 ///     orbit does not cross (the bouncing ball's Zeno point (0, 0): x(t) = −g t²/2 ≤ 0 on both
 ///     sides) is no crossing and passes. The criterion is `detail::grazing`
-///     (characteristics.hpp), which the backward tracer and the forward flow apply at every
+///     (core/geometry.hpp), which the backward tracer and the forward flow apply at every
 ///     crossing they meet later, anywhere — this scan sees only the grid edges at t = 0.
 ///
 /// Cost: O(grid nodes · (N + guards)) model evaluations plus a bisection per crossing edge;
 /// OpenMP over the nodes from 2¹⁸ nodes on (one thread below). The failure reported is the one with
 /// the smallest (guard, node) index, so the message does not depend on the number of threads.
+/// Size: one scan per failure class it must catch before the solve (support, resets,
+/// grazing, folds of the reset, Zeno), each with its located message.
 
 #include <algorithm>
 #include <array>
@@ -47,7 +49,7 @@
 #include <utility>
 #include <vector>
 
-#include "hybgen/rt/characteristics.hpp"
+#include "hybgen/rt/methods/characteristics.hpp"
 #include "hybgen/rt/model.hpp"
 
 namespace hybgen::rt {
@@ -107,7 +109,7 @@ inline const char* preflight_error_name(PreflightError e) {
 
 /// Tolerances of the pre-flight scan.
 struct PreflightOptions {
-  /// Grazing when |∇s·X| ≤ graze_tol·|∇s||X| at a crossing (`kGrazeTol`, characteristics.hpp,
+  /// Grazing when |∇s·X| ≤ graze_tol·|∇s||X| at a crossing (`kGrazeTol`, core/geometry.hpp,
   /// shared with the tracers).
   double graze_tol = kGrazeTol;
   /// Δ(x*) is on S_h when |s_h| ≤ surface_tol·|∇s_h|·diam(box): bisection leaves s_g(x*) at
@@ -206,7 +208,7 @@ PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, 
   const double rate = dot<N>(grad.data(), X.data());
   if (!std::isfinite(rate)) return fail(PreflightError::non_finite_flow, rate);
   // Grazing: tangent here, and the orbit crosses S_g in the firing direction (the criterion
-  // the tracers share, characteristics.hpp), followed until it has moved 1e-3·diam each way.
+  // the tracers share, core/geometry.hpp), followed until it has moved 1e-3·diam each way.
   const double ratio = grazing<M>(g, gi.from, x, par, opt.graze_tol,
                                   [diam](double speed) { return 1e-3 * diam / speed; });
   if (ratio >= 0.0) return fail(PreflightError::grazing, ratio);

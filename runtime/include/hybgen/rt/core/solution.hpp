@@ -1,0 +1,168 @@
+#pragma once
+/// \file solution.hpp
+/// What every method returns: densities at points for each mode and output time (Solution),
+/// the failure that stopped a trajectory (TraceError, TraceStatus, TraceFailure, describe),
+/// and the mass budget (MassBudget: mass in the box, outflow, atom, and their error bars).
+
+#include <array>
+#include <cstddef>
+#include <iomanip>
+#include <span>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "hybgen/rt/core/geometry.hpp"
+#include "hybgen/rt/core/names.hpp"
+#include "hybgen/rt/model.hpp"
+
+namespace hybgen::rt {
+
+/// What went wrong on a characteristic.
+enum class TraceError {
+  none,                ///< Nothing.
+  non_finite_flow,     ///< X or div X not finite (ODE could not continue).
+  non_finite_reset,    ///< Δ⁻¹(y*) not finite at a reset image.
+  zero_jacobian,       ///< |J| = 0 or J not finite at a pre-image.
+  inverse_failed,      ///< Newton for Δ⁻¹ did not converge.
+  event_cap,           ///< More than `max_events` resets on one characteristic.
+  branch_cap,          ///< Too many pending reversed-reset branches.
+  step_limit,          ///< ODE `max_steps` exceeded.
+  step_underflow,      ///< ODE step size underflow (singular or stiff flow).
+  non_finite_density,  ///< u0 · weight · exp(−∫div) not finite at a foot point.
+  grazing,             ///< The flow is tangent to the guard where the orbit crosses it.
+};
+
+/// Human-readable name of a `TraceError`.
+inline const char* trace_error_name(TraceError e) {
+  switch (e) {
+    case TraceError::none:
+      return "no error";
+    case TraceError::non_finite_flow:
+      return "non-finite vector field or divergence";
+    case TraceError::non_finite_reset:
+      return "non-finite inverse reset";
+    case TraceError::zero_jacobian:
+      return "zero or non-finite hybrid Jacobian";
+    case TraceError::inverse_failed:
+      return "Newton iteration for the inverse reset did not converge";
+    case TraceError::event_cap:
+      return "too many resets on one characteristic (max_events)";
+    case TraceError::branch_cap:
+      return "too many pending reset branches";
+    case TraceError::step_limit:
+      return "ODE step limit exceeded";
+    case TraceError::step_underflow:
+      return "ODE step size underflow";
+    case TraceError::non_finite_density:
+      return "non-finite density value";
+    case TraceError::grazing:
+      return "grazing: the flow is tangent to the guard at a crossing";
+  }
+  return "?";
+}
+
+/// Outcome of one characteristic: where (mode, guard, backward time τ, state) it failed.
+template <std::size_t N>
+struct TraceStatus {
+  TraceError error = TraceError::none;  ///< What happened.
+  int mode = -1;                        ///< Mode at the failure.
+  int guard = -1;                       ///< Guard involved, or −1.
+  double tau = 0.0;                     ///< Backward time τ of the failure.
+  std::array<double, N> state{};        ///< State at the failure.
+  int events = 0;                       ///< Resets crossed so far.
+  double value = 0.0;                   ///< grazing: |∇s·X|/(|∇s||X|) at `state`; else 0.
+  /// Whether nothing failed.
+  bool ok() const { return error == TraceError::none; }
+};
+
+/// A failed characteristic together with its starting point.
+template <std::size_t N>
+struct TraceFailure {
+  TraceStatus<N> status{};        ///< What failed, where (status.ok() if nothing failed).
+  int start_mode = -1;            ///< Mode of the starting point.
+  std::size_t start_index = 0;    ///< Index of the starting point (grid node / point).
+  std::array<double, N> start{};  ///< Coordinates of the starting point.
+  /// Whether nothing failed.
+  bool ok() const { return status.ok(); }
+};
+
+/// Densities at points for all modes and output times: u[(k·n_mode + m)·n_point + i].
+template <std::size_t N>
+struct Solution {
+  std::size_t n_time = 0;     ///< Number of output times.
+  std::size_t n_mode = 0;     ///< Number of modes.
+  std::size_t n_point = 0;    ///< Number of points (grid nodes, C order).
+  std::vector<double> u;      ///< Values, layout [time][mode][point].
+  TraceFailure<N> failure{};  ///< The failure with the smallest (mode, point) index, if any.
+
+  /// Whether every characteristic succeeded.
+  bool ok() const { return failure.ok(); }
+  /// Flat index of (time k, mode m, point i).
+  std::size_t index(std::size_t k, std::size_t m, std::size_t i) const {
+    return (k * n_mode + m) * n_point + i;
+  }
+  /// u(t_k, mode m, point i).
+  double at(std::size_t k, std::size_t m, std::size_t i) const { return u[index(k, m, i)]; }
+  /// All points of mode m at time k (a C-order grid-shaped array for grid solutions).
+  std::span<const double> slice(std::size_t k, std::size_t m) const {
+    return {u.data() + index(k, m, 0), n_point};
+  }
+};
+
+/// One-line description of a failed characteristic for an error message (exit code 3).
+template <HybridModel M>
+std::string describe(const TraceFailure<state_dim_v<M>>& f) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::ostringstream os;
+  os << std::setprecision(17);
+  auto point = [&os](const std::array<double, N>& x) { write_state<M>(os, x); };
+  const TraceStatus<N>& s = f.status;
+  os << "characteristic from ";
+  point(f.start);
+  os << " in mode '" << mode_name<M>(f.start_mode) << "' failed: " << trace_error_name(s.error);
+  if (s.guard >= 0 && s.guard < M::n_guard) os << " at guard '" << guard_name<M>(s.guard) << "'";
+  os << " at backward time tau = " << s.tau << ", state ";
+  point(s.state);
+  os << ", mode '" << mode_name<M>(s.mode) << "', after " << s.events << " resets";
+  if (s.error == TraceError::grazing) detail::describe_grazing(os, s.value);
+  return os.str();
+}
+
+/// The mass budget over a box: for each output time t_k,
+///   mass[k] = Σ_modes ∫_box u(t_k),  outflow[k] = ∫₀^{t_k} Σ_modes ∮_∂box u X·n_out,
+///   atom[k] = mass0 − mass[k] − outflow[k]  (mass neither in the box nor gone through its
+///   faces: concentrated on atoms such as a Zeno point, or reset out of the box from inside).
+struct MassBudget {
+  std::vector<double> times;    ///< Output times.
+  double mass0 = 0.0;           ///< Σ_modes ∫_box u0.
+  std::vector<double> mass;     ///< Mass in the box at each output time.
+  std::vector<double> outflow;  ///< Net outflow through the box faces during [0, t_k].
+  /// Mass at atoms: measured at Zeno points by `adaptive_mass_budget` (budget.hpp); for the
+  /// fixed-rule budgets below, the remainder mass0 − mass − outflow.
+  std::vector<double> atom;
+  /// Estimated |error| of mass[k] (`adaptive_mass_budget`, budget.hpp); empty for fixed rules.
+  std::vector<double> mass_error;
+  double mass0_error = 0.0;           ///< Estimated |error| of mass0 (adaptive only).
+  std::vector<double> outflow_error;  ///< Estimated |error| of outflow[k] (adaptive only).
+  std::vector<double> atom_error;     ///< Estimated |error| of atom[k] (adaptive only).
+};
+
+/// mass0 − mass[k] − outflow[k] − atom[k]: what no term of the budget accounts for.
+inline std::vector<double> budget_defect(const MassBudget& b) {
+  std::vector<double> d(b.mass.size(), 0.0);
+  for (std::size_t k = 0; k < d.size() && k < b.outflow.size() && k < b.atom.size(); ++k)
+    d[k] = b.mass0 - b.mass[k] - b.outflow[k] - b.atom[k];
+  return d;
+}
+
+/// Estimated |error| of budget_defect(b)[k]: the sum of its terms' estimates.
+inline std::vector<double> budget_defect_error(const MassBudget& b) {
+  std::vector<double> e(b.mass.size(), 0.0);
+  auto at = [](const std::vector<double>& v, std::size_t k) { return k < v.size() ? v[k] : 0.0; };
+  for (std::size_t k = 0; k < e.size(); ++k)
+    e[k] = at(b.mass_error, k) + b.mass0_error + at(b.outflow_error, k) + at(b.atom_error, k);
+  return e;
+}
+
+}  // namespace hybgen::rt
