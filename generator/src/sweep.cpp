@@ -138,6 +138,19 @@ nlohmann::ordered_json table_value(const std::string& value) {
   return value;
 }
 
+/// What a finished point's summary.json says that its "ok" should not hide: its runner's
+/// warnings went to stderr unlabelled (several points run at once).
+std::string point_note(const std::filesystem::path& dir) {
+  try {
+    const nlohmann::json s = nlohmann::json::parse(read_file((dir / "summary.json").string()));
+    if (s.contains("budget") && s["budget"].value("closes", true) == false)
+      return ", but its mass budget does not close (the warning above; column budget_closes)";
+  } catch (const std::exception&) {
+    return ", but its summary.json cannot be read";
+  }
+  return "";
+}
+
 /// One point of a sweep while it runs.
 struct Point {
   std::vector<std::string> sets;  ///< The axes' KEY=VALUE.
@@ -223,6 +236,8 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
     put_last(row, "outflow_error", s["budget"], "outflow_error");
     put_last(row, "unaccounted", s["budget"], "defect");
     put_last(row, "unaccounted_error", s["budget"], "defect_error");
+    if (s["budget"].contains("closes") && s["budget"]["closes"].is_boolean())
+      row["budget_closes"] = s["budget"]["closes"];
   }
   if (s.contains("transfer")) put_number(row, "unaccounted", s["transfer"], "budget_defect");
   if (s.contains("invariant")) {
@@ -344,7 +359,8 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     if (rc > 128) interrupted = rc - 128;
     if (!options.run.quiet && rc <= 128)
       std::cerr << "hybgen: [" << done << "/" << points.size() << "] " << p.label << ": "
-                << (rc == 0 ? std::string("ok") : "failed (exit " + std::to_string(rc) + ")")
+                << (rc == 0 ? "ok" + point_note(staging / p.label)
+                            : "failed (exit " + std::to_string(rc) + ")")
                 << "\n";
   }
   if (!interrupted && interrupt_signal()) interrupted = interrupt_signal();
