@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -45,6 +46,17 @@ bool run_file(const std::string& name, const std::string& ext) {
 }
 
 }  // namespace
+
+bool is_leftover_name(const std::string& entry, const std::string& name) {
+  for (const char* kind : {".partial-", ".old-"}) {
+    const std::string prefix = name + kind;
+    if (entry.size() > prefix.size() && entry.rfind(prefix, 0) == 0 &&
+        std::all_of(entry.begin() + static_cast<long>(prefix.size()), entry.end(),
+                    [](char c) { return std::isdigit(static_cast<unsigned char>(c)) != 0; }))
+      return true;
+  }
+  return false;
+}
 
 const RenameOps& system_renames() {
   static const RenameOps ops{exchange_paths, rename_path};
@@ -137,11 +149,18 @@ OutputTransaction::OutputTransaction(const std::string& out, OutputKind kind) : 
     // Leftovers of runs that were killed (we hold the lock, so nobody else is using them):
     // staging directories are incomplete and go; an old-outputs directory is complete, and
     // if OUT is missing (a run killed between the fallback's two renames) it is OUT again.
+    // Only names this protocol gives (NAME.partial-PID, NAME.old-PID, PID digits) whose contents
+    // are outputs: a user's own `results.old-v1` beside OUT is not ours to touch.
     std::vector<fs::path> leftovers;
     for (const auto& e : fs::directory_iterator(parent_, ec)) {
       const std::string n = e.path().filename().string();
-      if (n.rfind(name + ".partial-", 0) == 0 || n.rfind(name + ".old-", 0) == 0)
-        leftovers.push_back(e.path());
+      if (!is_leftover_name(n, name) || !e.is_directory(ec)) continue;
+      if (const std::string f = foreign_entry(e.path(), kind); !f.empty()) {
+        std::cerr << "hybgen: warning: leaving '" << e.path().string() << "' alone: it holds '" << f
+                  << "', which hybgen did not write\n";
+        continue;
+      }
+      leftovers.push_back(e.path());
     }
     std::sort(leftovers.begin(), leftovers.end());
     for (const auto& p : leftovers) {
@@ -171,7 +190,8 @@ const fs::path& OutputTransaction::stage() {
   old_ = parent_ / (name + ".old-" + tag);
   std::error_code ec;
   fs::remove_all(staging_, ec);
-  fs::create_directory(staging_, ec);
+  if (!ec && !fs::create_directory(staging_, ec) && !ec)
+    ec = std::make_error_code(std::errc::file_exists);
   if (ec)
     throw UsageError("cannot create the staging directory '" + staging_.string() +
                      "': " + ec.message());

@@ -62,11 +62,18 @@ InterruptGuard::InterruptGuard() {
   g_interrupt = 0;
   struct sigaction sa {};
   sa.sa_handler = on_interrupt;
-  sigemptyset(&sa.sa_mask);
+  sa.sa_mask = signal_set();  // one handler at a time: the first signal is the one recorded
+  sa.sa_flags = SA_RESTART;   // a write to stderr is not cut short by an interrupt
   for (std::size_t i = 0; i < kSignals.size(); ++i) {
     ::sigaction(kSignals[i], nullptr, &previous_[i]);
     if (previous_[i].sa_handler != SIG_IGN) ::sigaction(kSignals[i], &sa, nullptr);
   }
+  // Children must be waited for: a SIGCHLD ignored by whoever started hybgen (inherited
+  // across exec) would reap them unseen and make waitid fail.
+  struct sigaction dfl {};
+  dfl.sa_handler = SIG_DFL;
+  sigemptyset(&dfl.sa_mask);
+  ::sigaction(SIGCHLD, &dfl, &previous_child_);
 }
 
 InterruptGuard::~InterruptGuard() {
@@ -76,6 +83,7 @@ InterruptGuard::~InterruptGuard() {
 void InterruptGuard::restore() const {
   for (std::size_t i = 0; i < kSignals.size(); ++i)
     ::sigaction(kSignals[i], &previous_[i], nullptr);
+  ::sigaction(SIGCHLD, &previous_child_, nullptr);
 }
 
 int interrupt_signal() {
@@ -152,6 +160,16 @@ int run_process(const std::string& exe, const std::string& arg, const InterruptG
   const pid_t pid = start_process(exe, arg, guard, env);
   if (pid < 0) return 128 + g_interrupt;
   return wait_process(pid).second;
+}
+
+void stop_processes(const std::vector<pid_t>& pids) noexcept {
+  for (const pid_t pid : pids) ::kill(pid, SIGTERM);
+  for (const pid_t pid : pids) {
+    try {
+      (void)wait_process(pid);
+    } catch (...) {  // already reaped: nothing left to wait for
+    }
+  }
 }
 
 void die_by_signal(int sig) {

@@ -96,15 +96,19 @@ int run_model(const Frontend& fe, const RunOptions& options) {
   } catch (const std::runtime_error& e) {
     throw UsageError(std::string(e.what()) + "; " + tx.unchanged());
   }
-  int rc = run_process(b.executable, config, interrupt_guard);
-  if (rc == 0 && interrupt_signal()) rc = 128 + interrupt_signal();  // asked to stop: no swap
-  if (rc > 128) {
+  // An interrupt is what interrupt_signal() says, not a runner's exit status above 128 (which
+  // is a failure like any other): asked to stop, hybgen does not swap, even after a success.
+  auto stop_if_interrupted = [&tx] {
+    const int sig = interrupt_signal();
+    if (!sig) return;
     tx.abort();
     if (::isatty(STDERR_FILENO)) std::cerr << '\n';  // end a progress bar's line
-    std::cerr << "hybgen: interrupted by signal " << rc - 128 << " (" << ::strsignal(rc - 128)
-              << "); " << tx.unchanged() << "\n";
-    die_by_signal(rc - 128);  // so that a calling shell or script stops too
-  }
+    std::cerr << "hybgen: interrupted by signal " << sig << " (" << ::strsignal(sig) << "); "
+              << tx.unchanged() << "\n";
+    die_by_signal(sig);  // so that a calling shell or script stops too
+  };
+  const int rc = run_process(b.executable, config, interrupt_guard);
+  stop_if_interrupted();
   if (rc != 0) {
     tx.abort();
     std::cerr << "hybgen: the run failed (exit " << rc << "); " << tx.unchanged() << "\n";
@@ -117,6 +121,7 @@ int run_model(const Frontend& fe, const RunOptions& options) {
   } catch (const std::runtime_error& e) {
     throw InternalError(std::string(e.what()) + "; " + tx.unchanged());
   }
+  stop_if_interrupted();
   tx.commit();
   return 0;
 }

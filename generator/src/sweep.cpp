@@ -40,10 +40,18 @@ bool parse_number(const std::string& text, double& value) {
   return ec == std::errc() && p == end && std::isfinite(value);
 }
 
-/// The shortest decimal that reads back as `v` (std::to_chars).
+/// The shortest decimal that reads back as `v` (std::to_chars): a table's numbers, exactly.
 std::string shortest(double v) {
   char buf[64];
   const auto [p, ec] = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, ec == std::errc() ? p : buf);
+}
+
+/// `v` to 15 significant digits, as few as that takes (0.30000000000000004 is 0.3, 2e5 is
+/// 200000): a range's values, which the points then run with exactly as written.
+std::string range_value(double v) {
+  char buf[64];
+  const auto [p, ec] = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 15);
   return std::string(buf, ec == std::errc() ? p : buf);
 }
 
@@ -69,7 +77,7 @@ std::vector<std::string> range_values(const std::string& key, const std::string&
         i + 1 == count && count > 1
             ? b
             : a + (b - a) * static_cast<double>(i) / static_cast<double>(count - 1 + (count == 1));
-    out.push_back(shortest(v));
+    out.push_back(range_value(v));
   }
   return out;
 }
@@ -125,7 +133,7 @@ std::string csv_cell(const nlohmann::ordered_json& v) {
   if (v.is_number_float()) return shortest(v.get<double>());
   if (!v.is_string()) return v.dump();
   const std::string s = v.get<std::string>();
-  if (s.find_first_of(",\"\n") == std::string::npos) return s;
+  if (s.find_first_of(",\"\r\n") == std::string::npos) return s;
   std::string q = "\"";
   for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
   return q + "\"";
@@ -214,7 +222,9 @@ std::string sweep_label(std::size_t index, std::size_t count,
   label.insert(0, width - std::min(width, label.size()), '0');
   for (const auto& kv : point) {
     label += '_';
-    for (char c : kv)
+    // Each KEY=VALUE to 48 characters (a long expression would pass NAME_MAX); the index
+    // keeps labels unique.
+    for (char c : kv.substr(0, 48))
       label += std::isalnum(static_cast<unsigned char>(c)) || std::strchr("._=+-", c) ? c : '_';
   }
   return label;
@@ -339,33 +349,43 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     write_file_atomic(p.config, cfg.dump(2) + "\n");
   }
 
-  // Run `jobs` at a time; each line of progress says which point ended how.
-  std::map<pid_t, std::size_t> running;
+  // Run `jobs` at a time; each line of progress says which point ended how. Whatever ends
+  // this scope early (an exception) stops and reaps the runners still running.
+  struct Running {
+    std::map<pid_t, std::size_t> pids;
+    ~Running() {
+      std::vector<pid_t> left;
+      for (const auto& [pid, point] : pids) left.push_back(pid);
+      stop_processes(left);
+    }
+  } running;
   std::size_t next = 0, done = 0;
   int interrupted = 0;
   while (done < points.size() && !interrupted) {
-    while (running.size() < jobs && next < points.size()) {
+    while (running.pids.size() < jobs && next < points.size()) {
       const pid_t pid =
           start_process(points[next].build.executable, points[next].config, interrupt_guard, env);
       if (pid < 0) break;  // interrupted: start nothing more
-      running[pid] = next++;
+      running.pids[pid] = next++;
     }
-    if (running.empty()) break;
+    if (running.pids.empty()) break;
     const auto [pid, rc] = wait_process();
-    Point& p = points[running.at(pid)];
-    running.erase(pid);
+    const auto it = running.pids.find(pid);
+    if (it == running.pids.end()) continue;  // not one of ours
+    Point& p = points[it->second];
+    running.pids.erase(it);
     p.rc = rc;
     ++done;
-    if (rc > 128) interrupted = rc - 128;
-    if (!options.run.quiet && rc <= 128)
+    interrupted = interrupt_signal();
+    if (!options.run.quiet && !interrupted)
       std::cerr << "hybgen: [" << done << "/" << points.size() << "] " << p.label << ": "
                 << (rc == 0 ? "ok" + point_note(staging / p.label)
                             : "failed (exit " + std::to_string(rc) + ")")
                 << "\n";
   }
-  if (!interrupted && interrupt_signal()) interrupted = interrupt_signal();
+  if (!interrupted) interrupted = interrupt_signal();
   if (interrupted) {
-    while (!running.empty()) running.erase(wait_process().first);  // forwarded the signal too
+    while (!running.pids.empty()) running.pids.erase(wait_process().first);  // signalled too
     tx.abort();
     if (::isatty(STDERR_FILENO)) std::cerr << '\n';
     std::cerr << "hybgen: interrupted by signal " << interrupted << " (" << ::strsignal(interrupted)
@@ -386,17 +406,28 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     }
     row["status"] = p.rc == 0 ? "ok" : "failed";
     row["exit"] = p.rc;
-    if (p.rc == 0) {
-      // The runner's config, rewritten for OUT as `hybgen run` does.
-      nlohmann::json cfg = nlohmann::json::parse(read_file(p.config));
-      cfg["out_dir"] = out + "/" + p.label;
-      write_file_atomic(p.config, cfg.dump(2) + "\n");
-      const nlohmann::json summary =
-          nlohmann::json::parse(read_file((staging / p.label / "summary.json").string()));
-      row.update(sweep_row(summary));
-    } else {
+    int rc = p.rc;
+    if (rc == 0) {
+      try {
+        // The runner's config, rewritten for OUT as `hybgen run` does.
+        nlohmann::json cfg = nlohmann::json::parse(read_file(p.config));
+        cfg["out_dir"] = out + "/" + p.label;
+        write_file_atomic(p.config, cfg.dump(2) + "\n");
+        const nlohmann::json summary =
+            nlohmann::json::parse(read_file((staging / p.label / "summary.json").string()));
+        // A summary quantity named like a swept key keeps both: the summary's as run_KEY.
+        const nlohmann::ordered_json quantities = sweep_row(summary);
+        for (const auto& [k, v] : quantities.items()) row[row.contains(k) ? "run_" + k : k] = v;
+      } catch (const std::exception& e) {
+        std::cerr << "hybgen: sweep point " << p.label << ": " << e.what() << "\n";
+        rc = static_cast<int>(ExitCode::Internal);
+        row["status"] = "failed";
+        row["exit"] = rc;
+      }
+    }
+    if (rc != 0) {
       ++failed;
-      if (!first_failure) first_failure = p.rc;
+      if (!first_failure) first_failure = rc;
       std::error_code ec;
       fs::remove_all(staging / p.label, ec);
     }
@@ -416,6 +447,12 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
       {"model", m0.name}, {"fixed", spec.fixed}, {"axes", axes}, {"rows", rows}};
   write_file_atomic((staging / "sweep.json").string(), table.dump(2) + "\n");
   write_file_atomic((staging / "sweep.csv").string(), sweep_csv(rows));
+  if (const int sig = interrupt_signal()) {  // asked to stop after the last runner: no swap
+    tx.abort();
+    std::cerr << "hybgen: interrupted by signal " << sig << " (" << ::strsignal(sig) << "); "
+              << tx.unchanged() << "\n";
+    die_by_signal(sig);
+  }
   tx.commit();
   if (!options.run.quiet || failed)
     std::cerr << "hybgen: sweep of " << points.size() << " points: " << points.size() - failed

@@ -69,7 +69,7 @@ TEST(Sweep, SixValuesOfEShareOneRunner) {
       cache);
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_EQ(count(r.out, "runner (built in"), 1u) << r.out;
-  EXPECT_EQ(count(r.out, "ok"), 6u) << r.out;
+  EXPECT_EQ(count(r.out, ": ok"), 6u) << r.out;
   std::size_t entries = 0;
   for (const auto& e : fs::directory_iterator(cache)) entries += e.is_directory() ? 1 : 0;
   EXPECT_EQ(entries, 1u);
@@ -237,14 +237,23 @@ TEST(Sweep, AnInterruptedSweepLeavesTheEarlierOutputsAsTheyWere) {
       cache);
   ASSERT_EQ(first.code, 0) << first.out;
   const std::string before = hybgen::gen::read_file((out / "sweep.csv").string());
+  // Stopped once its runners run (their configurations are in the staging directory), not
+  // after a fixed delay: on a loaded machine the derivation and build can take seconds.
+  const std::string staging_glob = (kWork / "interrupted.partial-").string() + "*/*/config.json";
   const std::string cmd =
       "cd '" + kSrc + "' && HYBGEN_CACHE='" + cache.string() + "' '" + kExe +
       "' sweep models/bouncing_ball.model --set e=0.8,0.9 --set method=particles "
-      "--set particles=5e7 --set t_end=1 --out '" +
-      out.string() + "' 2>&1 & pid=$!; sleep 3; kill -TERM $pid; wait $pid; echo \"rc=$?\"";
+      "--set particles=1e7 --set t_end=5 --out '" +
+      out.string() + "' 2>&1 & pid=$!; for i in $(seq 600); do ls " + staging_glob +
+      " >/dev/null 2>&1 && break; sleep 0.05; done; sleep 0.5; start=$(date +%s); "
+      "kill -TERM $pid; wait $pid; echo \"rc=$?\"; echo \"took=$(( $(date +%s) - start ))\"";
   const auto r = hybgen::testing::run_shell(cmd);
   EXPECT_NE(r.out.find("interrupted by signal 15"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("rc=143"), std::string::npos) << r.out;  // 128 + SIGTERM
+  // The runners were stopped, not waited out (each has about 10 s of particles to push).
+  const auto took = r.out.find("took=");
+  ASSERT_NE(took, std::string::npos) << r.out;
+  EXPECT_LE(std::stoi(r.out.substr(took + 5)), 3) << r.out;
   EXPECT_EQ(hybgen::gen::read_file((out / "sweep.csv").string()), before);
   for (const auto& e : fs::directory_iterator(kWork)) {
     const std::string n = e.path().filename().string();

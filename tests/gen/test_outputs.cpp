@@ -218,4 +218,29 @@ TEST(Outputs, TransactionRestoresTheOutputsOfARunKilledMidSwap) {
   EXPECT_FALSE(fs::exists(d / "run.partial-4242"));
 }
 
+TEST(Outputs, LeftoverNamesAreThoseTheProtocolGives) {
+  EXPECT_TRUE(is_leftover_name("run.old-123", "run"));
+  EXPECT_TRUE(is_leftover_name("run.partial-7", "run"));
+  EXPECT_FALSE(is_leftover_name("run.old-v1", "run"));  // a user's backup
+  EXPECT_FALSE(is_leftover_name("run.partial-", "run"));
+  EXPECT_FALSE(is_leftover_name("run.partial-12a", "run"));
+  EXPECT_FALSE(is_leftover_name("runs.old-12", "run"));
+}
+
+TEST(Outputs, AUsersDirectoryBesideOutIsLeftAlone) {
+  // `results.old-v1` is the user's, and `run.old-99` holds a file hybgen did not write: the
+  // transaction neither removes nor restores them.
+  const fs::path d = fresh("beside");
+  put(d / "run.old-v1" / "u_0000.npy", "mine");
+  put(d / "run.old-99" / "notes.txt", "mine too");
+  {
+    OutputTransaction tx((d / "run").string(), OutputKind::Run);
+    put(tx.stage() / "u_0000.npy", "new");
+    tx.commit();
+  }
+  EXPECT_EQ(get(d / "run.old-v1" / "u_0000.npy"), "mine");
+  EXPECT_EQ(get(d / "run.old-99" / "notes.txt"), "mine too");
+  EXPECT_EQ(get(d / "run" / "u_0000.npy"), "new");
+}
+
 }  // namespace

@@ -17,14 +17,16 @@ TEST(Sweep, RangeHasBothEndsAndEqualSteps) {
   const SweepSpec s = parse_sweep({"e=0.5:1.0:6", "t_end=5"});
   ASSERT_EQ(s.axes.size(), 1u);
   EXPECT_EQ(s.axes[0].key, "e");
-  // Written as the shortest decimal that reads back as a + (b − a)·i/(N − 1): what the
-  // point runs with is what its row shows.
-  const std::vector<std::string> want{"0.5", "0.6", "0.7", "0.8", "0.9", "1"};
-  EXPECT_EQ(s.axes[0].values, want);
-  for (std::size_t i = 0; i < want.size(); ++i)
-    EXPECT_EQ(std::strtod(s.axes[0].values[i].c_str(), nullptr),
-              0.5 + 0.5 * static_cast<double>(i) / 5.0)
-        << i;
+  // a + (b − a)·i/(N − 1) to 15 significant digits: what the point runs with is what its
+  // row and directory show.
+  EXPECT_EQ(s.axes[0].values, (std::vector<std::string>{"0.5", "0.6", "0.7", "0.8", "0.9", "1"}));
+  // Without the rounding these would read 0.30000000000000004, 0.7000000000000001 and
+  // 0.7999999999999999, and 2e+05 in scientific notation.
+  EXPECT_EQ(parse_sweep({"e=0.1:1:10"}).axes[0].values,
+            (std::vector<std::string>{"0.1", "0.2", "0.3", "0.4", "0.5", "0.6", "0.7", "0.8", "0.9",
+                                      "1"}));
+  EXPECT_EQ(parse_sweep({"n=1e5:1e6:4"}).axes[0].values,
+            (std::vector<std::string>{"100000", "400000", "700000", "1000000"}));
   EXPECT_EQ(s.fixed, std::vector<std::string>{"t_end=5"});
   // One value, and a descending range.
   EXPECT_EQ(parse_sweep({"e=0.25:9:1"}).axes[0].values, std::vector<std::string>{"0.25"});
@@ -119,7 +121,10 @@ TEST(Sweep, CsvHasEveryColumnAndExactNumbers) {
             "point,e,status,note\n"
             "0,0.1,ok,\n"
             "1,0.3333333333333333,,\"a, \"\"b\"\"\"\n");
-  EXPECT_EQ(std::strtod("0.3333333333333333", nullptr), 1.0 / 3.0);
+  EXPECT_EQ(std::strtod("0.3333333333333333", nullptr), 1.0 / 3.0);  // exact: reads back
+  nlohmann::ordered_json cr = nlohmann::ordered_json::array();
+  cr.push_back({{"note", "a\rb"}});
+  EXPECT_EQ(sweep_csv(cr), "note\n\"a\rb\"\n");
 }
 
 }  // namespace

@@ -53,6 +53,10 @@ enum class OutputKind {
 /// run, any other file than its outputs or an atomic write's temporary), "" if none.
 std::string foreign_entry(const std::filesystem::path& dir, OutputKind kind);
 
+/// Whether `entry` is a name the protocol gives a leftover of OUT = `name`: NAME.partial-PID
+/// or NAME.old-PID with PID all digits.
+bool is_leftover_name(const std::string& entry, const std::string& name);
+
 /// One output directory, staged and then swapped in (the file comment's protocol).
 /// Construction takes the lock and checks OUT; stage() creates the staging directory;
 /// commit() swaps it in. Destroyed without a commit, it removes the staging directory.

@@ -35,6 +35,7 @@ class InterruptGuard {
 
  private:
   std::array<struct sigaction, 3> previous_{};
+  struct sigaction previous_child_ {};
 };
 
 /// The signal that interrupted hybgen while a guard was alive, 0 if none.
@@ -58,6 +59,10 @@ std::pair<pid_t, int> wait_process(pid_t pid = -1);
 /// start_process then wait_process: the child's exit code by the same rule.
 int run_process(const std::string& exe, const std::string& arg, const InterruptGuard& guard,
                 const Environment& env = {});
+
+/// Send SIGTERM to each child of `pids` and wait for it (when a caller unwinds while
+/// children run: none is left running or unreaped). Never throws.
+void stop_processes(const std::vector<pid_t>& pids) noexcept;
 
 /// End hybgen by `sig` itself (default disposition, unblocked): the caller sees a death by
 /// that signal, not an exit (a shell reports 128 + sig).
