@@ -279,6 +279,11 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
                           shell_quote(HYBGEN_RUNTIME_INCLUDE) + " -I" + shell_quote(r.directory) +
                           " " + shell_quote(r.directory + "/main.cpp") + " -o " +
                           shell_quote(tmp_exe) + " " + libs;
+  // Said only when a compile happens (a cache hit says "(cached)" afterwards, run.cpp).
+  if (options.progress)
+    std::fprintf(stderr, "hybgen: compiling the runner of '%s' (%s)...\n", model_name.c_str(),
+                 runner_uses_library(files, options) ? "linking the precompiled runtime"
+                                                     : "the whole runtime inlined");
   if (options.verbose) std::fprintf(stderr, "hybgen: %s\n", cmd.c_str());
   std::string output;
   int status = 0;

@@ -31,7 +31,6 @@ BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, 
   const GeneratedFiles files = emit(file_sys);  // stage 4: IR -> sources
   BuildOptions opt = options;
   opt.progress = !quiet;
-  if (!quiet) std::cerr << "hybgen: building the runner of '" << fe.model.name << "'...\n";
   BuildResult b = build_runner(files, fe.model.name, opt);  // stage 5: sources -> runner
   if (!quiet) {
     char took[48];
