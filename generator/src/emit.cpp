@@ -8,6 +8,7 @@
 
 #include "hybgen/gen/emit.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -129,15 +130,6 @@ bool is_temporary_name(const std::string& n) {
   for (std::size_t j = i; j < n.size(); ++j)
     if (!std::isdigit(static_cast<unsigned char>(n[j]))) return false;
   return true;
-}
-
-/// Every symbol name in e.
-void collect_symbols(const ex& e, std::set<std::string>& out) {
-  if (GiNaC::is_a<GiNaC::symbol>(e)) {
-    out.insert(GiNaC::ex_to<GiNaC::symbol>(e).get_name());
-    return;
-  }
-  for (std::size_t i = 0; i < e.nops(); ++i) collect_symbols(e.op(i), out);
 }
 
 /// The kernel-header builder: one buffer per kernel. A kernel names the state variables
@@ -377,16 +369,17 @@ class HeaderBuilder {
   /// `const double NAME = state[i];` (or `= parameter[j];`) for every state variable and parameter
   /// that `exprs` read, in model order; records that the kernel reads x or par.
   std::string name_values(const std::vector<ex>& exprs, const std::string& indent) {
-    std::set<std::string> used;
-    for (const auto& e : exprs) collect_symbols(e, used);
     std::string out;
-    auto declare = [&](const std::string& sym, bool& flag) {
-      if (!used.count(sym) || !declared_.insert(sym).second) return;
-      out += indent + "const double " + bind_.at(sym) + " = " + source_.at(sym) + ";\n";
+    auto declare = [&](const std::string& name, const ex& sym, bool& flag) {
+      const bool used =
+          std::any_of(exprs.begin(), exprs.end(), [&](const ex& e) { return e.has(sym); });
+      if (!used || !declared_.insert(name).second) return;
+      out += indent + "const double " + bind_.at(name) + " = " + source_.at(name) + ";\n";
       flag = true;
     };
-    for (const auto& st : m_.state) declare(st, uses_x_);
-    for (const auto& p : m_.params) declare(p.name, uses_par_);
+    for (std::size_t i = 0; i < m_.state.size(); ++i)
+      declare(m_.state[i], m_.state_symbols[i], uses_x_);
+    for (const auto& p : m_.params) declare(p.name, p.symbol, uses_par_);
     return out;
   }
 };

@@ -77,6 +77,16 @@ nlohmann::json run_config(const Model& m, const std::string& out_dir,
   return cfg;
 }
 
+void stop_if_interrupted(OutputTransaction& tx) {
+  const int sig = interrupt_signal();
+  if (!sig) return;
+  tx.abort();
+  if (::isatty(STDERR_FILENO)) std::cerr << '\n';  // end a progress bar's line
+  std::cerr << "hybgen: interrupted by signal " << sig << " (" << ::strsignal(sig) << "); "
+            << tx.unchanged() << "\n";
+  die_by_signal(sig);  // so that a calling shell or script stops too
+}
+
 int run_model(const Frontend& fe, const RunOptions& options) {
   check_runnable(fe);
   const Model& m = fe.model;
@@ -96,18 +106,9 @@ int run_model(const Frontend& fe, const RunOptions& options) {
     throw UsageError(std::string(e.what()) + "; " + tx.unchanged());
   }
   // An interrupt is what interrupt_signal() says, not a runner's exit status above 128 (which
-  // is a failure like any other): asked to stop, hybgen does not swap, even after a success.
-  auto stop_if_interrupted = [&tx] {
-    const int sig = interrupt_signal();
-    if (!sig) return;
-    tx.abort();
-    if (::isatty(STDERR_FILENO)) std::cerr << '\n';  // end a progress bar's line
-    std::cerr << "hybgen: interrupted by signal " << sig << " (" << ::strsignal(sig) << "); "
-              << tx.unchanged() << "\n";
-    die_by_signal(sig);  // so that a calling shell or script stops too
-  };
+  // is a failure like any other).
   const int rc = run_process(b.executable, config, interrupt_guard);
-  stop_if_interrupted();
+  stop_if_interrupted(tx);
   if (rc != 0) {
     tx.abort();
     std::cerr << "hybgen: the run failed (exit " << rc << "); " << tx.unchanged() << "\n";
@@ -120,7 +121,7 @@ int run_model(const Frontend& fe, const RunOptions& options) {
   } catch (const std::runtime_error& e) {
     throw InternalError(std::string(e.what()) + "; " + tx.unchanged());
   }
-  stop_if_interrupted();
+  stop_if_interrupted(tx);
   tx.commit();
   return 0;
 }

@@ -2,8 +2,6 @@
 
 #include "hybgen/gen/sweep.hpp"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <charconv>
 #include <cmath>
@@ -70,15 +68,12 @@ std::vector<std::string> range_values(const std::string& key, const std::string&
     throw UsageError("--set " + key + "=" + value + ": more than " +
                      std::to_string(kMaxSweepPoints) + " values");
   const auto count = static_cast<std::size_t>(n);
-  std::vector<std::string> out;
-  for (std::size_t i = 0; i < count; ++i) {
-    // Both ends exactly; the values between by one rounding each.
-    const double v =
-        i + 1 == count && count > 1
-            ? b
-            : a + (b - a) * static_cast<double>(i) / static_cast<double>(count - 1 + (count == 1));
-    out.push_back(range_value(v));
-  }
+  std::vector<std::string> out{range_value(a)};
+  // Both ends exactly; the values between by one rounding each.
+  for (std::size_t i = 1; i + 1 < count; ++i)
+    out.push_back(
+        range_value(a + (b - a) * static_cast<double>(i) / static_cast<double>(count - 1)));
+  if (count > 1) out.push_back(range_value(b));
   return out;
 }
 
@@ -146,28 +141,32 @@ nlohmann::ordered_json table_value(const std::string& value) {
   return value;
 }
 
-/// What a finished point's summary.json says that its "ok" should not hide: its runner's
-/// warnings went to stderr unlabelled (several points run at once).
-std::string point_note(const std::filesystem::path& dir) {
-  try {
-    const nlohmann::json s = nlohmann::json::parse(read_file((dir / "summary.json").string()));
-    if (s.contains("budget") && s["budget"].value("closes", true) == false)
-      return ", but its mass budget does not close (the warning above; column budget_closes)";
-  } catch (const std::exception&) {
-    return ", but its summary.json cannot be read";
-  }
-  return "";
-}
-
 /// One point of a sweep while it runs.
 struct Point {
   std::vector<std::string> sets;  ///< The axes' KEY=VALUE.
   std::string label;              ///< Its directory's name.
   const Frontend* fe = nullptr;   ///< Derived with the fixed and the point's overrides.
-  BuildResult build;              ///< Its runner (the same for every point).
   std::string config;             ///< Its configuration file.
   int rc = -1;                    ///< Exit code (-1 while not run).
+  nlohmann::json summary;         ///< Its summary.json, once it ran.
 };
+
+/// Read the summary.json of point `p`, which its runner wrote into `dir` and ended with exit 0;
+/// a summary that cannot be read makes the point a failure (exit 70, said on stderr). Returns
+/// what its "ok" should not hide: its runner's warnings went to stderr unlabelled (several
+/// points run at once).
+std::string finish_point(Point& p, const std::filesystem::path& dir) {
+  try {
+    p.summary = nlohmann::json::parse(read_file((dir / "summary.json").string()));
+  } catch (const std::exception& e) {
+    std::cerr << "hybgen: sweep point " << p.label << ": " << e.what() << "\n";
+    p.rc = static_cast<int>(ExitCode::Internal);
+    return "";
+  }
+  if (p.summary.contains("budget") && p.summary["budget"].value("closes", true) == false)
+    return ", but its mass budget does not close (the warning above; column budget_closes)";
+  return "";
+}
 
 }  // namespace
 
@@ -318,14 +317,10 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
   const std::string out = options.run.out.empty() ? "out/" + m0.name + "-sweep" : options.run.out;
   OutputTransaction tx(out, OutputKind::Sweep);
 
-  // One runner: the first build compiles (or finds it cached), the others find it cached.
-  for (std::size_t i = 0; i < points.size(); ++i)
-    points[i].build =
-        build_model_runner(*points[i].fe, options.run.build, options.run.quiet || i > 0);
-  for (const auto& p : points)
-    if (p.build.key != points.front().build.key)
-      throw InternalError("sweep point " + p.label + " needs another runner than point " +
-                          points.front().label + " (a swept value changed the generated code)");
+  // One runner for every point: its sources are emitted with the file's parameter values
+  // (build_model_runner), and every --set a point makes is read from its configuration.
+  const BuildResult runner =
+      build_model_runner(*points.front().fe, options.run.build, options.run.quiet);
 
   const std::size_t cores = std::max(1u, std::thread::hardware_concurrency());
   const std::size_t jobs =
@@ -344,7 +339,7 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     fs::create_directory(dir, ec);
     if (ec) throw UsageError("cannot create '" + dir.string() + "': " + ec.message());
     nlohmann::json cfg = run_config(p.fe->model, dir.string(), out + "/" + p.label, true);
-    cfg["seconds"] = {{"derive", p.fe->seconds}, {"build", p.build.seconds}};
+    cfg["seconds"] = {{"derive", p.fe->seconds}, {"build", runner.seconds}};
     p.config = (dir / "config.json").string();
     write_file_atomic(p.config, cfg.dump(2) + "\n");
   }
@@ -360,11 +355,9 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     }
   } running;
   std::size_t next = 0, done = 0;
-  int interrupted = 0;
-  while (done < points.size() && !interrupted) {
+  while (done < points.size()) {
     while (running.pids.size() < jobs && next < points.size()) {
-      const pid_t pid =
-          start_process(points[next].build.executable, points[next].config, interrupt_guard, env);
+      const pid_t pid = start_process(runner.executable, points[next].config, interrupt_guard, env);
       if (pid < 0) break;  // interrupted: start nothing more
       running.pids[pid] = next++;
     }
@@ -376,21 +369,15 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     running.pids.erase(it);
     p.rc = rc;
     ++done;
-    interrupted = interrupt_signal();
-    if (!options.run.quiet && !interrupted)
+    if (interrupt_signal()) break;
+    const std::string note = rc == 0 ? finish_point(p, staging / p.label) : "";
+    if (!options.run.quiet)
       std::cerr << "hybgen: [" << done << "/" << points.size() << "] " << p.label << ": "
-                << (rc == 0 ? "ok" + point_note(staging / p.label)
-                            : "failed (exit " + std::to_string(rc) + ")")
-                << "\n";
+                << (p.rc == 0 ? "ok" + note : "failed (exit " + std::to_string(p.rc) + ")") << "\n";
   }
-  if (!interrupted) interrupted = interrupt_signal();
-  if (interrupted) {
+  if (interrupt_signal()) {
     while (!running.pids.empty()) running.pids.erase(wait_process().first);  // signalled too
-    tx.abort();
-    if (::isatty(STDERR_FILENO)) std::cerr << '\n';
-    std::cerr << "hybgen: interrupted by signal " << interrupted << " (" << ::strsignal(interrupted)
-              << "); " << tx.unchanged() << "\n";
-    die_by_signal(interrupted);
+    stop_if_interrupted(tx);
   }
 
   // The table, from each point's summary.json; a failed point's directory goes (half-written).
@@ -406,24 +393,15 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     }
     row["status"] = p.rc == 0 ? "ok" : "failed";
     row["exit"] = p.rc;
-    int rc = p.rc;
+    const int rc = p.rc;
     if (rc == 0) {
-      try {
-        // The runner's config, rewritten for OUT as `hybgen run` does.
-        nlohmann::json cfg = nlohmann::json::parse(read_file(p.config));
-        cfg["out_dir"] = out + "/" + p.label;
-        write_file_atomic(p.config, cfg.dump(2) + "\n");
-        const nlohmann::json summary =
-            nlohmann::json::parse(read_file((staging / p.label / "summary.json").string()));
-        // A summary quantity named like a swept key keeps both: the summary's as run_KEY.
-        const nlohmann::ordered_json quantities = sweep_row(summary);
-        for (const auto& [k, v] : quantities.items()) row[row.contains(k) ? "run_" + k : k] = v;
-      } catch (const std::exception& e) {
-        std::cerr << "hybgen: sweep point " << p.label << ": " << e.what() << "\n";
-        rc = static_cast<int>(ExitCode::Internal);
-        row["status"] = "failed";
-        row["exit"] = rc;
-      }
+      // The runner's config, rewritten for OUT as `hybgen run` does.
+      nlohmann::json cfg = nlohmann::json::parse(read_file(p.config));
+      cfg["out_dir"] = out + "/" + p.label;
+      write_file_atomic(p.config, cfg.dump(2) + "\n");
+      // A summary quantity named like a swept key keeps both: the summary's as run_KEY.
+      const nlohmann::ordered_json quantities = sweep_row(p.summary);
+      for (const auto& [k, v] : quantities.items()) row[row.contains(k) ? "run_" + k : k] = v;
     }
     if (rc != 0) {
       ++failed;
@@ -447,12 +425,7 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
       {"model", m0.name}, {"fixed", spec.fixed}, {"axes", axes}, {"rows", rows}};
   write_file_atomic((staging / "sweep.json").string(), table.dump(2) + "\n");
   write_file_atomic((staging / "sweep.csv").string(), sweep_csv(rows));
-  if (const int sig = interrupt_signal()) {  // asked to stop after the last runner: no swap
-    tx.abort();
-    std::cerr << "hybgen: interrupted by signal " << sig << " (" << ::strsignal(sig) << "); "
-              << tx.unchanged() << "\n";
-    die_by_signal(sig);
-  }
+  stop_if_interrupted(tx);  // asked to stop after the last runner: no swap
   tx.commit();
   if (!options.run.quiet || failed)
     std::cerr << "hybgen: sweep of " << points.size() << " points: " << points.size() - failed

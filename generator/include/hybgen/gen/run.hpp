@@ -9,6 +9,7 @@
 
 #include "hybgen/gen/build.hpp"
 #include "hybgen/gen/frontend.hpp"
+#include "hybgen/gen/outputs.hpp"
 
 namespace hybgen::gen {
 
@@ -33,6 +34,11 @@ void check_runnable(const Frontend& fe);
 /// up (its messages name it).
 nlohmann::json run_config(const Model& m, const std::string& out_dir,
                           const std::string& final_out_dir, bool quiet);
+
+/// If hybgen has been interrupted (process.hpp), abandon `tx`'s staging directory, say that
+/// the previous outputs are unchanged and end hybgen by the signal; else return. Asked to
+/// stop, hybgen never swaps, even after its runners succeeded.
+void stop_if_interrupted(OutputTransaction& tx);
 
 /// `hybgen run`: build, run into a staging directory, and swap it in on success. Returns
 /// the exit code (the runner's on failure, OUT unchanged); on an interrupt, removes the
