@@ -2,6 +2,8 @@
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(GINAC REQUIRED IMPORTED_TARGET ginac>=1.8)
 find_package(PNG REQUIRED)
+# run.nc (runtime/src/io/netcdf.cpp): NetCDF-4 through Debian's libnetcdf.
+pkg_check_modules(NETCDF REQUIRED IMPORTED_TARGET netcdf>=4.6)
 find_package(OpenMP REQUIRED COMPONENTS CXX)
 find_package(CLI11 REQUIRED)
 find_package(nlohmann_json 3.10 REQUIRED)

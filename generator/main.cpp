@@ -42,21 +42,26 @@ struct Request {
 int cmd_check(const Request& req, bool preflight, const BuildOptions& build, bool quiet) {
   const Frontend fe(SourceText::load(req.path), req.options());
   fe.print_warnings(std::cerr);
-  std::cout << fe.src.path() << ": ok: model '" << fe.model.name << "', " << fe.model.state.size()
-            << " states, " << fe.sys.modes.size() << " modes, " << fe.sys.guards.size()
-            << " guards\n";
+  const auto count = [](std::size_t n, const char* what) {
+    return std::to_string(n) + " " + what + (n == 1 ? "" : "s");
+  };
+  std::cout << fe.src.path() << ": ok: model '" << fe.model.name << "', "
+            << count(fe.model.state.size(), "state") << ", " << count(fe.sys.modes.size(), "mode")
+            << ", " << count(fe.sys.guards.size(), "guard") << "\n";
   if (!preflight) return 0;
   std::cout.flush();
   return run_preflight(fe, build, quiet);
 }
 
 /// `hybgen derive`: the derived equations as text, LaTeX or JSON.
-int cmd_derive(const Request& req, const std::string& format) {
+int cmd_derive(const Request& req, const std::string& format, bool standalone) {
+  if (standalone && format != "latex")
+    throw UsageError("--standalone makes a LaTeX document: use it with --format latex");
   const Frontend fe(SourceText::load(req.path), req.options());
   if (format == "json") {
     std::cout << derive_json(fe.sys).dump(2) << "\n";
   } else if (format == "latex") {
-    std::cout << derive_latex(fe.sys);
+    std::cout << (standalone ? derive_latex_document(fe.sys) : derive_latex(fe.sys));
   } else {
     std::cout << derive_text(fe.sys);
   }
@@ -140,6 +145,10 @@ int main(int argc, char** argv) {
   add_model(derive);
   derive->add_option("--format", format, "text, latex or json")
       ->check(CLI::IsMember({"text", "latex", "json"}));
+  bool standalone = false;
+  derive->add_flag("--standalone", standalone,
+                   "with --format latex: a whole document for pdflatex (default: a fragment to "
+                   "paste, which needs amsmath)");
   auto* generate = app.add_subcommand("generate", "write the kernel header and derivation report");
   add_model(generate);
   generate->add_option("-o,--output", out, "output directory (default: generated/<model>)");
@@ -191,7 +200,7 @@ int main(int argc, char** argv) {
   const Request req{model, sets, unreduced ? ReduceTarget::Unreduced : ReduceTarget::Reduced};
   try {
     if (*check) return cmd_check(req, preflight, bopt, quiet);
-    if (*derive) return cmd_derive(req, format);
+    if (*derive) return cmd_derive(req, format, standalone);
     if (*generate) return cmd_generate(req, out);
     if (*build) return cmd_build(req, bopt);
     if (*run) return cmd_run(req, RunOptions{out, bopt, quiet});

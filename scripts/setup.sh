@@ -11,12 +11,19 @@ case "${1:-}" in
 esac
 cd "$(dirname "$0")/.."
 
+# What hybgen and its runtime build with (every run needs these).
 packages=(build-essential cmake ninja-build pkg-config libginac-dev libcln-dev libeigen3-dev
-          libspectra-dev libgtest-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev libpng-dev
-          libssl-dev
-          clang-format   # scripts/check-format.sh (CI)
-          python3-numpy  # an independent reader of the .npy outputs (tests/rt/test_output.cpp)
-          clang libclang-rt-14-dev)  # clang + compiler-rt: libFuzzer harnesses (fuzz/run.sh)
+          libspectra-dev libcli11-dev nlohmann-json3-dev libpng-dev libssl-dev
+          libnetcdf-dev)  # run.nc (runtime/src/io/netcdf.cpp)
+# What the tests, the benchmarks and CI need besides (--tests).
+if ((${#targets[@]} == 0)); then
+  packages+=(libgtest-dev libbenchmark-dev
+             clang-format                   # scripts/check-format.sh (CI)
+             python3-numpy                  # an independent reader of .npy (tests/rt/test_output.cpp)
+             python3-xarray python3-netcdf4 # an independent reader of run.nc (tests/e2e/test_run_nc.cpp)
+             texlive-latex-base             # pdflatex: derive --format latex --standalone (tests/e2e/test_latex.cpp)
+             clang libclang-rt-14-dev)      # clang + compiler-rt: libFuzzer harnesses (fuzz/run.sh)
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
@@ -30,5 +37,8 @@ fi
 
 BUILD_DIR=${BUILD_DIR:-build}
 WERROR=${HYBGEN_WERROR:-$([[ "${CI:-}" == "true" ]] && echo ON || echo OFF)}
-cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHYBGEN_WERROR="$WERROR" >/dev/null
+# Without --tests the test and benchmark packages may be missing: do not configure them.
+EXTRAS=$( ((${#targets[@]} == 0)) && echo ON || echo OFF)
+cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHYBGEN_WERROR="$WERROR" \
+  -DHYBGEN_BUILD_TESTS="$EXTRAS" -DHYBGEN_BUILD_BENCH="$EXTRAS" >/dev/null
 cmake --build "$BUILD_DIR" -j"$(nproc)" "${targets[@]}"

@@ -28,11 +28,23 @@
 #ifndef HYBGEN_RUNTIME_LIBRARY
 #error "HYBGEN_RUNTIME_LIBRARY (the path of hybgen::runner) must be defined by the build"
 #endif
+#ifndef HYBGEN_IO_LIBRARY
+#error "HYBGEN_IO_LIBRARY (the path of hybgen::io) must be defined by the build"
+#endif
+#ifndef HYBGEN_INSTALL_BINDIR
+#define HYBGEN_INSTALL_BINDIR "bin"
+#endif
+#ifndef HYBGEN_INSTALL_INCLUDEDIR
+#define HYBGEN_INSTALL_INCLUDEDIR "include"
+#endif
+#ifndef HYBGEN_INSTALL_LIBDIR
+#define HYBGEN_INSTALL_LIBDIR "lib"
+#endif
 #ifndef HYBGEN_CXX_COMPILER
 #define HYBGEN_CXX_COMPILER "c++"
 #endif
 #ifndef HYBGEN_RUNNER_LIBS
-#define HYBGEN_RUNNER_LIBS "-lpng"
+#define HYBGEN_RUNNER_LIBS "-lnetcdf -lpng"
 #endif
 #ifndef HYBGEN_RUNNER_INCLUDES
 #define HYBGEN_RUNNER_INCLUDES ""
@@ -110,27 +122,61 @@ std::string runner_target() {
 
 namespace {
 
+/// Where the runtime's headers and libraries are (RuntimeLocation).
+struct RuntimeLocation {
+  std::string include;         ///< The directory holding hybgen/rt/.
+  std::string runner_library;  ///< libhybgen_runner.a (hybgen::runner).
+  std::string io_library;      ///< libhybgen_io.a (hybgen::io).
+};
+
+/// Beside an installed hybgen (PREFIX/BINDIR/hybgen finds PREFIX/INCLUDEDIR/hybgen/rt and
+/// PREFIX/LIBDIR/libhybgen_*.a, the layout cmake/HybgenInstall.cmake installs), else the
+/// build tree hybgen was built in: `hybgen build` works from any directory either way.
+const RuntimeLocation& runtime_location() {
+  static const RuntimeLocation where = [] {
+    std::error_code ec;
+    const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+    if (!ec) {
+      fs::path prefix = exe.parent_path();
+      for (const auto& part : fs::path(HYBGEN_INSTALL_BINDIR)) {
+        (void)part;
+        prefix = prefix.parent_path();
+      }
+      const RuntimeLocation installed{
+          (prefix / HYBGEN_INSTALL_INCLUDEDIR).string(),
+          (prefix / HYBGEN_INSTALL_LIBDIR / "libhybgen_runner.a").string(),
+          (prefix / HYBGEN_INSTALL_LIBDIR / "libhybgen_io.a").string()};
+      if (fs::exists(fs::path(installed.include) / "hybgen/rt/runner.hpp") &&
+          fs::exists(installed.runner_library) && fs::exists(installed.io_library))
+        return installed;
+    }
+    return RuntimeLocation{HYBGEN_RUNTIME_INCLUDE, HYBGEN_RUNTIME_LIBRARY, HYBGEN_IO_LIBRARY};
+  }();
+  return where;
+}
+
 /// Hash of every runtime header (paths relative to the include root + content) and, when the
 /// runner links it, of the precompiled runtime library (a runner with the runtime inlined
 /// does not change with it).
 std::string runtime_fingerprint(bool library) {
   std::vector<std::string> files;
-  for (const auto& e : fs::recursive_directory_iterator(HYBGEN_RUNTIME_INCLUDE))
+  const RuntimeLocation& rt = runtime_location();
+  const fs::path rt_include = fs::path(rt.include) / "hybgen" / "rt";
+  for (const auto& e : fs::recursive_directory_iterator(rt_include))
     if (e.is_regular_file()) files.push_back(e.path().string());
   std::sort(files.begin(), files.end());
   std::string all;
   for (const auto& f : files) {
-    all += fs::relative(f, HYBGEN_RUNTIME_INCLUDE).string() + '\n';
+    all += fs::relative(f, rt_include).string() + '\n';
     all += sha256_hex(read_file(f)) + '\n';
   }
-  if (library) {
-    try {
-      all += "library\n" + sha256_hex(read_file(HYBGEN_RUNTIME_LIBRARY)) + '\n';
-    } catch (const std::exception& e) {
-      throw BuildError(std::string("the runtime library is missing (build the target "
-                                   "hybgen_runner): ") +
-                       e.what());
-    }
+  try {
+    if (library) all += "library\n" + sha256_hex(read_file(rt.runner_library)) + '\n';
+    all += "writers\n" + sha256_hex(read_file(rt.io_library)) + '\n';
+  } catch (const std::exception& e) {
+    throw BuildError(std::string("the runtime library is missing (build the targets "
+                                 "hybgen_runner and hybgen_io): ") +
+                     e.what());
   }
   return sha256_hex(all);
 }
@@ -233,7 +279,8 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
   const std::string main_src = runner_source(files, model_name, library);
   const std::string flags = runner_flags(options.werror);
   const std::string libs =
-      (library ? shell_quote(HYBGEN_RUNTIME_LIBRARY) + " " : std::string()) + HYBGEN_RUNNER_LIBS;
+      (library ? shell_quote(runtime_location().runner_library) + " " : std::string()) +
+      shell_quote(runtime_location().io_library) + " " + HYBGEN_RUNNER_LIBS;
   const std::string key =
       sha256_hex(std::string(generator_version()) + '\n' + files.header + '\n' + main_src + '\n' +
                  runtime_fingerprint(library) + '\n' + compiler_identity() + '\n' +
@@ -276,9 +323,9 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
   const std::string tmp_exe = r.executable + ".tmp." + tag;
   const std::string log = r.directory + "/build.log";
   const std::string cmd = shell_quote(runner_compiler()) + " " + flags + " -I" +
-                          shell_quote(HYBGEN_RUNTIME_INCLUDE) + " -I" + shell_quote(r.directory) +
-                          " " + shell_quote(r.directory + "/main.cpp") + " -o " +
-                          shell_quote(tmp_exe) + " " + libs;
+                          shell_quote(runtime_location().include) + " -I" +
+                          shell_quote(r.directory) + " " + shell_quote(r.directory + "/main.cpp") +
+                          " -o " + shell_quote(tmp_exe) + " " + libs;
   // Said only when a compile happens (a cache hit says "(cached)" afterwards, run.cpp).
   if (options.progress)
     std::fprintf(stderr, "hybgen: compiling the runner of '%s' (%s)...\n", model_name.c_str(),

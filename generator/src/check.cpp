@@ -20,6 +20,7 @@
 
 #include "hybgen/gen/hash.hpp"
 #include "hybgen/gen/limits.hpp"
+#include "hybgen/gen/tex.hpp"
 
 namespace hybgen::gen {
 
@@ -639,25 +640,10 @@ struct Checker {
     }
   }
 
-  /// TeX names for Greek-letter symbols.
+  /// TeX names of the states and parameters (tex.hpp).
   void tex_names() {
-    static const std::set<std::string> greek = {
-        "alpha",  "beta",  "gamma",  "delta", "epsilon", "zeta",  "eta",   "theta",
-        "iota",   "kappa", "lambda", "mu",    "nu",      "xi",    "rho",   "sigma",
-        "tau",    "phi",   "chi",    "psi",   "omega",   "Gamma", "Delta", "Theta",
-        "Lambda", "Xi",    "Pi",     "Sigma", "Phi",     "Psi",   "Omega"};
-    auto texname = [&](const std::string& nm) {
-      // theta0 -> \theta_{0}; zeta1 -> \zeta_{1}
-      std::size_t k = nm.size();
-      while (k > 0 && std::isdigit(static_cast<unsigned char>(nm[k - 1]))) --k;
-      std::string base = nm.substr(0, k), sub = nm.substr(k);
-      std::string t = greek.count(base) ? "\\" + base : base;
-      if (!greek.count(base) && base.size() > 1) t = "\\mathrm{" + base + "}";
-      if (!sub.empty()) t += "_{" + sub + "}";
-      return t;
-    };
-    for (const auto& s : m.state) m.tex[s] = texname(s);
-    for (const auto& p : m.params) m.tex[p.name] = texname(p.name);
+    for (const auto& s : m.state) m.tex[s] = tex_identifier(s);
+    for (const auto& p : m.params) m.tex[p.name] = tex_identifier(p.name);
   }
 
   /// Declare a state or parameter name (they share a namespace): refuse a function name, a

@@ -19,6 +19,7 @@
 #include "hybgen/gen/dag.hpp"
 #include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/fs.hpp"
+#include "hybgen/gen/tex.hpp"
 
 #ifndef HYBGEN_VERSION
 #define HYBGEN_VERSION "0.0.0"
@@ -384,18 +385,6 @@ class HeaderBuilder {
   }
 };
 
-/// A name inside \\mathrm{}: underscores escaped.
-std::string tex_name(const std::string& name) {
-  std::string out;
-  for (char c : name) {
-    if (c == '_')
-      out += "\\_";
-    else
-      out += c;
-  }
-  return "\\mathrm{" + out + "}";
-}
-
 /// |J| in LaTeX: a number is printed as its absolute value.
 std::string abs_latex(Printer& pr, const ex& e) {
   if (GiNaC::is_a<GiNaC::numeric>(e)) return pr.latex(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)));
@@ -429,8 +418,11 @@ std::string pde_latex(const HybridSystem& sys, Printer& pr, const IrMode& md,
   std::string s = "\\frac{\\partial " + u + "}{\\partial t}";
   for (std::size_t i = 0; i < m.state.size(); ++i) {
     if (md.flow[i].is_zero()) continue;
-    s += pr.signed_term(md.flow[i]) + "\\,\\frac{\\partial " + u + "}{\\partial " +
-         m.tex.at(m.state[i]) + "}";
+    // A coefficient ±1 is a sign only (not "+ 1 ∂u/∂x").
+    const std::string coefficient = md.flow[i].is_equal(1)    ? " + "
+                                    : md.flow[i].is_equal(-1) ? " - "
+                                                              : pr.signed_term(md.flow[i]) + "\\,";
+    s += coefficient + "\\frac{\\partial " + u + "}{\\partial " + m.tex.at(m.state[i]) + "}";
   }
   if (md.divergence.is_zero()) return s + " = 0";
   // −div·u, with the sign folded into a single term when div is not a sum.
@@ -535,14 +527,14 @@ void reduction_latex(std::ostream& os, const Model& m, Printer& pr) {
     os << (i + 1 < n ? " \\\\\n" : "\n");
   }
   os << "  \\end{pmatrix}, \\qquad \\dot\\zeta = "
-        "\\mathrm{ad}^*_{\\partial h/\\partial\\zeta}\\,\\zeta, \\qquad \\dot "
-     << q << " = " << pr.latex(r.q_dot) << "\n\\]\n";
+        "\\mathrm{ad}^*_{\\partial h/\\partial\\zeta}\\,\\zeta, \\qquad "
+     << tex_dot(q) << " = " << pr.latex(r.q_dot) << "\n\\]\n";
   os << "\\[\n  " << q << " = " << pr.latex(r.phi)
      << minus_level(
             r.level, [&](const ex& e) { return pr.latex(e); }, "\\left(", "\\right)")
      << ", \\qquad \\mathfrak k = \\ker d\\phi_e,\\ d\\phi_e = " << tuple_latex(pr, r.dphi_e);
   for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
-    os << ", \\qquad \\Delta\\zeta_{" << tex_name(m.guards[k].name)
+    os << ", \\qquad \\Delta\\zeta_{" << tex_label(m.guards[k].name)
        << "} = " << tuple_latex(pr, r.momentum_jumps[k]);
   os << "\n\\]\n";
 }
@@ -753,33 +745,41 @@ std::string derive_latex(const HybridSystem& sys) {
   std::ostringstream os;
   const bool multi = sys.modes.size() > 1;
   os << "% hybgen " << generator_version() << ": hybrid Frobenius--Perron PDE of '" << m.name
-     << "'\n";
+     << "' (needs amsmath)\n";
   if (m.reduction) reduction_latex(os, m, pr);
+  // Each mode's field, one line per state (its own derivative), and its divergence.
   for (const auto& md : sys.modes) {
-    os << "% mode " << md.name << "\n\\[\n  \\dot x = " << tuple_latex(pr, md.flow)
-       << ", \\qquad \\operatorname{div}_\\mu X = " << pr.latex(md.divergence) << "\n\\]\n";
+    os << "\\[\n  \\text{mode } " << tex_label(md.name) << ":\\qquad\n  \\begin{aligned}\n";
+    for (std::size_t i = 0; i < m.state.size(); ++i)
+      os << "    " << tex_dot(m.tex.at(m.state[i])) << " &= " << pr.latex(md.flow[i]) << ", \\\\\n";
+    os << "    \\operatorname{div}_\\mu X &= " << pr.latex(md.divergence)
+       << "\n  \\end{aligned}\n\\]\n";
   }
+  // Each guard: its surface, its reset (and inverse) and the hybrid Jacobian.
   for (const auto& g : sys.guards) {
-    os << "% guard " << g.name << "\n\\[\n  \\mathcal S_{" << tex_name(g.name) << "} = \\{"
-       << pr.latex(g.surface) << " = 0\\},\\quad \\Delta" << tuple_latex(pr, m.state_symbols)
-       << " = " << tuple_latex(pr, g.reset);
+    os << "\\[\n  \\text{guard } " << tex_label(g.name) << "\\ ("
+       << tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) << " \\to "
+       << tex_label(sys.modes[static_cast<std::size_t>(g.to)].name)
+       << "):\\qquad\n  \\begin{aligned}\n    \\mathcal S_{" << tex_label(g.name) << "} &= \\{"
+       << pr.latex(g.surface) << " = 0\\}, \\\\\n    \\Delta" << tuple_latex(pr, m.state_symbols)
+       << " &= " << tuple_latex(pr, g.reset) << ", \\\\\n";
     if (g.has_inverse)
-      os << ",\\quad \\Delta^{-1}" << tuple_latex(pr, m.state_symbols) << " = "
-         << tuple_latex(pr, g.reset_inverse);
-    os << ",\\quad \\mathcal J^X_\\mu(\\Delta) = " << pr.latex(g.hybrid_jacobian_on_surface)
-       << "\n\\]\n";
+      os << "    \\Delta^{-1}" << tuple_latex(pr, m.state_symbols)
+         << " &= " << tuple_latex(pr, g.reset_inverse) << ", \\\\\n";
+    os << "    \\mathcal J^X_\\mu(\\Delta) &= " << pr.latex(g.hybrid_jacobian_on_surface)
+       << "\n  \\end{aligned}\n\\]\n";
   }
   os << "\\[\n\\begin{cases}\n";
   for (const auto& md : sys.modes) {
-    std::string u = multi ? "u_{\\mathrm{" + md.name + "}}" : "u";
+    std::string u = multi ? "u_{" + tex_label(md.name) + "}" : "u";
     os << "  " << pde_latex(sys, pr, md, u) << ", & x \\notin \\Delta(\\mathcal S); \\\\[1ex]\n";
   }
   for (std::size_t k = 0; k < sys.guards.size(); ++k) {
     const auto& g = sys.guards[k];
     std::string uf =
-        multi ? "u_{" + tex_name(sys.modes[static_cast<std::size_t>(g.from)].name) + "}" : "u";
+        multi ? "u_{" + tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) + "}" : "u";
     std::string ut =
-        multi ? "u_{" + tex_name(sys.modes[static_cast<std::size_t>(g.to)].name) + "}" : "u";
+        multi ? "u_{" + tex_label(sys.modes[static_cast<std::size_t>(g.to)].name) + "}" : "u";
     std::string args = state_args_latex(m);
     os << "  " << ut << "(t^+" << args << ") = ";
     if (g.has_inverse) {
@@ -794,10 +794,33 @@ std::string derive_latex(const HybridSystem& sys) {
       os << "\\dfrac{" << uf
          << "(t^-, \\Delta^{-1}(x))}{\\left|\\mathcal J(\\Delta^{-1}(x))\\right|}";
     }
-    os << ", & x \\in \\Delta(\\mathcal S_{" << tex_name(g.name) << "})"
+    os << ", & x \\in \\Delta(\\mathcal S_{" << tex_label(g.name) << "})"
        << (k + 1 < sys.guards.size() ? ";\\\\[1ex]" : ".") << "\n";
   }
   os << "\\end{cases}\n\\]\n";
+  return os.str();
+}
+
+std::string derive_latex_document(const HybridSystem& sys) {
+  const Model& m = *sys.model;
+  Printer pr(m);
+  std::string name;
+  for (char c : m.name) name += c == '_' ? std::string("\\_") : std::string(1, c);
+  std::ostringstream os;
+  os << "% hybgen " << generator_version() << ": pdflatex this file\n"
+     << "\\documentclass[11pt]{article}\n\\usepackage[margin=2cm]{geometry}\n"
+     << "\\usepackage{amsmath,amssymb}\n\\allowdisplaybreaks\n\\begin{document}\n"
+     << "\\section*{The hybrid Frobenius--Perron equation of \\texttt{" << name << "}}\n"
+     << "State $" << tuple_latex(pr, m.state_symbols) << "$";
+  if (!m.params.empty()) {
+    os << ", parameters ";
+    for (std::size_t j = 0; j < m.params.size(); ++j)
+      os << (j ? ", " : "") << "$" << m.tex.at(m.params[j].name) << " = "
+         << pr.latex(m.params[j].value) << "$";
+  }
+  os << ". The density $u$ is with respect to the Lebesgue measure $\\mu$ in these "
+        "coordinates.\n\n"
+     << derive_latex(sys) << "\\end{document}\n";
   return os.str();
 }
 

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "hybgen/gen/errors.hpp"
+#include "hybgen/rt/io/run_files.hpp"
 
 namespace hybgen::gen {
 
@@ -41,8 +42,7 @@ void sync_directory(const fs::path& dir) {
 
 /// Whether `name` (with extension `ext`) is a file a run writes, or an atomic write's temporary.
 bool run_file(const std::string& name, const std::string& ext) {
-  return ext == ".npy" || ext == ".png" || ext == ".vti" || ext == ".json" ||
-         name.find(".tmp.") != std::string::npos;
+  return rt::is_run_file_extension(ext) || name.find(".tmp.") != std::string::npos;
 }
 
 }  // namespace

@@ -656,19 +656,38 @@ class Parser {
     sim.initial.push_back(std::move(initial));
   }
 
-  // sim_item := IDENT ( expr | IDENT )
+  /// Whether `t` continues an expression after an operand (an operator or '(').
+  static bool continues_expr(const Token& t) {
+    return t.kind == Tok::Punct &&
+           (t.text == "+" || t.text == "-" || t.text == "*" || t.text == "/" || t.text == "^" ||
+            t.text == "**" || t.text == "(");
+  }
+
+  // sim_item := IDENT ( expr | IDENT | IDENT '+' IDENT { '+' IDENT } )
   // A value that is one identifier not followed by an operator or '(' is a
-  // word (and also kept as a Symbol expression); anything else an expression.
+  // word (and also kept as a Symbol expression); identifiers joined by '+' and
+  // followed by no operator are a word list (`outputs netcdf + png`), kept as
+  // "netcdf+png"; anything else an expression.
   void parse_setting(SimulationDecl& sim) {
     Setting setting;
     setting.key = expect_name("a setting name");
     const Token& t = tok();
-    const Token& after = peek(1);
-    const bool continues =
-        after.kind == Tok::Punct &&
-        (after.text == "+" || after.text == "-" || after.text == "*" || after.text == "/" ||
-         after.text == "^" || after.text == "**" || after.text == "(");
-    if (t.kind == Tok::Ident && !continues) setting.word = t.text;
+    if (t.kind == Tok::Ident && is_punct(peek(1), "+")) {
+      std::size_t k = 0;  // tokens of IDENT ('+' IDENT)*
+      while (peek(k).kind == Tok::Ident && is_punct(peek(k + 1), "+") &&
+             peek(k + 2).kind == Tok::Ident)
+        k += 2;
+      if (peek(k).kind == Tok::Ident && !continues_expr(peek(k + 1))) {
+        setting.value_loc = t.loc;
+        for (std::size_t i = 0; i <= k; ++i) {
+          const Token w = take();
+          if (w.kind == Tok::Ident) setting.word += (setting.word.empty() ? "" : "+") + w.text;
+        }
+        sim.settings.push_back(std::move(setting));
+        return;
+      }
+    }
+    if (t.kind == Tok::Ident && !continues_expr(peek(1))) setting.word = t.text;
     const bool starts_expr =
         t.kind == Tok::Number || t.kind == Tok::Ident ||
         (t.kind == Tok::Punct && (t.text == "(" || t.text == "+" || t.text == "-"));

@@ -186,7 +186,7 @@ Model reduced(const LieModel& lm, const SourceText& src) {
     g.reset = reset;
   }
 
-  for (const auto& cn : lm.coordinate_names) out.tex[cn] = tex_of(cn);
+  for (const auto& cn : lm.coordinate_names) out.tex[cn] = tex_identifier(cn);
   if (!lm.group.has_coordinates()) out.tex[kPhiName] = "\\phi(g)";
   red.group = lm.group_name;
   red.coordinates = lm.coordinate_names;
@@ -339,7 +339,7 @@ Model reduced_constrained(const LieModel& lm, const SourceText& src) {
   red.coadjoint = alg.coadjoint(Components(xi.begin(), xi.end()));
   for (unsigned i = 0; i < n; ++i)
     for (unsigned j = 0; j < n; ++j) red.coadjoint(i, j) = red.coadjoint(i, j).expand();
-  for (const auto& cn : lm.coordinate_names) out.tex[cn] = tex_of(cn);
+  for (const auto& cn : lm.coordinate_names) out.tex[cn] = tex_identifier(cn);
   if (!lm.group.has_coordinates()) out.tex[kPhiName] = "\\phi(g)";
   out.reduction = std::move(red);
   return out;

@@ -5,6 +5,7 @@
 #include <string>
 
 #include "hybgen/gen/reduce.hpp"
+#include "hybgen/gen/tex.hpp"
 
 namespace hybgen::gen::reduce_detail {
 
@@ -16,9 +17,6 @@ ModelError hypothesis_error(const SourceText& src, SourceLoc loc, const LieError
 
 /// s(q) of a guard, checked to be a function of q (and parameters) only.
 void require_level_set(const LieModel& lm, const GuardSpec& g, const SourceText& src);
-
-/// TeX name like check's: zeta1 -> \zeta_{1}, a11 -> a_{11}, p_a11 -> p_{a11}.
-std::string tex_of(const std::string& nm);
 
 /// The unreduced twin: the 2n-dimensional impact system on T*G.
 /// For a constrained (nonholonomic) model it is the 2n-dimensional system on TG

@@ -13,6 +13,7 @@
 #include "hybgen/gen/emit.hpp"
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/fs.hpp"
+#include "hybgen/gen/hash.hpp"
 #include "hybgen/gen/outputs.hpp"
 #include "hybgen/gen/process.hpp"
 
@@ -77,6 +78,14 @@ nlohmann::json run_config(const Model& m, const std::string& out_dir,
   return cfg;
 }
 
+nlohmann::json run_provenance(const Frontend& fe) {
+  return {{"model_path", fe.src.path()},
+          {"model_text", fe.src.text()},
+          {"model_sha256", sha256_hex(fe.src.text())},
+          {"equations", derive_text(fe.sys)},
+          {"hybgen_version", generator_version()}};
+}
+
 void stop_if_interrupted(OutputTransaction& tx) {
   const int sig = interrupt_signal();
   if (!sig) return;
@@ -98,6 +107,7 @@ int run_model(const Frontend& fe, const RunOptions& options) {
   const fs::path staging = tx.stage();
 
   nlohmann::json cfg = run_config(m, staging.string(), out, options.quiet);
+  cfg["provenance"] = run_provenance(fe);
   cfg["seconds"] = {{"derive", fe.seconds}, {"build", b.seconds}};
   const std::string config = (staging / "config.json").string();
   try {

@@ -339,6 +339,7 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     fs::create_directory(dir, ec);
     if (ec) throw UsageError("cannot create '" + dir.string() + "': " + ec.message());
     nlohmann::json cfg = run_config(p.fe->model, dir.string(), out + "/" + p.label, true);
+    cfg["provenance"] = run_provenance(*p.fe);
     cfg["seconds"] = {{"derive", p.fe->seconds}, {"build", runner.seconds}};
     p.config = (dir / "config.json").string();
     write_file_atomic(p.config, cfg.dump(2) + "\n");

@@ -38,24 +38,6 @@ void require_level_set(const LieModel& lm, const GuardSpec& g, const SourceText&
                                          lm.base.state[n] + " = c')");
 }
 
-std::string tex_of(const std::string& nm) {
-  static const std::set<std::string> greek = {"alpha", "beta",  "gamma", "delta", "epsilon", "zeta",
-                                              "eta",   "theta", "iota",  "kappa", "lambda",  "mu",
-                                              "nu",    "xi",    "rho",   "sigma", "tau",     "phi",
-                                              "chi",   "psi",   "omega"};
-  const auto us = nm.find('_');
-  if (us != std::string::npos && us + 1 < nm.size())
-    return tex_of(nm.substr(0, us)) + "_{" + nm.substr(us + 1) + "}";
-  std::size_t k = nm.size();
-  while (k > 0 && std::isdigit(static_cast<unsigned char>(nm[k - 1]))) --k;
-  const std::string base = nm.substr(0, k), sub = nm.substr(k);
-  std::string t = greek.count(base) ? "\\" + base
-                  : base.size() > 1 ? "\\mathrm{" + base + "}"
-                                    : base;
-  if (!sub.empty()) t += "_{" + sub + "}";
-  return t;
-}
-
 namespace {
 
 /// The parts common to both twins: name, parameters, and the state (c_1..c_n,
@@ -88,7 +70,7 @@ Model twin_skeleton(const LieModel& lm, const std::string& prefix, const std::st
     out.state.push_back(name);
     out.state_symbols.push_back(second.back());
   }
-  for (const auto& s : out.state) out.tex[s] = tex_of(s);
+  for (const auto& s : out.state) out.tex[s] = tex_identifier(s);
   for (const auto& pr : b.params) out.tex[pr.name] = b.tex.at(pr.name);
   out.sim.present = false;
   out.sim.initial.assign(1, ex(0));
@@ -243,7 +225,7 @@ Model unreduced_constrained(const LieModel& lm, const SourceText& src) {
   std::vector<ex> cd;
   Model out = twin_skeleton(lm, "", "dot", cd);
   for (unsigned i = 0; i < n; ++i)
-    out.tex[out.state[n + i]] = "\\dot{" + tex_of(out.state[i]) + "}";
+    out.tex[out.state[n + i]] = "\\dot{" + tex_identifier(out.state[i]) + "}";
 
   // ξ = L⁻¹ ċ: M = L⁻ᵀ I L⁻¹, M⁻¹ = L I⁻¹ Lᵀ, A = C L⁻¹.
   const matrix Linv = tidy(L.inverse(GiNaC::solve_algo::gauss));

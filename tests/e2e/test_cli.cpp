@@ -182,11 +182,16 @@ fs::path run_dir(const std::string& name) {
   return kWork / "runs" / name;
 }
 
+/// The runs these tests read arrays of: run.nc and pictures (the default) and the .npy
+/// frames (on request).
+const std::string kWithArrays = " --set outputs=netcdf+png+npy";
+
 /// Run a model into a fresh directory; return its summary.
 json run(const std::string& model, const std::string& tag, const std::string& sets) {
   fs::path out = run_dir(tag);
   fs::remove_all(out);
-  Result r = hybgen("run models/" + model + ".model --quiet --out '" + out.string() + "' " + sets);
+  Result r = hybgen("run models/" + model + ".model --quiet --out '" + out.string() + "' " + sets +
+                    kWithArrays);
   EXPECT_EQ(r.code, 0) << r.out;
   return read_json((out / "summary.json").string());
 }
@@ -205,6 +210,8 @@ void check_run_outputs(const json& s, const fs::path& out, std::size_t dims) {
   EXPECT_EQ(s["mass"].size(), s["times"].size());
   EXPECT_EQ(s["outflow"].size(), s["times"].size());
   for (const char* k : {"derive", "build", "solve"}) EXPECT_TRUE(s["seconds"][k].is_number());
+  EXPECT_EQ(s["outputs"]["netcdf"], "run.nc");
+  EXPECT_TRUE(fs::exists(out / "run.nc"));
   for (const auto& f : s["files"]) {
     auto arr = hybgen::rt::read_npy((out / f.get<std::string>()).string());
     EXPECT_EQ(arr.shape, shape);
@@ -433,7 +440,7 @@ simulation { domain x in [1, 2]; grid 401; initial on: 1; t_end 1; dt 0.05; meth
 )");
   fs::path out = run_dir("thermostat");
   fs::remove_all(out);
-  Result r = hybgen("run '" + path + "' --quiet --out '" + out.string() + "'");
+  Result r = hybgen("run '" + path + "' --quiet --out '" + out.string() + "'" + kWithArrays);
   ASSERT_EQ(r.code, 0) << r.out;
   json s = read_json((out / "summary.json").string());
   const double lam = s["invariant"]["eigenvalues"][0]["re"];
@@ -640,7 +647,7 @@ simulation { domain x in [0, 2]; grid 101; initial exp(-(x - 1)^2); t_end 1; dt 
 )");
   fs::path out = run_dir("decay");
   fs::remove_all(out);
-  Result r = hybgen("run '" + path + "' --quiet --out '" + out.string() + "'");
+  Result r = hybgen("run '" + path + "' --quiet --out '" + out.string() + "'" + kWithArrays);
   ASSERT_EQ(r.code, 0) << r.out;
   json s = read_json((out / "summary.json").string());
   check_run_outputs(s, out, 1);

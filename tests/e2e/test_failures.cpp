@@ -236,7 +236,8 @@ TEST(NumericalFailure, EventCapWithTheStateWhereItHappened) {
 
 TEST(NothingLost, FailedRunLeavesThePreviousOutputsAndASuccessReplacesThemWhole) {
   const fs::path out = fresh_out("staged");
-  const std::string run = "run models/bouncing_ball.model --quiet --out '" + out.string() + "' ";
+  const std::string run = "run models/bouncing_ball.model --quiet --out '" + out.string() +
+                          "' --set outputs=netcdf+npy ";
   Result r = hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.25");
   ASSERT_EQ(r.code, 0) << r.out;
   const std::string summary = hybgen::gen::read_file((out / "summary.json").string());
@@ -400,12 +401,18 @@ TEST(NothingLost, AFullDiskIsAClearErrorAndKeepsThePreviousOutputs) {
       out.string() + "'";
   ASSERT_EQ(hybgen(run).code, 0);
   const std::string summary = hybgen::gen::read_file((out / "summary.json").string());
-  const Result r = hybgen(run, "trap '' XFSZ && ulimit -f 40 &&");
+  const Result r = hybgen(run + " --set outputs=npy", "trap '' XFSZ && ulimit -f 40 &&");
   EXPECT_EQ(r.code, 70) << r.out;  // runner.hpp: I/O failures exit 70, naming the file
   EXPECT_NE(r.out.find("cannot write '"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("/u_0000.npy': File too large"), std::string::npos) << r.out;
   expect_previous_outputs_kept(r, out, summary);
   std::printf("[ message ] %s\n", r.out.c_str());
+  // run.nc (HDF5 underneath) fails the same way: exit 70 naming the file, nothing kept.
+  const Result nc = hybgen(run + " --set outputs=netcdf", "trap '' XFSZ && ulimit -f 40 &&");
+  EXPECT_EQ(nc.code, 70) << nc.out;
+  EXPECT_NE(nc.out.find("/run.nc': "), std::string::npos) << nc.out;
+  expect_previous_outputs_kept(nc, out, summary);
+  std::printf("[ message ] %s\n", nc.out.c_str());
 }
 
 TEST(NothingLost, ACorruptedBuildCacheEntryIsRebuilt) {

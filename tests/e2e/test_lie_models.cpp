@@ -169,7 +169,8 @@ json run(const std::string& model, const std::string& tag, const std::string& se
   const fs::path out = kWork / "runs" / tag;
   fs::remove_all(out);
   const Result r =
-      hybgen("run models/" + model + ".model --quiet --out '" + out.string() + "' " + sets);
+      hybgen("run models/" + model + ".model --quiet --out '" + out.string() + "' " + sets +
+             " --set outputs=netcdf+png+npy");  // run.nc, pictures and the .npy frames read here
   EXPECT_EQ(r.code, 0) << r.out;
   return json::parse(hybgen::gen::read_file((out / "summary.json").string()));
 }

@@ -64,7 +64,7 @@ TEST(Sweep, SixValuesOfEShareOneRunner) {
   fs::remove_all(out);
   const auto r = hybgen(
       "sweep models/bouncing_ball.model --set e=0.5:1.0:6 --set grid=21x21 "
-      "--set t_end=2 --set dt=0.5 --out '" +
+      "--set t_end=2 --set dt=0.5 --set outputs=netcdf+npy --out '" +
           out.string() + "'",
       cache);
   ASSERT_EQ(r.code, 0) << r.out;
@@ -271,7 +271,7 @@ TEST(Sweep, TheThreadCountDoesNotChangeTheDensities) {
   const auto r = hybgen(
       "sweep models/bouncing_ball.model --set method=characteristics,particles "
       "--set threads=1,2 --set particles=20000 --set grid=21x21 --set t_end=2 "
-      "--set dt=1 --jobs 1 --out '" +
+      "--set dt=1 --set outputs=npy --jobs 1 --out '" +
           out.string() + "'",
       kWork / "cache_threads");
   ASSERT_EQ(r.code, 0) << r.out;

@@ -38,9 +38,14 @@ Model model() {
   return check(parse(src), src);
 }
 
+/// Whether `s` holds text (one word, or a '+'-joined list of words).
+bool is_text(const rt::SettingSpec& s) {
+  return s.type == rt::SettingType::word || s.type == rt::SettingType::words;
+}
+
 /// A valid value of `s` other than its default, as `--set` text.
 std::string other_value(const rt::SettingSpec& s) {
-  if (s.type == rt::SettingType::word) {
+  if (is_text(s)) {
     const std::string_view w = s.words.substr(s.words.rfind('|') + 1);  // the last word
     return std::string(w == s.word ? s.words.substr(0, s.words.find('|')) : w);
   }
@@ -54,7 +59,7 @@ std::string other_value(const rt::SettingSpec& s) {
 
 /// A value `s` refuses, as `--set` text.
 std::string bad_value(const rt::SettingSpec& s) {
-  if (s.type == rt::SettingType::word) return "nosuchword";
+  if (is_text(s)) return "nosuchword";
   if (s.hi < 1e300) return "1e301";
   return s.lo_open ? std::to_string(s.lo) : "-1e300";
 }
@@ -72,7 +77,7 @@ TEST(Settings, EveryRowTravelsFromSetToTheRunner) {
     rt::Settings runner;
     ASSERT_NO_THROW(runner = rt::Settings::from_json(config)) << name;
     EXPECT_EQ(runner.to_json(), m.sim.settings.to_json()) << name;
-    if (s.type == rt::SettingType::word)
+    if (is_text(s))
       EXPECT_EQ(config[name].get<std::string>(), value) << name;
     else
       EXPECT_EQ(config[name].get<double>(), std::stod(value)) << name;
@@ -93,7 +98,7 @@ TEST(Settings, BothSidesRefuseTheSameValuesWithTheSameReason) {
     }
     if (s.methods == "derive") continue;
     nlohmann::json config = model().sim.settings.to_json();  // valid: dt resolved
-    if (s.type == rt::SettingType::word)
+    if (is_text(s))
       config[name] = value;
     else
       config[name] = std::stod(value);
@@ -122,6 +127,31 @@ TEST(Settings, ModelFileBlockUsesTheSameRules) {
     EXPECT_NE(std::string(e.what()).find("must be an integer in [0, 64]"), std::string::npos)
         << e.what();
   }
+}
+
+TEST(Settings, AWordListTakesEachWordOnceInAnyOrder) {
+  Model m = model();
+  ASSERT_NO_THROW(apply_overrides(m, {"outputs=vti+netcdf+npy"}));
+  const rt::Settings& s = m.sim.settings;
+  EXPECT_TRUE(s.includes<"outputs">("vti"));
+  EXPECT_TRUE(s.includes<"outputs">("npy"));
+  EXPECT_TRUE(s.includes<"outputs">("netcdf"));
+  EXPECT_FALSE(s.includes<"outputs">("png"));
+  for (const char* bad : {"outputs=npy+npy", "outputs=npy+", "outputs=+npy", "outputs=npy+gif"}) {
+    Model b = model();
+    EXPECT_THROW(apply_overrides(b, {bad}), UsageError) << bad;
+  }
+  // The model file's block spells the list the same way, spaces around '+' allowed.
+  const std::string text = std::string(kModel).replace(std::string(kModel).find("  t_end 2"), 9,
+                                                       "  t_end 2\n  outputs npy + png");
+  SourceText src("t.model", text);
+  const Model f = check(parse(src), src);
+  EXPECT_EQ(f.sim.settings.to_json()["outputs"], "npy+png");
+  // A list where a number belongs is refused, located.
+  const std::string num =
+      std::string(kModel).replace(std::string(kModel).find("  t_end 2"), 9, "  t_end npy + png");
+  SourceText src2("t.model", num);
+  EXPECT_THROW((void)check(parse(src2), src2), ModelError);
 }
 
 TEST(Settings, DefaultsAndDerivedDefaults) {

@@ -39,6 +39,10 @@ std::string derive_text(const HybridSystem& sys);
 /// `hybgen derive --format latex`: the PDE and jump conditions as the paper writes them.
 std::string derive_latex(const HybridSystem& sys);
 
+/// `derive --format latex --standalone`: derive_latex as a document pdflatex compiles
+/// (article, amsmath), with the state and the parameter values.
+std::string derive_latex_document(const HybridSystem& sys);
+
 /// `hybgen derive --format json` (docs/design.md contract).
 nlohmann::ordered_json derive_json(const HybridSystem& sys);
 

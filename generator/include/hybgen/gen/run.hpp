@@ -35,6 +35,11 @@ void check_runnable(const Frontend& fe);
 nlohmann::json run_config(const Model& m, const std::string& out_dir,
                           const std::string& final_out_dir, bool quiet);
 
+/// What a run's files record of where they came from (the configuration's `provenance`,
+/// written into run.nc's attributes by runtime/src/io/netcdf.cpp): the model's path, text
+/// and SHA-256, the derived equations as `hybgen derive` prints them, and hybgen's version.
+nlohmann::json run_provenance(const Frontend& fe);
+
 /// If hybgen has been interrupted (process.hpp), abandon `tx`'s staging directory, say that
 /// the previous outputs are unchanged and end hybgen by the signal; else return. Asked to
 /// stop, hybgen never swaps, even after its runners succeeded.

@@ -29,10 +29,7 @@
 
 #include "hybgen/rt/exit_codes.hpp"
 #include "hybgen/rt/io/atomic_file.hpp"
-#include "hybgen/rt/io/npy.hpp"
-#include "hybgen/rt/io/png.hpp"
-#include "hybgen/rt/io/progress.hpp"
-#include "hybgen/rt/io/vti.hpp"
+#include "hybgen/rt/io/run_outputs.hpp"
 #include "hybgen/rt/methods/methods.hpp"
 #include "hybgen/rt/methods/preflight.hpp"
 #include "hybgen/rt/model.hpp"
@@ -53,6 +50,8 @@ struct RunConfig {
   bool quiet = false;           ///< No progress output.
   bool preflight_only = false;  ///< Run the pre-flight scan only (`hybgen check --preflight`).
   nlohmann::json seconds;       ///< Timings of the earlier stages.
+  /// The model's text, hash and derived equations (generator/src/run.cpp, run_provenance).
+  nlohmann::json provenance;
 
   /// The method.
   const std::string& method() const { return settings.word<"method">(); }
@@ -105,6 +104,7 @@ RunConfig read_config(const std::string& path) {
     c.quiet = j.value("quiet", false);
     c.preflight_only = j.value("preflight_only", false);
     c.seconds = j.value("seconds", nlohmann::json::object());
+    c.provenance = j.value("provenance", nlohmann::json::object());
   } catch (const std::exception& e) {
     throw ConfigError("bad run configuration '" + path + "': " + e.what());
   }
@@ -121,17 +121,6 @@ RunConfig read_config(const std::string& path) {
     if (!std::isfinite(p)) throw ConfigError("a parameter value is not finite");
   return c;
 }
-
-namespace detail {
-
-/// t with three decimals (a frame's title).
-inline std::string fixed3(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.3f", v);
-  return b;
-}
-
-}  // namespace detail
 
 /// Solve with the configured method, write the outputs and the summary; returns the exit
 /// code.
@@ -211,86 +200,38 @@ int run_model(const RunConfig& c) {
     return exit_status(ExitCode::Numerical);
   }
 
-  // Outputs: one .npy per frame (sum over modes; per mode too when there are several), a
-  // picture and a VTK image.
+  // Outputs: the files the setting `outputs` chooses (io/run_outputs.hpp), durable together
+  // with summary.json by one sync of the staging directory.
   const auto t2 = Clock::now();
   const Solution<N>& sol = res.solution;
-  const std::filesystem::path out(c.out_dir);
   const std::size_t n_node = grid.size();
-  std::vector<std::size_t> shape;
-  std::vector<double> origins, spacings;
-  for (const auto& a : c.axes) {
-    shape.push_back(static_cast<std::size_t>(a.n));
-    origins.push_back(a.min);
-    spacings.push_back((a.max - a.min) / (a.n - 1));
-  }
-  std::vector<std::uint8_t> outside(n_node, 0);
+  RunRecord rec;
+  rec.model = c.model;
+  rec.method = method;
+  rec.axis_names = c.axis_names;
+  rec.axes = c.axes;
+  rec.mode_names.assign(M::mode_names.begin(), M::mode_names.end());
+  rec.param_names.assign(M::param_names.begin(), M::param_names.end());
+  rec.params = c.params;
+  rec.times = res.frame_times;
+  rec.frame_names = res.frame_names;
+  rec.density = std::span<const double>(sol.u.data(), sol.u.size());
+  rec.outside.assign(n_node, 0);
   bool any_outside = false;
   for (std::size_t i = 0; i < n_node; ++i) {
     const auto y = grid.node(i);
-    if (!M::in_support(y.data(), par)) outside[i] = 1, any_outside = true;
+    if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
   }
-  nlohmann::json files = nlohmann::json::array(), mode_files = nlohmann::json::object();
-  std::vector<double> total(n_node);
-  Progress progress("writing outputs", sol.n_time, c.quiet);
-  for (std::size_t k = 0; k < sol.n_time; ++k) {
-    std::fill(total.begin(), total.end(), 0.0);
-    for (std::size_t m = 0; m < sol.n_mode; ++m) {
-      auto sl = sol.slice(k, m);
-      for (std::size_t i = 0; i < n_node; ++i) total[i] += sl[i];
-    }
-    const std::string base = res.frame_names[k];
-    write_npy((out / (base + ".npy")).string(), total, shape);
-    if (!res.frame_times.empty()) files.push_back(base + ".npy");
-    if (M::n_mode > 1) {
-      for (std::size_t m = 0; m < sol.n_mode; ++m) {
-        const std::string name = base + "_" + M::mode_names[m] + ".npy";
-        write_npy((out / name).string(), sol.slice(k, m).data(), shape);
-        mode_files[M::mode_names[m]].push_back(name);
-      }
-    }
-    std::string title = c.model + "   ";
-    title += res.frame_times.empty() ? std::string("invariant density (transfer operator)")
-                                     : method + "   t = " + detail::fixed3(res.frame_times[k]);
-    if (M::n_mode > 1) title += "   (sum over modes)";
-    const std::string png = (out / (base + ".png")).string();
-    if constexpr (N == 1) {
-      std::vector<double> xs(n_node);
-      for (std::size_t i = 0; i < n_node; ++i) xs[i] = grid.node(i)[0];
-      write_lineplot_png(png, xs, total, c.axis_names[0], "u", title);
-    } else if constexpr (N == 2) {
-      write_heatmap_png(png, total.data(), shape[0], shape[1], c.axis_names[0], c.axes[0].min,
-                        c.axes[0].max, c.axis_names[1], c.axes[1].min, c.axes[1].max, title,
-                        any_outside ? outside.data() : nullptr);
-    } else {
-      // Marginal density on the first two axes: integrate the others (trapezoid).
-      const std::size_t n0 = shape[0], n1 = shape[1], rest = n_node / (n0 * n1);
-      std::vector<std::vector<double>> w(N);
-      for (std::size_t a = 2; a < N; ++a) w[a] = trapezoid_rule(c.axes[a]).weights;
-      std::vector<double> wrest(rest, 1.0);
-      for (std::size_t r = 0; r < rest; ++r) {
-        std::size_t rem = r;
-        for (std::size_t a = N; a-- > 2;) {
-          wrest[r] *= w[a][rem % shape[a]];
-          rem /= shape[a];
-        }
-      }
-      std::vector<double> marginal(n0 * n1, 0.0);
-      for (std::size_t i = 0; i < n0 * n1; ++i)
-        for (std::size_t r = 0; r < rest; ++r) marginal[i] += wrest[r] * total[i * rest + r];
-      std::string others;
-      for (std::size_t a = 2; a < N; ++a) others += (a > 2 ? ", " : "") + c.axis_names[a];
-      write_heatmap_png(png, marginal.data(), n0, n1, c.axis_names[0], c.axes[0].min, c.axes[0].max,
-                        c.axis_names[1], c.axes[1].min, c.axes[1].max,
-                        title + "   marginal over " + others);
-    }
-    // VTK image data for ParaView: every dimension up to 3 (VTK images have at most 3 axes).
-    if constexpr (N <= 3)
-      write_vti((out / (base + ".vti")).string(), total.data(), shape, origins, spacings,
-                c.axis_names, "u");
-    progress.advance();
-  }
-  progress.finish();
+  if (!any_outside) rec.outside.clear();
+  rec.budget = res.budget;
+  rec.atom_error = res.atom_error;
+  rec.provenance = c.provenance;
+  rec.summary = nlohmann::json::object();
+  rec.summary["settings"] = c.settings.to_json();
+  for (const auto& [key, value] : res.summary.items()) rec.summary[key] = value;
+  const DeferredDurability durability(c.out_dir);
+  const WrittenOutputs written = write_run_outputs(rec, c.settings, c.out_dir, c.quiet);
+  for (const auto& note : written.notes) std::fprintf(stderr, "hybgen: note: %s\n", note.c_str());
   const double output_s = std::chrono::duration<double>(Clock::now() - t2).count();
 
   // summary.json (docs/design.md run contract, extended with the atom, per-mode files and the
@@ -307,8 +248,12 @@ int run_model(const RunConfig& c) {
                     {"n", c.axes[a].n}});
   s["grid"] = {{"axes", axes}};
   s["times"] = res.frame_times;
-  s["files"] = files;
-  if (M::n_mode > 1) s["mode_files"] = mode_files;
+  // `files` and `mode_files`: the .npy frames of a time series (outputs=…+npy), as before
+  // `outputs` listed every kind.
+  s["files"] = res.frame_times.empty() ? std::vector<std::string>{} : written.npy;
+  if (M::n_mode > 1 && !written.mode_npy.empty()) s["mode_files"] = written.mode_npy;
+  s["outputs"] = written.to_json();
+  s["settings"] = rec.summary["settings"];
   s["modes"] = std::vector<std::string>(M::mode_names.begin(), M::mode_names.end());
   nlohmann::json params = nlohmann::json::object();
   for (std::size_t j = 0; j < static_cast<std::size_t>(M::n_param); ++j)
@@ -326,7 +271,8 @@ int run_model(const RunConfig& c) {
   secs["budget"] = res.budget_s;
   secs["output"] = output_s;
   s["seconds"] = secs;
-  write_file_atomic((out / "summary.json").string(), s.dump(2) + "\n");
+  write_file_atomic((std::filesystem::path(c.out_dir) / "summary.json").string(), s.dump(2) + "\n");
+  durability.commit();
 
   if (!c.quiet) {
     // The time hybgen spent before the runner started (derive, build: its config), then ours.
@@ -362,8 +308,8 @@ int run_model(const RunConfig& c) {
       std::printf("spectral gap %.3e, decay rate %.4g per unit time\n",
                   inv["spectral_gap"].template get<double>(),
                   inv["decay_rate"].template get<double>());
-      std::printf("outputs in %s: invariant .npy/.png/.vti, summary.json%s\n", c.final_dir.c_str(),
-                  took.c_str());
+      std::printf("outputs in %s: %s, summary.json%s\n", c.final_dir.c_str(),
+                  written.describe(res.frame_names).c_str(), took.c_str());
     } else {
       if (mb.mass.empty()) {
         std::printf("mass budget: off\n");
@@ -381,8 +327,8 @@ int run_model(const RunConfig& c) {
                         mb.mass[k], mb.outflow[k], mb.atom[k],
                         k < res.atom_error.size() ? res.atom_error[k] : 0.0, defect[k], bar[k]);
       }
-      std::printf("outputs in %s: %s..%s .npy/.png/.vti, summary.json%s\n", c.final_dir.c_str(),
-                  res.frame_names.front().c_str(), res.frame_names.back().c_str(), took.c_str());
+      std::printf("outputs in %s: %s, summary.json%s\n", c.final_dir.c_str(),
+                  written.describe(res.frame_names).c_str(), took.c_str());
     }
   }
   return exit_status(ExitCode::Success);

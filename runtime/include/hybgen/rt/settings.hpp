@@ -23,6 +23,7 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace hybgen::rt {
 
@@ -31,6 +32,7 @@ enum class SettingType {
   real,     ///< A finite double in its range.
   integer,  ///< A whole number in its range (stored as a double: exact up to 2^53).
   word,     ///< One of its words.
+  words,    ///< Some of its words, joined by '+' (`netcdf+png`), each at most once.
 };
 
 /// One row of the settings table.
@@ -86,6 +88,10 @@ inline constexpr std::array kSettings = {
     SettingSpec{"seed", SettingType::integer, 1, "", 0, kMaxExactInteger, false, "", "particles",
                 "random seed (counter-based streams: results do not depend on "
                 "the number of threads)"},
+    SettingSpec{"outputs", SettingType::words, 0.0, "netcdf+png", 0, 0, false, "netcdf|png|npy|vti",
+                "all",
+                "files of a run, joined by '+': run.nc (netcdf), pictures, .npy arrays, .vti "
+                "images with a .pvd collection (summary.json always)"},
     SettingSpec{"threads", SettingType::integer, 0, "", 0, 4096, false, "", "all",
                 "worker threads of the runner (0: $OMP_NUM_THREADS, else one per core)"},
     SettingSpec{"max_expr_nodes", SettingType::integer, 200000, "", 100, 1e12, false, "", "derive",
@@ -178,11 +184,25 @@ inline bool has_word(std::string_view words, std::string_view w) {
   return false;
 }
 
+/// The parts of a '+'-joined word list ("netcdf+png" -> netcdf, png; "" -> one empty part).
+inline std::vector<std::string_view> split_plus(std::string_view list) {
+  std::vector<std::string_view> out;
+  std::size_t i = 0;
+  while (true) {
+    const std::size_t j = list.find('+', i);
+    out.push_back(list.substr(i, j == std::string_view::npos ? std::string_view::npos : j - i));
+    if (j == std::string_view::npos) return out;
+    i = j + 1;
+  }
+}
+
 }  // namespace detail
 
 /// What a setting accepts, in words: "positive", "an integer in [1, 1e9]", "one of: a, b".
 inline std::string setting_range(const SettingSpec& s) {
   if (s.type == SettingType::word) return "one of: " + detail::word_list(s.words);
+  if (s.type == SettingType::words)
+    return "some of: " + detail::word_list(s.words) + ", joined by '+'";
   const bool integer = s.type == SettingType::integer;
   if (s.lo == 0 && s.lo_open && s.hi >= 1e300) return integer ? "a positive integer" : "positive";
   if (s.hi >= 1e300)
@@ -193,7 +213,7 @@ inline std::string setting_range(const SettingSpec& s) {
 
 /// The default of a setting as text.
 inline std::string setting_default(const SettingSpec& s) {
-  if (s.type == SettingType::word) return std::string(s.word);
+  if (s.type == SettingType::word || s.type == SettingType::words) return std::string(s.word);
   if (s.number == 0 && s.lo_open) return "automatic";  // outside the range: the help says how
   return detail::fmt_g(s.number);
 }
@@ -211,6 +231,19 @@ inline std::string setting_problem(const SettingSpec& s, const SettingValue& v) 
     if (v.has_number || v.word.empty()) return "needs one of: " + detail::word_list(s.words);
     if (!detail::has_word(s.words, v.word))
       return "unknown value '" + v.word + "' (available: " + detail::word_list(s.words) + ")";
+    return "";
+  }
+  if (s.type == SettingType::words) {
+    if (v.has_number || v.word.empty()) return "needs " + setting_range(s);
+    std::vector<std::string_view> seen;
+    for (const std::string_view w : detail::split_plus(v.word)) {
+      if (!detail::has_word(s.words, w))
+        return "unknown value '" + std::string(w) + "' (available: " + detail::word_list(s.words) +
+               ", joined by '+')";
+      if (std::find(seen.begin(), seen.end(), w) != seen.end())
+        return "'" + std::string(w) + "' is given twice";
+      seen.push_back(w);
+    }
     return "";
   }
   if (!v.has_number) return "needs a number (" + setting_range(s) + ")";
@@ -237,7 +270,7 @@ class Settings {
     const std::size_t i = setting_index(name);
     if (i == kSettings.size()) return "unknown setting";
     if (std::string why = setting_problem(kSettings[i], v); !why.empty()) return why;
-    if (kSettings[i].type == SettingType::word)
+    if (kSettings[i].type == SettingType::word || kSettings[i].type == SettingType::words)
       word_[i] = v.word;
     else
       number_[i] = v.number;
@@ -275,6 +308,14 @@ class Settings {
     constexpr std::size_t i = checked<N>(SettingType::word);
     return word_[i];
   }
+  /// Whether the word-list setting N includes `w` (`includes<"outputs">("npy")`).
+  template <SettingName N>
+  bool includes(std::string_view w) const {
+    constexpr std::size_t i = checked<N>(SettingType::words);
+    for (const std::string_view part : detail::split_plus(word_[i]))
+      if (part == w) return true;
+    return false;
+  }
   /// Set a number directly (a derived default such as dt = t_end/10); unchecked.
   template <SettingName N>
   void put(double x) {
@@ -290,7 +331,7 @@ class Settings {
     for (std::size_t i = 0; i < kSettings.size(); ++i) {
       const SettingSpec& s = kSettings[i];
       if (s.methods == "derive") continue;
-      if (s.type == SettingType::word)
+      if (s.type == SettingType::word || s.type == SettingType::words)
         j[std::string(s.name)] = word_[i];
       else if (s.type == SettingType::integer)
         j[std::string(s.name)] = static_cast<long long>(number_[i]);

@@ -126,17 +126,23 @@ inline void vti_put_le(Base64Writer& b64, std::uint64_t v) {
 
 }  // namespace detail
 
-/// Writes a scalar field on a regular node grid as VTK XML ImageData to `path`
-/// (atomically). `data` is a C-order array of shape `dims` (1 to 3 axes, last axis
-/// fastest); node i of axis k sits at origins[k] + i * spacings[k]. On output the
-/// axes are transposed so that VTK x/y/z = axis 0/1/2 (VTK's x-fastest point order).
-/// `axis_names` (one per axis, may be empty) label the axes in an XML comment; the
-/// point-data array is called `field_name`. Throws std::invalid_argument for
-/// inconsistent arguments and std::runtime_error for I/O errors.
-inline void write_vti(const std::string& path, const double* data,
+/// One point-data array of a .vti file: its name and C-order values.
+struct VtiField {
+  std::string name;    ///< Array name (ParaView's "Coloring" list).
+  const double* data;  ///< C-order values, the grid's shape.
+};
+
+/// Writes scalar fields on a regular node grid as VTK XML ImageData to `path`
+/// (atomically). Each field's `data` is a C-order array of shape `dims` (1 to 3 axes,
+/// last axis fastest); node i of axis k sits at origins[k] + i * spacings[k]. On output
+/// the axes are transposed so that VTK x/y/z = axis 0/1/2 (VTK's x-fastest point order).
+/// `axis_names` (one per axis, may be empty) label the axes in an XML comment; the first
+/// field is the active scalar. Throws std::invalid_argument for inconsistent arguments and
+/// std::runtime_error for I/O errors.
+inline void write_vti(const std::string& path, const std::vector<VtiField>& fields,
                       const std::vector<std::size_t>& dims, const std::vector<double>& origins,
                       const std::vector<double>& spacings,
-                      const std::vector<std::string>& axis_names, const std::string& field_name) {
+                      const std::vector<std::string>& axis_names) {
   const std::size_t na = dims.size();
   if (na < 1 || na > 3) throw std::invalid_argument("write_vti: 1 to 3 axes supported: " + path);
   if (origins.size() != na || spacings.size() != na ||
@@ -151,7 +157,9 @@ inline void write_vti(const std::string& path, const double* data,
       throw std::invalid_argument("write_vti: grid too large");
     n *= dims[k];
   }
-  if (data == nullptr) throw std::invalid_argument("write_vti: null data for " + path);
+  if (fields.empty()) throw std::invalid_argument("write_vti: no field for " + path);
+  for (const VtiField& f : fields)
+    if (f.data == nullptr) throw std::invalid_argument("write_vti: null data for " + path);
 
   // Padded to three axes: VTK axis a = our axis a; missing axes have one point.
   std::array<std::size_t, 3> d{1, 1, 1};
@@ -169,10 +177,10 @@ inline void write_vti(const std::string& path, const double* data,
       detail::vti_number(sp[0]) + " " + detail::vti_number(sp[1]) + " " + detail::vti_number(sp[2]);
 
   std::string xml;
-  xml.reserve(n * 8 * 4 / 3 + 2048);
+  xml.reserve(fields.size() * (n * 8 * 4 / 3 + 256) + 2048);
   xml += "<?xml version=\"1.0\"?>\n";
-  xml += "<!-- hybgen: " + detail::xml_comment_text(field_name) + " on a " + std::to_string(na) +
-         "-D node grid; VTK x/y/z = ";
+  xml += "<!-- hybgen: " + detail::xml_comment_text(fields.front().name) + " on a " +
+         std::to_string(na) + "-D node grid; VTK x/y/z = ";
   for (std::size_t k = 0; k < na; ++k) {
     if (k) xml += ", ";
     xml +=
@@ -185,10 +193,10 @@ inline void write_vti(const std::string& path, const double* data,
   xml += "  <ImageData WholeExtent=\"" + extent + "\" Origin=\"" + origin + "\" Spacing=\"" +
          spacing + "\">\n";
   xml += "    <Piece Extent=\"" + extent + "\">\n";
-  xml += "      <PointData Scalars=\"" + detail::xml_escape(field_name) + "\">\n";
-  xml += "        <DataArray type=\"Float64\" Name=\"" + detail::xml_escape(field_name) +
-         "\" NumberOfComponents=\"1\" format=\"binary\">\n          ";
-  {
+  xml += "      <PointData Scalars=\"" + detail::xml_escape(fields.front().name) + "\">\n";
+  for (const VtiField& f : fields) {
+    xml += "        <DataArray type=\"Float64\" Name=\"" + detail::xml_escape(f.name) +
+           "\" NumberOfComponents=\"1\" format=\"binary\">\n          ";
     // Uncompressed inline binary: one base64 stream of [UInt64 byte count][values].
     detail::Base64Writer b64(xml);
     detail::vti_put_le(b64, static_cast<std::uint64_t>(n) * 8u);
@@ -196,15 +204,39 @@ inline void write_vti(const std::string& path, const double* data,
     for (std::size_t k = 0; k < d[2]; ++k)
       for (std::size_t j = 0; j < d[1]; ++j)
         for (std::size_t i = 0; i < d[0]; ++i)
-          detail::vti_put_le(b64, std::bit_cast<std::uint64_t>(data[(i * d[1] + j) * d[2] + k]));
+          detail::vti_put_le(b64, std::bit_cast<std::uint64_t>(f.data[(i * d[1] + j) * d[2] + k]));
     b64.finish();
+    xml += "\n        </DataArray>\n";
   }
-  xml += "\n        </DataArray>\n";
   xml += "      </PointData>\n";
   xml += "      <CellData>\n      </CellData>\n";
   xml += "    </Piece>\n";
   xml += "  </ImageData>\n";
   xml += "</VTKFile>\n";
+  write_file_atomic(path, xml);
+}
+
+/// One field: `write_vti` with the single array `field_name`.
+inline void write_vti(const std::string& path, const double* data,
+                      const std::vector<std::size_t>& dims, const std::vector<double>& origins,
+                      const std::vector<double>& spacings,
+                      const std::vector<std::string>& axis_names, const std::string& field_name) {
+  write_vti(path, {VtiField{field_name, data}}, dims, origins, spacings, axis_names);
+}
+
+/// A ParaView collection (.pvd) of `files` (names relative to the .pvd) at `times`: ParaView
+/// opens it as one time series.
+inline void write_pvd(const std::string& path, const std::vector<std::string>& files,
+                      const std::vector<double>& times) {
+  if (files.size() != times.size())
+    throw std::invalid_argument("write_pvd: files and times disagree: " + path);
+  std::string xml =
+      "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" "
+      "byte_order=\"LittleEndian\">\n  <Collection>\n";
+  for (std::size_t k = 0; k < files.size(); ++k)
+    xml += "    <DataSet timestep=\"" + detail::vti_number(times[k]) +
+           "\" group=\"\" part=\"0\" file=\"" + detail::xml_escape(files[k]) + "\"/>\n";
+  xml += "  </Collection>\n</VTKFile>\n";
   write_file_atomic(path, xml);
 }
 

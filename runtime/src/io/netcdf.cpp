@@ -1,0 +1,299 @@
+// run.nc: the run as one NetCDF-4 file (hybgen/rt/io/netcdf.hpp states the layout).
+
+#include "hybgen/rt/io/netcdf.hpp"
+
+#include <netcdf.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <ctime>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace hybgen::rt {
+
+namespace {
+
+/// A NetCDF file being written: every call checked, closed (and on failure removed) by the
+/// destructor.
+class NcFile {
+ public:
+  explicit NcFile(std::string path) : path_(std::move(path)) {
+    check(nc_create(path_.c_str(), NC_NETCDF4 | NC_CLOBBER, &id_), "create");
+  }
+  NcFile(const NcFile&) = delete;
+  NcFile& operator=(const NcFile&) = delete;
+  ~NcFile() {
+    if (id_ >= 0) {
+      nc_close(id_);
+      std::remove(path_.c_str());  // not closed by close(): a failure, leave no torn file
+    }
+  }
+
+  /// Throws "cannot write 'PATH': WHAT: NetCDF's message" for a failed call.
+  void check(int status, const char* what) const {
+    if (status != NC_NOERR)
+      throw std::runtime_error("cannot write '" + path_ + "': " + what + ": " +
+                               nc_strerror(status));
+  }
+  int dim(const std::string& name, std::size_t n) {
+    int d = -1;
+    check(nc_def_dim(id_, name.c_str(), n, &d), "define a dimension");
+    return d;
+  }
+  int var(const std::string& name, nc_type type, const std::vector<int>& dims) {
+    int v = -1;
+    check(nc_def_var(id_, name.c_str(), type, static_cast<int>(dims.size()), dims.data(), &v),
+          "define a variable");
+    return v;
+  }
+  void text(int var, const char* name, const std::string& value) {
+    check(nc_put_att_text(id_, var, name, value.size(), value.c_str()), "write an attribute");
+  }
+  void number(int var, const char* name, double value) {
+    check(nc_put_att_double(id_, var, name, NC_DOUBLE, 1, &value), "write an attribute");
+  }
+  void end_definitions() { check(nc_enddef(id_), "end the definitions"); }
+  void put(int var, const std::vector<double>& values) {
+    check(nc_put_var_double(id_, var, values.data()), "write a variable");
+  }
+  void put(int var, const std::vector<std::size_t>& start, const std::vector<std::size_t>& count,
+           const double* values) {
+    check(nc_put_vara_double(id_, var, start.data(), count.data(), values), "write a variable");
+  }
+  void put_strings(int var, const std::vector<std::string>& values) {
+    std::vector<const char*> p;
+    for (const auto& v : values) p.push_back(v.c_str());
+    check(nc_put_var_string(id_, var, p.data()), "write a variable");
+  }
+  void close() {
+    const int id = id_;
+    id_ = -1;
+    const int status = nc_close(id);
+    if (status != NC_NOERR) {
+      std::remove(path_.c_str());
+      check(status, "close");
+    }
+  }
+  int id() const { return id_; }
+
+ private:
+  std::string path_;
+  int id_ = -1;
+};
+
+/// Names of ours that do not collide with the state variables: `base`, or `base_`, ….
+class Names {
+ public:
+  explicit Names(const std::vector<std::string>& taken) : taken_(taken.begin(), taken.end()) {}
+  std::string operator()(std::string base) {
+    while (taken_.count(base)) base += '_';
+    taken_.insert(base);
+    return base;
+  }
+
+ private:
+  std::set<std::string> taken_;
+};
+
+/// The current UTC time, ISO 8601 (the history attribute).
+std::string utc_now() {
+  const std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char b[32];
+  std::strftime(b, sizeof b, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return b;
+}
+
+std::string json_text(const nlohmann::json& j, const char* key) {
+  return j.is_object() && j.contains(key) && j[key].is_string() ? j[key].get<std::string>() : "";
+}
+
+}  // namespace
+
+void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
+  const std::size_t N = run.axes.size(), n_mode = run.n_mode(), n_node = run.n_node();
+  const bool series = !run.times.empty();
+  if (run.density.size() != run.n_frame() * n_mode * n_node)
+    throw std::invalid_argument("write_netcdf: the density does not match the grid");
+  NcFile nc(path);
+  Names names(run.axis_names);
+
+  // Dimensions and coordinates.
+  std::vector<int> axis_dims(N), axis_vars(N);
+  for (std::size_t a = 0; a < N; ++a) {
+    axis_dims[a] = nc.dim(run.axis_names[a], static_cast<std::size_t>(run.axes[a].n));
+    axis_vars[a] = nc.var(run.axis_names[a], NC_DOUBLE, {axis_dims[a]});
+    nc.text(axis_vars[a], "long_name", "state variable " + run.axis_names[a]);
+  }
+  int time_dim = -1, time_var = -1;
+  if (series) {
+    const std::string t = names("time");
+    time_dim = nc.dim(t, run.times.size());
+    time_var = nc.var(t, NC_DOUBLE, {time_dim});
+    nc.text(time_var, "long_name", "time");
+    nc.text(time_var, "units", "1");  // the model's own (dimensionless) time
+    nc.text(time_var, "axis", "T");
+  }
+  int mode_dim = -1, mode_var = -1;
+  if (n_mode > 1) {
+    const std::string m = names("mode");
+    mode_dim = nc.dim(m, n_mode);
+    mode_var = nc.var(m, NC_STRING, {mode_dim});
+    nc.text(mode_var, "long_name", "mode of the hybrid system");
+  }
+
+  // The density, one chunk per frame (and mode).
+  auto frame_dims = [&](bool by_mode) {
+    std::vector<int> d;
+    if (series) d.push_back(time_dim);
+    if (by_mode) d.push_back(mode_dim);
+    d.insert(d.end(), axis_dims.begin(), axis_dims.end());
+    return d;
+  };
+  auto define_density = [&](const std::string& name, bool by_mode, const std::string& long_name) {
+    const std::vector<int> dims = frame_dims(by_mode);
+    const int v = nc.var(name, NC_DOUBLE, dims);
+    std::vector<std::size_t> chunk;
+    if (series) chunk.push_back(1);
+    if (by_mode) chunk.push_back(1);
+    for (const GridAxis& a : run.axes) chunk.push_back(static_cast<std::size_t>(a.n));
+    nc.check(nc_def_var_chunking(nc.id(), v, NC_CHUNKED, chunk.data()), "chunk a variable");
+    if (deflate > 0)
+      nc.check(nc_def_var_deflate(nc.id(), v, 1, 1, deflate), "compress a variable");
+    nc.text(v, "long_name", long_name);
+    nc.text(v, "units", "1");
+    nc.text(v, "description",
+            "probability density with respect to the Lebesgue measure of the state "
+            "variables, sampled at the grid nodes");
+    return v;
+  };
+  const std::string what = series ? "density" : "invariant density";
+  const int density = define_density(names("density"), false,
+                                     n_mode > 1 ? what + ", summed over the modes" : what);
+  const int by_mode =
+      n_mode > 1 ? define_density(names("density_by_mode"), true, what + " of each mode") : -1;
+
+  // The mass budget.
+  struct Series {
+    std::string name, long_name;
+    const std::vector<double>* values;
+    std::vector<double> owned;
+    int var = -1;
+  };
+  std::vector<Series> budget;
+  const MassBudget& b = run.budget;
+  const std::size_t K = run.times.size();
+  if (series && b.mass.size() == K && b.outflow.size() == K && b.atom.size() == K) {
+    auto add = [&](const char* name, const char* long_name, const std::vector<double>& v) {
+      if (v.size() == K) budget.push_back({names(name), long_name, &v, {}, -1});
+    };
+    add("mass", "mass in the grid box", b.mass);
+    add("mass_error", "estimated error of mass", b.mass_error);
+    add("outflow", "net mass out through the faces of the grid box since time 0", b.outflow);
+    add("outflow_error", "estimated error of outflow", b.outflow_error);
+    add("atom", "mass come to rest at Zeno points", b.atom);
+    add("atom_error", "estimated error of atom",
+        run.atom_error.size() == K ? run.atom_error : b.atom_error);
+    Series defect{names("unaccounted"),
+                  "initial_mass - mass - outflow - atom: what no term accounts for",
+                  nullptr, budget_defect(b), -1};
+    budget.push_back(std::move(defect));
+    Series defect_error{names("unaccounted_error"), "sum of the terms' estimated errors",
+                        nullptr, budget_defect_error(b), -1};
+    budget.push_back(std::move(defect_error));
+    for (Series& s : budget) {
+      s.var = nc.var(s.name, NC_DOUBLE, {time_dim});
+      nc.text(s.var, "long_name", s.long_name);
+      nc.text(s.var, "units", "1");
+    }
+  }
+  int mass0_var = -1;
+  if (series && !b.mass.empty()) {
+    mass0_var = nc.var(names("initial_mass"), NC_DOUBLE, {});
+    nc.text(mass0_var, "long_name", "mass in the grid box at time 0");
+    nc.number(mass0_var, "error", b.mass0_error);
+  }
+
+  // The invariant density's spectrum.
+  const nlohmann::json inv =
+      run.summary.is_object() && run.summary.contains("invariant") ? run.summary["invariant"]
+                                                                   : nlohmann::json();
+  std::vector<double> re, im, ab;
+  int re_var = -1, im_var = -1, abs_var = -1;
+  if (inv.is_object() && inv.contains("eigenvalues")) {
+    for (const auto& l : inv["eigenvalues"]) {
+      re.push_back(l.at("re").get<double>());
+      im.push_back(l.at("im").get<double>());
+      ab.push_back(l.at("abs").get<double>());
+    }
+    const int ev = nc.dim(names("eigenvalue"), re.size());
+    re_var = nc.var(names("eigenvalue_real"), NC_DOUBLE, {ev});
+    im_var = nc.var(names("eigenvalue_imag"), NC_DOUBLE, {ev});
+    abs_var = nc.var(names("eigenvalue_abs"), NC_DOUBLE, {ev});
+    nc.text(re_var, "long_name", "real part of an eigenvalue of the transfer operator");
+    nc.text(im_var, "long_name", "imaginary part of an eigenvalue of the transfer operator");
+    nc.text(abs_var, "long_name", "modulus of an eigenvalue of the transfer operator");
+    for (const char* key : {"spectral_gap", "decay_rate", "step"})
+      if (inv.contains(key) && inv[key].is_number())
+        nc.number(NC_GLOBAL, (std::string(key == std::string("step") ? "transfer_" : "") + key).c_str(),
+                  inv[key].get<double>());
+  }
+
+  // Global attributes.
+  const nlohmann::json& pv = run.provenance;
+  const std::string version = json_text(pv, "hybgen_version");
+  nc.text(NC_GLOBAL, "Conventions", "CF-1.8");
+  nc.text(NC_GLOBAL, "title",
+          run.model + ": " + (series ? "density under the hybrid flow" : "invariant density") +
+              " (" + run.method + ")");
+  nc.text(NC_GLOBAL, "source", "hybgen" + (version.empty() ? "" : " " + version));
+  nc.text(NC_GLOBAL, "history", utc_now() + " hybgen run " + json_text(pv, "model_path"));
+  nc.text(NC_GLOBAL, "model", run.model);
+  nc.text(NC_GLOBAL, "method", run.method);
+  for (const char* key : {"model_path", "model_sha256", "model_text", "equations"})
+    if (const std::string v = json_text(pv, key); !v.empty()) nc.text(NC_GLOBAL, key, v);
+  if (run.summary.is_object() && run.summary.contains("settings"))
+    nc.text(NC_GLOBAL, "settings", run.summary["settings"].dump());
+  for (std::size_t j = 0; j < run.params.size(); ++j)
+    nc.number(NC_GLOBAL, ("parameter_" + run.param_names[j]).c_str(), run.params[j]);
+  nc.end_definitions();
+
+  // Data.
+  for (std::size_t a = 0; a < N; ++a) {
+    std::vector<double> x(static_cast<std::size_t>(run.axes[a].n));
+    for (int i = 0; i < run.axes[a].n; ++i) x[static_cast<std::size_t>(i)] = axis_node(run.axes[a], i);
+    nc.put(axis_vars[a], x);
+  }
+  if (series) nc.put(time_var, run.times);
+  if (n_mode > 1) nc.put_strings(mode_var, run.mode_names);
+  for (std::size_t k = 0; k < run.n_frame(); ++k) {
+    std::vector<std::size_t> start, count;
+    if (series) start.push_back(k), count.push_back(1);
+    const std::vector<double> total = run.total_density(k);
+    std::vector<std::size_t> s = start, c = count;
+    for (const GridAxis& a : run.axes) s.push_back(0), c.push_back(static_cast<std::size_t>(a.n));
+    nc.put(density, s, c, total.data());
+    if (by_mode >= 0)
+      for (std::size_t m = 0; m < n_mode; ++m) {
+        std::vector<std::size_t> sm = start, cm = count;
+        sm.push_back(m), cm.push_back(1);
+        for (const GridAxis& a : run.axes)
+          sm.push_back(0), cm.push_back(static_cast<std::size_t>(a.n));
+        nc.put(by_mode, sm, cm, run.mode_density(k, m).data());
+      }
+  }
+  for (const Series& s : budget) nc.put(s.var, s.values ? *s.values : s.owned);
+  if (mass0_var >= 0) nc.put(mass0_var, std::vector<double>{b.mass0});
+  if (re_var >= 0) {
+    nc.put(re_var, re);
+    nc.put(im_var, im);
+    nc.put(abs_var, ab);
+  }
+  nc.close();
+}
+
+}  // namespace hybgen::rt
