@@ -1,9 +1,12 @@
 # Every dependency comes from a Debian package; nothing is downloaded.
 find_package(PkgConfig REQUIRED)
 pkg_check_modules(GINAC REQUIRED IMPORTED_TARGET ginac>=1.8)
-find_package(PNG REQUIRED)
 # run.nc (runtime/src/io/netcdf.cpp): NetCDF-4 through Debian's libnetcdf.
 pkg_check_modules(NETCDF REQUIRED IMPORTED_TARGET netcdf>=4.6)
+# The pictures (runtime/src/io/figures.cpp): PNG, PDF and SVG from one drawing.
+pkg_check_modules(CAIRO REQUIRED IMPORTED_TARGET cairo>=1.16)
+# animation.gif (runtime/src/io/animation.cpp): giflib (Debian ships no pkg-config file).
+find_package(GIF 5 REQUIRED)
 find_package(OpenMP REQUIRED COMPONENTS CXX)
 find_package(CLI11 REQUIRED)
 find_package(nlohmann_json 3.10 REQUIRED)

@@ -7,7 +7,11 @@
 #   P/lib/cmake/hybgen/            hybgenConfig.cmake: find_package(hybgen) gives hybgen::rt,
 #                                  hybgen::io and hybgen::runner
 # An installed hybgen finds its runtime beside itself (generator/src/build.cpp,
-# runtime_location).
+# runtime_location). Sanitized and fuzzing builds (cmake/HybgenSanitizers.cmake) check
+# code; they are not installed.
+if(HYBGEN_SANITIZE OR HYBGEN_FUZZ)
+  return()
+endif()
 install(TARGETS hybgen RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 install(DIRECTORY runtime/include/hybgen DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 set_target_properties(hybgen_rt PROPERTIES EXPORT_NAME rt)

@@ -13,8 +13,11 @@ cd "$(dirname "$0")/.."
 
 # What hybgen and its runtime build with (every run needs these).
 packages=(build-essential cmake ninja-build pkg-config libginac-dev libcln-dev libeigen3-dev
-          libspectra-dev libcli11-dev nlohmann-json3-dev libpng-dev libssl-dev
-          libnetcdf-dev)  # run.nc (runtime/src/io/netcdf.cpp)
+          libspectra-dev libcli11-dev nlohmann-json3-dev libssl-dev
+          libnetcdf-dev                  # run.nc (runtime/src/io/netcdf.cpp)
+          libcairo2-dev fonts-dejavu-core  # pictures (runtime/src/io/figures.cpp)
+          libgif-dev                     # animation.gif (runtime/src/io/animation.cpp)
+          libjs-katex)                   # report.html's equations (runtime/src/io/report.cpp)
 # What the tests, the benchmarks and CI need besides (--tests).
 if ((${#targets[@]} == 0)); then
   packages+=(libgtest-dev libbenchmark-dev
@@ -22,6 +25,7 @@ if ((${#targets[@]} == 0)); then
              python3-numpy                  # an independent reader of .npy (tests/rt/test_output.cpp)
              python3-xarray python3-netcdf4 # an independent reader of run.nc (tests/e2e/test_run_nc.cpp)
              texlive-latex-base             # pdflatex: derive --format latex --standalone (tests/e2e/test_latex.cpp)
+             chromium                       # headless: report.html (tests/e2e/test_report.cpp)
              clang libclang-rt-14-dev)      # clang + compiler-rt: libFuzzer harnesses (fuzz/run.sh)
 fi
 missing=()

@@ -87,11 +87,31 @@ SwapResult swap_into_place(const fs::path& staging, const fs::path& target, cons
   return {};
 }
 
+namespace {
+
+/// The first entry of a run's report assets directory (recursively) that a run did not
+/// write, or "".
+std::string foreign_asset(const fs::path& dir) {
+  std::error_code ec;
+  for (const auto& e : fs::recursive_directory_iterator(dir, ec)) {
+    if (e.is_directory(ec)) continue;
+    if (!e.is_regular_file(ec) || !rt::is_report_asset_extension(e.path().extension().string()))
+      return fs::relative(e.path(), dir.parent_path()).string();
+  }
+  return ec ? dir.filename().string() : "";
+}
+
+}  // namespace
+
 std::string foreign_entry(const fs::path& dir, OutputKind kind) {
   std::error_code ec;
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     const std::string n = e.path().filename().string();
     const std::string x = e.path().extension().string();
+    if (n == rt::kReportAssetsDirectory && e.is_directory(ec) && !e.is_symlink(ec)) {
+      if (const std::string f = foreign_asset(e.path()); !f.empty()) return f;
+      continue;
+    }
     if (kind == OutputKind::Sweep && e.is_directory(ec)) {
       // A point's directory: its own entries must be a run's.
       if (const std::string f = foreign_entry(e.path(), OutputKind::Run); !f.empty())

@@ -83,6 +83,7 @@ nlohmann::json run_provenance(const Frontend& fe) {
           {"model_text", fe.src.text()},
           {"model_sha256", sha256_hex(fe.src.text())},
           {"equations", derive_text(fe.sys)},
+          {"equations_latex", derive_latex(fe.sys)},
           {"hybgen_version", generator_version()}};
 }
 

@@ -137,7 +137,7 @@ TEST(Settings, AWordListTakesEachWordOnceInAnyOrder) {
   EXPECT_TRUE(s.includes<"outputs">("npy"));
   EXPECT_TRUE(s.includes<"outputs">("netcdf"));
   EXPECT_FALSE(s.includes<"outputs">("png"));
-  for (const char* bad : {"outputs=npy+npy", "outputs=npy+", "outputs=+npy", "outputs=npy+gif"}) {
+  for (const char* bad : {"outputs=npy+npy", "outputs=npy+", "outputs=+npy", "outputs=npy+mp4"}) {
     Model b = model();
     EXPECT_THROW(apply_overrides(b, {bad}), UsageError) << bad;
   }

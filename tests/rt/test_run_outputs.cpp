@@ -77,10 +77,11 @@ Settings with_outputs(const std::string& list) {
 TEST_F(RunOutputs, EveryKindInFourDimensionsWithTwoModes) {
   const WrittenOutputs w =
       write_run_outputs(rec_, with_outputs("netcdf+npy+vti+png"), dir_.string(), true);
+  EXPECT_TRUE(fs::exists(dir_ / "budget.png"));
   EXPECT_EQ(w.netcdf, "run.nc");
   ASSERT_EQ(w.npy.size(), 3u);
   ASSERT_EQ(w.mode_npy.at("right").size(), 3u);
-  EXPECT_EQ(w.png.size(), 3u);
+  EXPECT_EQ(w.figures.size(), 4u);  // 3 frames and the budget
   EXPECT_EQ(w.vti.size(), 3u);
   EXPECT_EQ(w.pvd, "u.pvd");
   ASSERT_EQ(w.notes.size(), 1u);  // 4-D: the images hold a 3-D marginal, and say so

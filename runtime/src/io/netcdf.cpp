@@ -162,8 +162,7 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     if (by_mode) chunk.push_back(1);
     for (const GridAxis& a : run.axes) chunk.push_back(static_cast<std::size_t>(a.n));
     nc.check(nc_def_var_chunking(nc.id(), v, NC_CHUNKED, chunk.data()), "chunk a variable");
-    if (deflate > 0)
-      nc.check(nc_def_var_deflate(nc.id(), v, 1, 1, deflate), "compress a variable");
+    if (deflate > 0) nc.check(nc_def_var_deflate(nc.id(), v, 1, 1, deflate), "compress a variable");
     nc.text(v, "long_name", long_name);
     nc.text(v, "units", "1");
     nc.text(v, "description",
@@ -172,8 +171,8 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     return v;
   };
   const std::string what = series ? "density" : "invariant density";
-  const int density = define_density(names("density"), false,
-                                     n_mode > 1 ? what + ", summed over the modes" : what);
+  const int density =
+      define_density(names("density"), false, n_mode > 1 ? what + ", summed over the modes" : what);
   const int by_mode =
       n_mode > 1 ? define_density(names("density_by_mode"), true, what + " of each mode") : -1;
 
@@ -199,11 +198,11 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     add("atom_error", "estimated error of atom",
         run.atom_error.size() == K ? run.atom_error : b.atom_error);
     Series defect{names("unaccounted"),
-                  "initial_mass - mass - outflow - atom: what no term accounts for",
-                  nullptr, budget_defect(b), -1};
+                  "initial_mass - mass - outflow - atom: what no term accounts for", nullptr,
+                  budget_defect(b), -1};
     budget.push_back(std::move(defect));
-    Series defect_error{names("unaccounted_error"), "sum of the terms' estimated errors",
-                        nullptr, budget_defect_error(b), -1};
+    Series defect_error{names("unaccounted_error"), "sum of the terms' estimated errors", nullptr,
+                        budget_defect_error(b), -1};
     budget.push_back(std::move(defect_error));
     for (Series& s : budget) {
       s.var = nc.var(s.name, NC_DOUBLE, {time_dim});
@@ -219,9 +218,9 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   }
 
   // The invariant density's spectrum.
-  const nlohmann::json inv =
-      run.summary.is_object() && run.summary.contains("invariant") ? run.summary["invariant"]
-                                                                   : nlohmann::json();
+  const nlohmann::json inv = run.summary.is_object() && run.summary.contains("invariant")
+                                 ? run.summary["invariant"]
+                                 : nlohmann::json();
   std::vector<double> re, im, ab;
   int re_var = -1, im_var = -1, abs_var = -1;
   if (inv.is_object() && inv.contains("eigenvalues")) {
@@ -239,7 +238,8 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     nc.text(abs_var, "long_name", "modulus of an eigenvalue of the transfer operator");
     for (const char* key : {"spectral_gap", "decay_rate", "step"})
       if (inv.contains(key) && inv[key].is_number())
-        nc.number(NC_GLOBAL, (std::string(key == std::string("step") ? "transfer_" : "") + key).c_str(),
+        nc.number(NC_GLOBAL,
+                  (std::string(key == std::string("step") ? "transfer_" : "") + key).c_str(),
                   inv[key].get<double>());
   }
 
@@ -265,7 +265,8 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   // Data.
   for (std::size_t a = 0; a < N; ++a) {
     std::vector<double> x(static_cast<std::size_t>(run.axes[a].n));
-    for (int i = 0; i < run.axes[a].n; ++i) x[static_cast<std::size_t>(i)] = axis_node(run.axes[a], i);
+    for (int i = 0; i < run.axes[a].n; ++i)
+      x[static_cast<std::size_t>(i)] = axis_node(run.axes[a], i);
     nc.put(axis_vars[a], x);
   }
   if (series) nc.put(time_var, run.times);

@@ -4,16 +4,20 @@
 
 #include <omp.h>
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <mutex>
 #include <string>
 #include <vector>
 
+#include "hybgen/rt/io/figures.hpp"
 #include "hybgen/rt/io/netcdf.hpp"
 #include "hybgen/rt/io/npy.hpp"
-#include "hybgen/rt/io/png.hpp"
 #include "hybgen/rt/io/progress.hpp"
+#include "hybgen/rt/io/report.hpp"
 #include "hybgen/rt/io/vti.hpp"
 
 namespace hybgen::rt {
@@ -40,13 +44,6 @@ class FirstError {
   std::mutex mutex_;
   std::exception_ptr error_;
 };
-
-/// t with three decimals (a frame's title).
-std::string fixed3(double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, "%.3f", v);
-  return b;
-}
 
 /// The marginal of `u` (C order, `shape`) on the axes `keep`, integrating the others with
 /// the trapezoid rule of their grid axes.
@@ -80,35 +77,6 @@ std::vector<double> marginal(const std::vector<double>& u, const std::vector<Gri
     out[o] += weight * u[i];
   }
   return out;
-}
-
-/// The frame's picture: a line plot (1-D), a heat map (2-D), the marginal on the first two
-/// axes (3-D and more).
-void write_picture(const RunRecord& run, std::size_t k, const std::vector<double>& total,
-                   const std::string& path) {
-  const std::size_t N = run.axes.size();
-  std::string title = run.model + "   ";
-  title += run.times.empty() ? std::string("invariant density (transfer operator)")
-                             : run.method + "   t = " + fixed3(run.times[k]);
-  if (run.n_mode() > 1) title += "   (sum over modes)";
-  const auto n = [&](std::size_t a) { return static_cast<std::size_t>(run.axes[a].n); };
-  if (N == 1) {
-    std::vector<double> xs(n(0));
-    for (std::size_t i = 0; i < xs.size(); ++i)
-      xs[i] = axis_node(run.axes[0], static_cast<int>(i));
-    write_lineplot_png(path, xs, total, run.axis_names[0], "u", title);
-  } else if (N == 2) {
-    write_heatmap_png(path, total.data(), n(0), n(1), run.axis_names[0], run.axes[0].min,
-                      run.axes[0].max, run.axis_names[1], run.axes[1].min, run.axes[1].max, title,
-                      run.outside.empty() ? nullptr : run.outside.data());
-  } else {
-    const std::vector<double> m = marginal(total, run.axes, {0, 1});
-    std::string others;
-    for (std::size_t a = 2; a < N; ++a) others += (a > 2 ? ", " : "") + run.axis_names[a];
-    write_heatmap_png(path, m.data(), n(0), n(1), run.axis_names[0], run.axes[0].min,
-                      run.axes[0].max, run.axis_names[1], run.axes[1].min, run.axes[1].max,
-                      title + "   marginal over " + others);
-  }
 }
 
 /// The frame's VTK image: the summed density and each mode's (several modes) on the grid,
@@ -146,21 +114,63 @@ void write_image(const RunRecord& run, std::size_t k, const std::vector<double>&
 
 }  // namespace
 
+std::string resolution_warning(const RunRecord& run) {
+  const MassBudget& b = run.budget;
+  const std::size_t K = run.times.size();
+  if (K == 0 || b.mass.size() != K || b.mass_error.size() != K || !(b.mass0 > 0)) return "";
+  // Trapezoid weights of the whole grid (a product over the axes).
+  std::vector<std::vector<double>> w;
+  for (const GridAxis& a : run.axes) w.push_back(trapezoid_rule(a).weights);
+  const std::size_t N = run.axes.size();
+  double worst = 0, worst_sum = 0;
+  std::size_t worst_k = K;
+  for (std::size_t k = 0; k < K; ++k) {
+    const std::vector<double> u = run.total_density(k);
+    double sum = 0;
+    for (std::size_t i = 0; i < u.size(); ++i) {
+      std::size_t rem = i;
+      double weight = 1;
+      for (std::size_t a = N; a-- > 0;) {
+        weight *= w[a][rem % static_cast<std::size_t>(run.axes[a].n)];
+        rem /= static_cast<std::size_t>(run.axes[a].n);
+      }
+      sum += weight * u[i];
+    }
+    const double gap = std::fabs(sum - b.mass[k]);
+    if (gap > 0.05 * b.mass0 && gap > 10 * b.mass_error[k] && gap > worst)
+      worst = gap, worst_sum = sum, worst_k = k;
+  }
+  if (worst_k == K) return "";
+  char msg[640];
+  std::snprintf(msg, sizeof msg,
+                "the grid under-resolves the density: at t = %g the nodes' trapezoid sum is %.4g "
+                "but the mass is %.4g +/- %.2g (adaptive cubature), so the density has features "
+                "narrower than the grid's spacing and the pictures and run.nc show node samples "
+                "of them (speckle), not their shape; refine the grid, or use cell averages: "
+                "--set method=transfer --set scheme=cell, or method=particles",
+                run.times[worst_k], worst_sum, b.mass[worst_k], b.mass_error[worst_k]);
+  return msg;
+}
+
 nlohmann::json WrittenOutputs::to_json() const {
   nlohmann::json j = nlohmann::json::object();
   if (!netcdf.empty()) j["netcdf"] = netcdf;
   if (!npy.empty()) j["npy"] = npy;
   if (!mode_npy.empty()) j["mode_npy"] = mode_npy;
-  if (!png.empty()) j["png"] = png;
+  if (!figures.empty()) j["figures"] = figures;
   if (!vti.empty()) j["vti"] = vti;
   if (!pvd.empty()) j["pvd"] = pvd;
+  if (!report.empty()) j["report"] = report;
   return j;
 }
 
 std::string WrittenOutputs::describe(const std::vector<std::string>& frame_names) const {
   std::string kinds;
   if (!npy.empty()) kinds += "/.npy";
-  if (!png.empty()) kinds += "/.png";
+  for (const char* ext : {".png", ".svg"})
+    if (std::any_of(figures.begin(), figures.end(),
+                    [&](const std::string& f) { return f.ends_with(std::string(ext)); }))
+      kinds += std::string("/") + ext;
   if (!vti.empty()) kinds += "/.vti";
   std::string out = netcdf;
   if (!kinds.empty() && !frame_names.empty()) {
@@ -169,6 +179,11 @@ std::string WrittenOutputs::describe(const std::vector<std::string>& frame_names
                                    : frame_names.front() + ".." + frame_names.back();
     out += " " + kinds.substr(1);
   }
+  for (const std::string& f : figures)
+    if (f.ends_with(".pdf") || f.ends_with(".gif") || f.rfind("budget", 0) == 0 ||
+        f.rfind("spectrum", 0) == 0)
+      out += ", " + f;
+  if (!report.empty()) out += ", " + report;
   if (!pvd.empty()) out += ", " + pvd;
   return out;
 }
@@ -181,7 +196,13 @@ WrittenOutputs write_run_outputs(const RunRecord& run, const Settings& settings,
   for (const GridAxis& a : run.axes) shape.push_back(static_cast<std::size_t>(a.n));
   const bool netcdf = settings.includes<"outputs">("netcdf");
   const bool npy = settings.includes<"outputs">("npy");
-  const bool png = settings.includes<"outputs">("png");
+  FigureRequest figures;
+  figures.png = settings.includes<"outputs">("png");
+  figures.pdf = settings.includes<"outputs">("pdf");
+  figures.svg = settings.includes<"outputs">("svg");
+  figures.gif = settings.includes<"outputs">("gif");
+  const bool html = settings.includes<"outputs">("html");
+  figures.scale = settings.word<"figure_scale">();
   const bool vti = settings.includes<"outputs">("vti");
 
   WrittenOutputs w;
@@ -190,12 +211,13 @@ WrittenOutputs write_run_outputs(const RunRecord& run, const Settings& settings,
     if (npy) {
       w.npy.push_back(base + ".npy");
       if (n_mode > 1)
-        for (const std::string& m : run.mode_names) w.mode_npy[m].push_back(base + "_" + m + ".npy");
+        for (const std::string& m : run.mode_names)
+          w.mode_npy[m].push_back(base + "_" + m + ".npy");
     }
-    if (png) w.png.push_back(base + ".png");
     if (vti) w.vti.push_back(base + ".vti");
   }
   if (netcdf) w.netcdf = "run.nc";
+  if (std::string why = resolution_warning(run); !why.empty()) w.warnings.push_back(why);
   if (vti && !run.times.empty()) w.pvd = "u.pvd";
   if (vti && run.axes.size() > 3)
     w.notes.push_back("the .vti images hold the marginal density on the first three axes (" +
@@ -204,7 +226,7 @@ WrittenOutputs write_run_outputs(const RunRecord& run, const Settings& settings,
 
   // Frames over threads; run.nc (NetCDF is not thread-safe: one writer) beside them.
   FirstError error;
-  Progress progress("writing outputs", K + (netcdf ? 1 : 0), quiet);
+  Progress progress("writing outputs", K + (netcdf ? 1 : 0) + 1, quiet);
 #pragma omp parallel
   {
 #pragma omp single nowait
@@ -224,14 +246,28 @@ WrittenOutputs write_run_outputs(const RunRecord& run, const Settings& settings,
               write_npy((out / (base + "_" + run.mode_names[m] + ".npy")).string(),
                         run.mode_density(k, m).data(), shape);
         }
-        if (png) write_picture(run, k, total, (out / (base + ".png")).string());
         if (vti) write_image(run, k, total, (out / (base + ".vti")).string());
       });
       progress.advance();
     }
   }
-  progress.finish();
   error.rethrow();
+  // The pictures: frames in parallel inside (one colour scale for the run needs every frame).
+  if (figures.png || figures.pdf || figures.svg || figures.gif) {
+    write_figures(run, figures, dir);
+    w.figures = figures.out;
+  }
+  // The report, last: it links what was written.
+  if (html) {
+    std::vector<std::string> files = w.figures;
+    if (!w.netcdf.empty()) files.push_back(w.netcdf);
+    if (!w.pvd.empty()) files.push_back(w.pvd);
+    if (const std::string why = write_report(run, files, dir); !why.empty())
+      w.warnings.push_back(why);
+    w.report = "report.html";
+  }
+  progress.advance();
+  progress.finish();
   if (!w.pvd.empty()) write_pvd((out / w.pvd).string(), w.vti, run.times);
   return w;
 }

@@ -37,7 +37,8 @@ nlohmann::json run_config(const Model& m, const std::string& out_dir,
 
 /// What a run's files record of where they came from (the configuration's `provenance`,
 /// written into run.nc's attributes by runtime/src/io/netcdf.cpp): the model's path, text
-/// and SHA-256, the derived equations as `hybgen derive` prints them, and hybgen's version.
+/// and SHA-256, the derived equations as `hybgen derive` prints them (text and LaTeX: the
+/// report typesets the LaTeX), and hybgen's version.
 nlohmann::json run_provenance(const Frontend& fe);
 
 /// If hybgen has been interrupted (process.hpp), abandon `tx`'s staging directory, say that

@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <exception>
 #include <filesystem>
 #include <fstream>
@@ -223,15 +224,29 @@ int run_model(const RunConfig& c) {
     if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
   }
   if (!any_outside) rec.outside.clear();
+  // Every guard's s at the nodes: the pictures draw the surfaces s = 0.
+  for (int g = 0; g < M::n_guard; ++g) {
+    GuardField f{M::guard_names[static_cast<std::size_t>(g)], std::vector<double>(n_node),
+                 M::guards[static_cast<std::size_t>(g)].from};
+    for (std::size_t i = 0; i < n_node; ++i) {
+      const auto y = grid.node(i);
+      f.values[i] = M::guard_surface(g, y.data(), par);
+    }
+    rec.guards.push_back(std::move(f));
+  }
   rec.budget = res.budget;
   rec.atom_error = res.atom_error;
   rec.provenance = c.provenance;
   rec.summary = nlohmann::json::object();
   rec.summary["settings"] = c.settings.to_json();
+  rec.summary["seconds"] = c.seconds.is_object() ? c.seconds : nlohmann::json::object();
+  rec.summary["seconds"]["solve"] = res.solve_s;
+  rec.summary["seconds"]["budget"] = res.budget_s;
   for (const auto& [key, value] : res.summary.items()) rec.summary[key] = value;
   const DeferredDurability durability(c.out_dir);
   const WrittenOutputs written = write_run_outputs(rec, c.settings, c.out_dir, c.quiet);
   for (const auto& note : written.notes) std::fprintf(stderr, "hybgen: note: %s\n", note.c_str());
+  for (const auto& w : written.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
   const double output_s = std::chrono::duration<double>(Clock::now() - t2).count();
 
   // summary.json (docs/design.md run contract, extended with the atom, per-mode files and the
@@ -253,6 +268,7 @@ int run_model(const RunConfig& c) {
   s["files"] = res.frame_times.empty() ? std::vector<std::string>{} : written.npy;
   if (M::n_mode > 1 && !written.mode_npy.empty()) s["mode_files"] = written.mode_npy;
   s["outputs"] = written.to_json();
+  if (!written.warnings.empty()) s["output_warnings"] = written.warnings;
   s["settings"] = rec.summary["settings"];
   s["modes"] = std::vector<std::string>(M::mode_names.begin(), M::mode_names.end());
   nlohmann::json params = nlohmann::json::object();
@@ -350,7 +366,12 @@ int runner_main(int argc, char** argv) {
     return exit_status(ExitCode::UsageError);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "hybgen: error: %s\n", e.what());
-    return exit_status(ExitCode::Internal);
+    // Ended without the exit handlers: after a failed write of run.nc (a full disk), HDF5's
+    // own handler (H5_term_library) crashes on the file NetCDF could not close. Nothing of
+    // this process needs cleaning: hybgen removes its staging directory
+    // (tests/e2e/test_failures.cpp, AFullDiskIsAClearErrorAndKeepsThePreviousOutputs).
+    std::fflush(nullptr);
+    std::_Exit(exit_status(ExitCode::Internal));
   }
 }
 

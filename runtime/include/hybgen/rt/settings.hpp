@@ -88,10 +88,16 @@ inline constexpr std::array kSettings = {
     SettingSpec{"seed", SettingType::integer, 1, "", 0, kMaxExactInteger, false, "", "particles",
                 "random seed (counter-based streams: results do not depend on "
                 "the number of threads)"},
-    SettingSpec{"outputs", SettingType::words, 0.0, "netcdf+png", 0, 0, false, "netcdf|png|npy|vti",
-                "all",
-                "files of a run, joined by '+': run.nc (netcdf), pictures, .npy arrays, .vti "
+    SettingSpec{"outputs", SettingType::words, 0.0, "netcdf+png+pdf+gif+html", 0, 0, false,
+                "netcdf|png|pdf|svg|gif|html|npy|vti", "all",
+                "files of a run, joined by '+': run.nc (netcdf), pictures (png: one per frame; "
+                "pdf: one page per frame; svg), animation.gif, report.html, .npy arrays, .vti "
                 "images with a .pvd collection (summary.json always)"},
+    SettingSpec{"figure_scale", SettingType::word, 0.0, "auto", 0, 0, false, "auto|linear|log",
+                "all",
+                "colour scale of the pictures, fixed for the whole run: linear from 0, log over "
+                "four decades, or auto (log when the maximum is over 100 times the 99th "
+                "percentile)"},
     SettingSpec{"threads", SettingType::integer, 0, "", 0, 4096, false, "", "all",
                 "worker threads of the runner (0: $OMP_NUM_THREADS, else one per core)"},
     SettingSpec{"max_expr_nodes", SettingType::integer, 200000, "", 100, 1e12, false, "", "derive",

@@ -21,6 +21,14 @@
 
 namespace hybgen::rt {
 
+/// A guard's surface function s sampled at the grid's nodes (the surface is s = 0): the
+/// pictures draw its zero contour.
+struct GuardField {
+  std::string name;            ///< Guard name.
+  std::vector<double> values;  ///< s at every node, C order.
+  int from = -1;               ///< The mode it fires from (-1: every mode).
+};
+
 /// A finished run, as its writers see it.
 struct RunRecord {
   std::string model;                     ///< Model name.
@@ -35,10 +43,12 @@ struct RunRecord {
   std::vector<std::string> frame_names;  ///< File stem per frame (u_0000, …, or invariant).
   std::span<const double> density;       ///< [frame][mode][node] (see the invariant above).
   std::vector<std::uint8_t> outside;     ///< 1 at nodes outside the support (empty: none).
+  std::vector<GuardField> guards;        ///< Every guard's s at the nodes.
   MassBudget budget;                     ///< Per frame time (empty: no budget).
   std::vector<double> atom_error;        ///< Estimated |error| of budget.atom (may be empty).
   nlohmann::json summary;                ///< summary.json as written (method blocks, timings).
   /// From the configuration: model_text, model_path, model_sha256, equations (text),
+  /// equations_latex,
   /// hybgen_version (generator/src/run.cpp, run_provenance); may be empty.
   nlohmann::json provenance;
 

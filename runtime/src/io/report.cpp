@@ -1,0 +1,282 @@
+// report.html (hybgen/rt/io/report.hpp).
+
+#include "hybgen/rt/io/report.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <system_error>
+#include <vector>
+
+#include "hybgen/rt/io/atomic_file.hpp"
+#include "hybgen/rt/io/run_files.hpp"
+
+namespace hybgen::rt {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+/// `s` safe in HTML text and attribute values.
+std::string html(const std::string& s) {
+  std::string o;
+  for (char c : s) switch (c) {
+      case '&':
+        o += "&amp;";
+        break;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      case '\'':
+        o += "&#39;";
+        break;
+      default:
+        o += c;
+    }
+  return o;
+}
+
+std::string number(double v) {
+  char b[40];
+  std::snprintf(b, sizeof b, "%.6g", v);
+  return b;
+}
+
+std::string text_of(const nlohmann::json& j, const char* key) {
+  return j.is_object() && j.contains(key) && j[key].is_string() ? j[key].get<std::string>() : "";
+}
+
+bool has(const std::vector<std::string>& files, const std::string& f) {
+  return std::find(files.begin(), files.end(), f) != files.end();
+}
+
+/// Copy KaTeX's stylesheet, script and woff2 fonts from `from` into `to`; false when
+/// `from` has no KaTeX.
+bool copy_katex(const fs::path& from, const fs::path& to) {
+  std::error_code ec;
+  if (!fs::exists(from / "katex.min.css", ec) || !fs::exists(from / "katex.min.js", ec))
+    return false;
+  fs::create_directories(to / "fonts");
+  const auto copy = [&](const fs::path& a, const fs::path& b) {
+    // Through the symlinks Debian installs (katex.min.js -> katex.js, fonts -> ../../fonts).
+    fs::copy_file(fs::canonical(a), b, fs::copy_options::overwrite_existing);
+  };
+  copy(from / "katex.min.css", to / "katex.min.css");
+  copy(from / "katex.min.js", to / "katex.min.js");
+  for (const auto& e : fs::directory_iterator(fs::canonical(from / "fonts")))
+    if (e.path().extension() == ".woff2") copy(e.path(), to / "fonts" / e.path().filename());
+  return true;
+}
+
+}  // namespace
+
+std::string katex_directory() {
+  if (const char* d = std::getenv("HYBGEN_KATEX_DIR"); d && *d) return d;
+  return "/usr/share/javascript/katex";
+}
+
+std::vector<std::string> display_equations(const std::string& latex) {
+  std::vector<std::string> out;
+  std::istringstream in(latex);
+  std::string line, current;
+  bool inside = false;
+  while (std::getline(in, line)) {
+    const std::size_t first = line.find_first_not_of(" \t");
+    const std::string trimmed = first == std::string::npos ? "" : line.substr(first);
+    if (trimmed.rfind('%', 0) == 0) continue;
+    if (trimmed == "\\[") {
+      inside = true;
+      current.clear();
+    } else if (trimmed == "\\]") {
+      if (inside) out.push_back(current);
+      inside = false;
+    } else if (inside) {
+      current += line + "\n";
+    }
+  }
+  return out;
+}
+
+std::string write_report(const RunRecord& run, const std::vector<std::string>& files,
+                         const std::string& dir) {
+  const fs::path out(dir);
+  std::string warning;
+  const bool katex = copy_katex(katex_directory(), out / std::string(kReportAssetsDirectory));
+  if (!katex)
+    warning = "report.html shows the equations as LaTeX source: KaTeX was not found in '" +
+              katex_directory() + "' (install Debian's libjs-katex, or set HYBGEN_KATEX_DIR)";
+  const nlohmann::json& pv = run.provenance;
+  const bool series = !run.times.empty();
+  std::vector<std::string> frames;  // the frame pictures the slider shows
+  for (const std::string& f : run.frame_names)
+    if (has(files, f + ".png")) frames.push_back(f + ".png");
+
+  std::ostringstream h;
+  h << "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+    << "<title>" << html(run.model) << " · hybgen report</title>\n";
+  if (katex)
+    h << "<link rel=\"stylesheet\" href=\"katex/katex.min.css\">\n"
+      << "<script src=\"katex/katex.min.js\"></script>\n";
+  h << R"(<style>
+body { font-family: "DejaVu Sans", sans-serif; max-width: 1150px; margin: 1.5em auto; color: #222; }
+h1 { margin-bottom: 0.2em; } h2 { border-bottom: 1px solid #ddd; padding-bottom: 0.2em; }
+.eq { overflow-x: auto; margin: 0.5em 0; }
+pre { background: #f6f6f6; padding: 0.8em; overflow-x: auto; font-size: 90%; }
+table { border-collapse: collapse; } td, th { padding: 2px 12px; border-bottom: 1px solid #e4e4e4; }
+td.n { text-align: right; font-variant-numeric: tabular-nums; }
+img { max-width: 100%; } .muted { color: #666; }
+#controls { display: flex; gap: 1em; align-items: center; } #slider { flex: 1; }
+</style>
+</head>
+<body>
+)";
+  h << "<h1>" << html(run.model) << "</h1>\n<p class=\"muted\">" << html(run.method) << " on ";
+  for (std::size_t a = 0; a < run.axes.size(); ++a) h << (a ? " × " : "") << run.axes[a].n;
+  h << " nodes in (";
+  for (std::size_t a = 0; a < run.axes.size(); ++a) h << (a ? ", " : "") << html(run.axis_names[a]);
+  h << ")";
+  h << ", " << run.n_mode() << " mode" << (run.n_mode() == 1 ? "" : "s");
+  if (series) h << ", " << run.times.size() << " output times to t = " << number(run.times.back());
+  h << " · "
+    << html(text_of(pv, "hybgen_version").empty() ? "hybgen"
+                                                  : "hybgen " + text_of(pv, "hybgen_version"))
+    << "</p>\n";
+
+  // The density.
+  h << "<h2>" << (series ? "The density" : "The invariant density") << "</h2>\n";
+  if (!frames.empty()) {
+    h << "<img id=\"frame\" src=\"" << html(frames.front()) << "\" alt=\"the density\">\n";
+    if (frames.size() > 1)
+      h << "<div id=\"controls\"><button id=\"play\">play</button>"
+        << "<input id=\"slider\" type=\"range\" min=\"0\" max=\"" << frames.size() - 1
+        << "\" value=\"0\"><span id=\"time\"></span></div>\n";
+  } else if (has(files, "animation.gif")) {
+    h << "<img src=\"animation.gif\" alt=\"the density, animated\">\n";
+  } else {
+    h << "<p class=\"muted\">No pictures were written (outputs=…+png).</p>\n";
+  }
+  if (has(files, "density.pdf"))
+    h << "<p class=\"muted\">Every frame for print: <a href=\"density.pdf\">density.pdf</a>"
+      << (has(files, "animation.gif") ? ", animated: <a href=\"animation.gif\">animation.gif</a>"
+                                      : "")
+      << ".</p>\n";
+
+  // The mass budget.
+  const MassBudget& b = run.budget;
+  if (series && b.mass.size() == run.times.size() && !b.mass.empty()) {
+    h << "<h2>Mass budget</h2>\n";
+    if (has(files, "budget.png")) h << "<img src=\"budget.png\" alt=\"the mass budget\">\n";
+    const std::size_t k = b.mass.size() - 1;
+    const std::vector<double> defect = budget_defect(b), bar = budget_defect_error(b);
+    h << "<table>\n<tr><th>at t = " << number(run.times[k])
+      << "</th><th>value</th><th>± estimate</th></tr>\n";
+    const auto row = [&](const char* name, double v, double e) {
+      h << "<tr><td>" << name << "</td><td class=\"n\">" << number(v) << "</td><td class=\"n\">"
+        << (e > 0 ? number(e) : "") << "</td></tr>\n";
+    };
+    row("initial mass", b.mass0, b.mass0_error);
+    row("mass in the box", b.mass[k], k < b.mass_error.size() ? b.mass_error[k] : 0);
+    row("outflow", b.outflow[k], k < b.outflow_error.size() ? b.outflow_error[k] : 0);
+    row("atom (Zeno)", b.atom[k], k < run.atom_error.size() ? run.atom_error[k] : 0);
+    row("unaccounted", defect[k], bar[k]);
+    h << "</table>\n";
+  }
+  if (run.summary.is_object() && run.summary.contains("invariant")) {
+    const nlohmann::json& inv = run.summary["invariant"];
+    h << "<h2>Spectrum</h2>\n";
+    if (has(files, "spectrum.png")) h << "<img src=\"spectrum.png\" alt=\"the spectrum\">\n";
+    h << "<p>spectral gap " << number(inv.value("spectral_gap", 0.0)) << ", decay rate "
+      << number(inv.value("decay_rate", 0.0)) << " per unit time</p>\n";
+  }
+
+  // The equations.
+  const std::vector<std::string> eqs = display_equations(text_of(pv, "equations_latex"));
+  h << "<h2>Derived equations</h2>\n";
+  for (const std::string& e : eqs)
+    h << "<div class=\"eq\" data-tex=\"" << html(e) << "\">"
+      << (katex ? "" : "<pre>" + html(e) + "</pre>") << "</div>\n";
+  if (const std::string t = text_of(pv, "equations"); !t.empty())
+    h << "<details><summary>As <code>hybgen derive</code> prints them</summary><pre>" << html(t)
+      << "</pre></details>\n";
+
+  // The model.
+  h << "<h2>Model</h2>\n<p class=\"muted\">" << html(text_of(pv, "model_path")) << " · SHA-256 "
+    << html(text_of(pv, "model_sha256")) << "</p>\n<pre>" << html(text_of(pv, "model_text"))
+    << "</pre>\n<p>Parameters: ";
+  for (std::size_t j = 0; j < run.params.size(); ++j)
+    h << (j ? ", " : "") << html(run.param_names[j]) << " = " << number(run.params[j]);
+  h << "</p>\n";
+
+  // Timings and files.
+  if (run.summary.is_object() && run.summary.contains("seconds")) {
+    h << "<h2>Timings</h2>\n<table>\n";
+    for (const auto& [key, value] : run.summary["seconds"].items())
+      if (value.is_number())
+        h << "<tr><td>" << html(key) << "</td><td class=\"n\">" << number(value.get<double>())
+          << " s</td></tr>\n";
+    h << "</table>\n";
+  }
+  h << "<h2>Files</h2>\n<p>";
+  bool first = true;
+  for (const std::string& f : files) {
+    if (f.ends_with(".png") && f.rfind("u_", 0) == 0) continue;  // the frames: the slider's
+    h << (first ? "" : " · ") << "<a href=\"" << html(f) << "\">" << html(f) << "</a>";
+    first = false;
+  }
+  h << (frames.empty() ? "" : " · frames u_0000.png … ")
+    << " · <a href=\"summary.json\">summary.json</a></p>\n";
+
+  // The script: frames, the slider, KaTeX, the self-test.
+  nlohmann::json jf = frames, jt = run.times;
+  h << "<script>\nconst frames = " << jf.dump() << ", times = " << jt.dump() << ";\n"
+    << R"(const img = document.getElementById('frame'), slider = document.getElementById('slider');
+const label = document.getElementById('time'), play = document.getElementById('play');
+function show(k) {
+  if (!img || !frames.length) return;
+  img.setAttribute('src', frames[k]);
+  if (label && times.length) label.textContent = 't = ' + times[k].toFixed(3);
+}
+if (slider) {
+  slider.addEventListener('input', () => show(+slider.value));
+  show(0);
+  let timer = null;
+  play.addEventListener('click', () => {
+    if (timer) { clearInterval(timer); timer = null; play.textContent = 'play'; return; }
+    play.textContent = 'pause';
+    timer = setInterval(() => { slider.value = (+slider.value + 1) % frames.length; show(+slider.value); },
+                        Math.max(40, 6000 / frames.length));
+  });
+}
+let rendered = 0, failed = 0;
+document.querySelectorAll('.eq').forEach(el => {
+  if (typeof katex === 'undefined') return;
+  try { katex.render(el.dataset.tex, el, {displayMode: true, throwOnError: true}); rendered++; }
+  catch (e) { failed++; el.innerHTML = '<pre>' + el.dataset.tex.replace(/</g, '&lt;') + '</pre>'; }
+});
+if (location.hash === '#selftest') {
+  const last = frames.length ? frames[frames.length - 1] : '';
+  if (slider) { slider.value = frames.length - 1; slider.dispatchEvent(new Event('input')); }
+  const shown = img ? img.getAttribute('src') : '';
+  const ok = rendered === document.querySelectorAll('.eq').length && rendered > 0 && failed === 0 &&
+             shown === last;
+  document.title = (ok ? 'selftest ok' : 'selftest failed') + ': ' + rendered + ' equations rendered, ' +
+                   failed + ' failed, frame ' + shown;
+}
+</script>
+</body>
+</html>
+)";
+  write_file_atomic((out / "report.html").string(), h.str());
+  return warning;
+}
+
+}  // namespace hybgen::rt
