@@ -12,18 +12,20 @@ export HYBGEN_CACHE="$tmp/cache"
 hybgen=build/bin/hybgen
 $hybgen build models/bouncing_ball.model >/dev/null 2>&1  # warm the cache
 printf '%-28s %9s %9s %9s %11s %8s\n' outputs solve budget output end-to-end files
-for outputs in netcdf+png+pdf netcdf netcdf+png netcdf+pdf npy netcdf+png+pdf+svg+npy+vti; do
+for outputs in default netcdf png pdf gif html npy netcdf+png+pdf+gif+html+svg+npy+vti; do
+  set_outputs=()
+  [[ $outputs == default ]] || set_outputs=(--set "outputs=$outputs")
   rows=()
   for _ in 1 2 3 4 5; do
     rm -rf "$tmp/out"
     t0=$(date +%s.%N)
-    $hybgen run models/bouncing_ball.model --set outputs=$outputs --out "$tmp/out" -q >/dev/null
+    $hybgen run models/bouncing_ball.model "${set_outputs[@]}" --out "$tmp/out" -q >/dev/null
     t1=$(date +%s.%N)
     rows+=("$(python3 -c "
 import json; s = json.load(open('$tmp/out/summary.json'))['seconds']
 print(f\"{s['solve']:.3f} {s['budget']:.3f} {s['output']:.3f} {$t1 - $t0:.3f}\")")")
   done
-  files=$(ls "$tmp/out" | wc -l)
+  files=$(find "$tmp/out" -type f | wc -l)
   python3 - "$outputs" "$files" "${rows[@]}" <<'PY'
 import statistics, sys
 name, files, rows = sys.argv[1], sys.argv[2], [list(map(float, r.split())) for r in sys.argv[3:]]

@@ -16,7 +16,7 @@ packages=(build-essential cmake ninja-build pkg-config libginac-dev libcln-dev l
           libspectra-dev libcli11-dev nlohmann-json3-dev libssl-dev
           libnetcdf-dev                  # run.nc (runtime/src/io/netcdf.cpp)
           libcairo2-dev fonts-dejavu-core  # pictures (runtime/src/io/figures.cpp)
-          libgif-dev                     # animation.gif (runtime/src/io/animation.cpp)
+          libpng-dev libgif-dev          # frames (figures.cpp) and animation.gif (animation.cpp)
           libjs-katex)                   # report.html's equations (runtime/src/io/report.cpp)
 # What the tests, the benchmarks and CI need besides (--tests).
 if ((${#targets[@]} == 0)); then

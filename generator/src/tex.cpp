@@ -12,10 +12,10 @@ namespace hybgen::gen {
 namespace {
 
 constexpr std::array<std::string_view, 32> kGreek = {
-    "alpha", "beta",  "gamma",  "delta",  "epsilon", "zeta",  "eta",   "theta",
-    "iota",  "kappa", "lambda", "mu",     "nu",      "xi",    "rho",   "sigma",
-    "tau",   "phi",   "chi",    "psi",    "omega",   "Gamma", "Delta", "Theta",
-    "Lambda", "Xi",   "Pi",     "Sigma",  "Phi",     "Psi",   "Omega", "pi"};
+    "alpha",  "beta",  "gamma",  "delta", "epsilon", "zeta",  "eta",   "theta",
+    "iota",   "kappa", "lambda", "mu",    "nu",      "xi",    "rho",   "sigma",
+    "tau",    "phi",   "chi",    "psi",   "omega",   "Gamma", "Delta", "Theta",
+    "Lambda", "Xi",    "Pi",     "Sigma", "Phi",     "Psi",   "Omega", "pi"};
 
 bool is_greek(std::string_view s) {
   return std::find(kGreek.begin(), kGreek.end(), s) != kGreek.end();

@@ -43,7 +43,9 @@ guard switch_on {
 )";
 
 /// Whether pdflatex is installed (scripts/setup.sh --tests installs texlive-latex-base).
-bool have_pdflatex() { return run_shell("command -v pdflatex >/dev/null 2>&1").code == 0; }
+bool have_pdflatex() {
+  return run_shell("command -v pdflatex >/dev/null 2>&1").code == 0;
+}
 
 /// Compile `tex` with pdflatex in `dir`; "" on success, else the log's error lines.
 std::string pdflatex(const fs::path& dir, const std::string& tex) {
@@ -56,13 +58,13 @@ std::string pdflatex(const fs::path& dir, const std::string& tex) {
   return r.out;
 }
 
-#define REQUIRE_PDFLATEX()                                                               \
-  do {                                                                                   \
-    if (!have_pdflatex()) {                                                              \
-      const char* ci = std::getenv("CI");                                                \
+#define REQUIRE_PDFLATEX()                                                                    \
+  do {                                                                                        \
+    if (!have_pdflatex()) {                                                                   \
+      const char* ci = std::getenv("CI");                                                     \
       if (ci && std::string(ci) == "true") FAIL() << "CI has no pdflatex (scripts/setup.sh)"; \
-      GTEST_SKIP() << "no pdflatex: install Debian's texlive-latex-base";                \
-    }                                                                                    \
+      GTEST_SKIP() << "no pdflatex: install Debian's texlive-latex-base";                     \
+    }                                                                                         \
   } while (0)
 
 TEST(Latex, NamesWithSubscriptsAndUnderscoresCompile) {

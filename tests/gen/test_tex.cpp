@@ -36,7 +36,8 @@ TEST(Tex, TheDotSitsOnTheBase) {
   EXPECT_EQ(hybgen::gen::tex_dot("T_{\\mathrm{room}}"), "\\dot{T}_{\\mathrm{room}}");
   EXPECT_EQ(hybgen::gen::tex_dot("\\theta"), "\\dot{\\theta}");
   EXPECT_EQ(hybgen::gen::tex_dot("\\zeta_{1}"), "\\dot{\\zeta}_{1}");
-  EXPECT_EQ(hybgen::gen::tex_dot("\\mathrm{x\\_}"), "\\dot{\\mathrm{x\\_}}");  // escaped: no subscript
+  EXPECT_EQ(hybgen::gen::tex_dot("\\mathrm{x\\_}"),
+            "\\dot{\\mathrm{x\\_}}");  // escaped: no subscript
 }
 
 }  // namespace

@@ -68,7 +68,6 @@ bool same_bits(double a, double b) {
   return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b);
 }
 
-
 // ----------------------------------------------------------------------------- npy
 
 void expect_npy_round_trip(const std::string& file, const std::vector<std::size_t>& shape,

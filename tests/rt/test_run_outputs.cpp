@@ -44,8 +44,8 @@ class RunOutputs : public ::testing::Test {
     for (std::size_t k = 0; k < 3; ++k)
       for (std::size_t m = 0; m < 2; ++m)
         for (std::size_t i = 0; i < n; ++i)
-          values_[(k * 2 + m) * n + i] = static_cast<double>(k) + 0.1 * static_cast<double>(m) +
-                                         1e-4 * static_cast<double>(i);
+          values_[(k * 2 + m) * n + i] =
+              static_cast<double>(k) + 0.1 * static_cast<double>(m) + 1e-4 * static_cast<double>(i);
     rec_.density = values_;
     rec_.budget.mass0 = 1;
     rec_.budget.mass = {1, 0.9, 0.7};
@@ -105,7 +105,8 @@ TEST_F(RunOutputs, EveryKindInFourDimensionsWithTwoModes) {
             std::string::npos)
       << pvd;
   const std::string vti = slurp("u_0001.vti");
-  for (const char* name : {"Name=\"u_marginal\"", "Name=\"u_marginal_left\"", "Name=\"u_marginal_right\""})
+  for (const char* name :
+       {"Name=\"u_marginal\"", "Name=\"u_marginal_left\"", "Name=\"u_marginal_right\""})
     EXPECT_NE(vti.find(name), std::string::npos) << name;
   EXPECT_NE(vti.find("WholeExtent=\"0 2 0 3 0 1\""), std::string::npos);  // axes a, b, c
 }

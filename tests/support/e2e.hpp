@@ -49,8 +49,8 @@ inline nlohmann::json read_json_file(const std::filesystem::path& p) {
 /// Debian interpreter comes first: a python3 earlier on PATH may lack Debian's packages.
 inline std::string python_with(const std::string& modules) {
   for (const char* candidate : {"/usr/bin/python3", "python3"})
-    if (std::system((std::string(candidate) + " -c 'import " + modules + "' >/dev/null 2>&1")
-                        .c_str()) == 0)
+    if (std::system(
+            (std::string(candidate) + " -c 'import " + modules + "' >/dev/null 2>&1").c_str()) == 0)
       return candidate;
   return "";
 }
@@ -60,13 +60,13 @@ inline std::string python_with(const std::string& modules) {
 /// Skip the test, saying why, when `python` is empty; in CI (CI=true), where
 /// scripts/setup.sh installs the readers, fail instead: a reader must not go missing
 /// silently.
-#define HYBGEN_REQUIRE_PYTHON(python, modules)                                       \
-  do {                                                                               \
-    if ((python).empty()) {                                                          \
-      const char* ci_ = std::getenv("CI");                                           \
-      if (ci_ && std::string(ci_) == "true")                                         \
-        FAIL() << "CI has no python3 with " << (modules) << " (scripts/setup.sh)";   \
+#define HYBGEN_REQUIRE_PYTHON(python, modules)                                         \
+  do {                                                                                 \
+    if ((python).empty()) {                                                            \
+      const char* ci_ = std::getenv("CI");                                             \
+      if (ci_ && std::string(ci_) == "true")                                           \
+        FAIL() << "CI has no python3 with " << (modules) << " (scripts/setup.sh)";     \
       GTEST_SKIP() << "no python3 with " << (modules) << ": install Debian's python3 " \
-                   << "packages (scripts/setup.sh --tests)";                         \
-    }                                                                                \
+                   << "packages (scripts/setup.sh --tests)";                           \
+    }                                                                                  \
   } while (0)

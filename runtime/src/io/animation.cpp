@@ -54,7 +54,9 @@ const std::vector<std::uint8_t>& nearest_table() {
     for (int r = 0; r < 32; ++r)
       for (int g = 0; g < 32; ++g)
         for (int b = 0; b < 32; ++b) {
-          const int R = r * 8 + 4, G = g * 8 + 4, B = b * 8 + 4;
+          // The bucket's centre, but its ends at 0 and 255: white stays white, black black.
+          const auto centre = [](int q) { return q == 31 ? 255 : q == 0 ? 0 : q * 8 + 4; };
+          const int R = centre(r), G = centre(g), B = centre(b);
           int best = 0;
           long best_d = std::numeric_limits<long>::max();
           for (int i = 0; i < 256; ++i) {
@@ -88,12 +90,22 @@ std::uint32_t gif_palette_colour(std::uint8_t i) {
   return palette()[i];
 }
 
-void write_gif(const std::string& path, const std::vector<Raster>& frames, int delay_cs) {
+IndexedFrame quantize(const Raster& r) {
+  const std::vector<std::uint8_t>& table = nearest_table();
+  IndexedFrame f{r.width, r.height, std::vector<std::uint8_t>(r.pixel.size())};
+  for (std::size_t i = 0; i < r.pixel.size(); ++i) {
+    const std::uint32_t c = r.pixel[i];
+    f.index[i] = table[((c >> 9) & 0x7C00u) | ((c >> 6) & 0x3E0u) | ((c >> 3) & 0x1Fu)];
+  }
+  return f;
+}
+
+void write_gif(const std::string& path, const std::vector<IndexedFrame>& frames, int delay_cs) {
   if (frames.empty()) throw std::invalid_argument("write_gif: no frames for " + path);
   const int w = frames.front().width, h = frames.front().height;
-  for (const Raster& f : frames)
+  for (const IndexedFrame& f : frames)
     if (f.width != w || f.height != h ||
-        f.pixel.size() != static_cast<std::size_t>(w) * static_cast<std::size_t>(h))
+        f.index.size() != static_cast<std::size_t>(w) * static_cast<std::size_t>(h))
       throw std::invalid_argument("write_gif: frames of different sizes for " + path);
   int err = 0;
   GifFileType* gif = EGifOpenFileName(path.c_str(), false, &err);
@@ -131,21 +143,35 @@ void write_gif(const std::string& path, const std::vector<Raster>& frames, int d
   check(EGifPutExtensionBlock(gif, sizeof loop, loop));
   check(EGifPutExtensionTrailer(gif));
   std::vector<GifPixelType> row(static_cast<std::size_t>(w));
+  const auto at = [w](const IndexedFrame& f, int x, int y) {
+    return f.index[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) +
+                   static_cast<std::size_t>(x)];
+  };
   for (std::size_t k = 0; k < frames.size(); ++k) {
+    const IndexedFrame& f = frames[k];
+    // The rectangle that changed since the frame before (the whole frame first); a frame
+    // equal to the one before is one pixel. DISPOSE_DO_NOT keeps the rest on screen.
+    int x0 = 0, y0 = 0, x1 = w - 1, y1 = h - 1;
+    if (k > 0) {
+      const IndexedFrame& p = frames[k - 1];
+      x0 = w, y0 = h, x1 = -1, y1 = -1;
+      for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+          if (at(f, x, y) != at(p, x, y))
+            x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+      if (x1 < 0) x0 = y0 = x1 = y1 = 0;
+    }
     GraphicsControlBlock gcb{DISPOSE_DO_NOT, false,
                              k + 1 == frames.size() ? std::max(delay_cs, 150) : delay_cs,
                              NO_TRANSPARENT_COLOR};
     GifByteType ext[4];
     EGifGCBToExtension(&gcb, ext);
     check(EGifPutExtension(gif, GRAPHICS_EXT_FUNC_CODE, 4, ext));
-    check(EGifPutImageDesc(gif, 0, 0, w, h, false, nullptr));
-    const Raster& f = frames[k];
-    for (int y = 0; y < h; ++y) {
-      for (int x = 0; x < w; ++x)
-        row[static_cast<std::size_t>(x)] =
-            gif_palette_index(f.pixel[static_cast<std::size_t>(y) * static_cast<std::size_t>(w) +
-                                      static_cast<std::size_t>(x)]);
-      check(EGifPutLine(gif, row.data(), w));
+    const int rw = x1 - x0 + 1, rh = y1 - y0 + 1;
+    check(EGifPutImageDesc(gif, x0, y0, rw, rh, false, nullptr));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) row[static_cast<std::size_t>(x - x0)] = at(f, x, y);
+      check(EGifPutLine(gif, row.data(), rw));
     }
   }
   GifFileType* g = gif;

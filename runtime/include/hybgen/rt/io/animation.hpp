@@ -18,9 +18,20 @@ struct Raster {
   std::vector<std::uint32_t> pixel;  ///< width × height.
 };
 
+/// A picture reduced to the animation's palette: one palette index per pixel.
+struct IndexedFrame {
+  int width = 0;                    ///< Pixels per row.
+  int height = 0;                   ///< Rows.
+  std::vector<std::uint8_t> index;  ///< width × height palette indices.
+};
+
+/// `r` in the palette's colours (each pixel its nearest entry); thread-safe.
+IndexedFrame quantize(const Raster& r);
+
 /// Writes `frames` (all of one size) to `path` as a looping GIF, `delay_cs` hundredths of a
-/// second per frame; throws std::runtime_error naming the file.
-void write_gif(const std::string& path, const std::vector<Raster>& frames, int delay_cs);
+/// second per frame; each frame after the first is stored as the rectangle where it differs
+/// from the one before. Throws std::runtime_error naming the file.
+void write_gif(const std::string& path, const std::vector<IndexedFrame>& frames, int delay_cs);
 
 /// The palette's entry nearest to `rgb` (0x00RRGGBB); the palette, for tests.
 std::uint8_t gif_palette_index(std::uint32_t rgb);
