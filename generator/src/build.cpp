@@ -157,8 +157,8 @@ const RuntimeLocation& runtime_location() {
 
 /// Hash of every runtime header (paths relative to the include root + content) and, when the
 /// runner links it, of the precompiled runtime library (a runner with the runtime inlined
-/// does not change with it).
-std::string runtime_fingerprint(bool library) {
+/// does not change with it). The libraries' hashes are remembered in `memo_dir`.
+std::string runtime_fingerprint(bool library, const fs::path& memo_dir) {
   std::vector<std::string> files;
   const RuntimeLocation& rt = runtime_location();
   const fs::path rt_include = fs::path(rt.include) / "hybgen" / "rt";
@@ -171,8 +171,8 @@ std::string runtime_fingerprint(bool library) {
     all += sha256_hex(read_file(f)) + '\n';
   }
   try {
-    if (library) all += "library\n" + sha256_hex(read_file(rt.runner_library)) + '\n';
-    all += "writers\n" + sha256_hex(read_file(rt.io_library)) + '\n';
+    if (library) all += "library\n" + file_sha256(rt.runner_library, memo_dir) + '\n';
+    all += "writers\n" + file_sha256(rt.io_library, memo_dir) + '\n';
   } catch (const std::exception& e) {
     throw BuildError(std::string("the runtime library is missing (build the targets "
                                  "hybgen_runner and hybgen_io): ") +
@@ -247,6 +247,30 @@ std::string runner_source(const GeneratedFiles& files, const std::string& model_
 
 }  // namespace
 
+std::string file_sha256(const std::string& path, const fs::path& memo_dir) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return sha256_hex(read_file(path));  // throws, naming it
+  const std::string stamp = std::to_string(st.st_size) + " " + std::to_string(st.st_mtim.tv_sec) +
+                            "." + std::to_string(st.st_mtim.tv_nsec) + " ";
+  const fs::path memo = memo_dir / (".file-" + sha256_hex(path).substr(0, 32) + ".sha256");
+  std::error_code ec;
+  if (fs::exists(memo, ec)) {
+    try {
+      const std::string m = read_file(memo.string());
+      if (m.size() == stamp.size() + 64 && m.compare(0, stamp.size(), stamp) == 0)
+        return m.substr(stamp.size());
+    } catch (const std::exception&) {  // unreadable: hash again
+    }
+  }
+  const std::string h = sha256_hex(read_file(path));
+  try {
+    fs::create_directories(memo_dir);
+    write_file_atomic(memo.string(), stamp + h);
+  } catch (const std::exception&) {  // a read-only cache still builds
+  }
+  return h;
+}
+
 std::string default_cache_dir() {
   if (const char* c = std::getenv("HYBGEN_CACHE"); c && *c) return c;
   if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/hybgen";
@@ -281,13 +305,13 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
   const std::string libs =
       (library ? shell_quote(runtime_location().runner_library) + " " : std::string()) +
       shell_quote(runtime_location().io_library) + " " + HYBGEN_RUNNER_LIBS;
+  const std::string root = options.cache_dir.empty() ? default_cache_dir() : options.cache_dir;
   const std::string key =
       sha256_hex(std::string(generator_version()) + '\n' + files.header + '\n' + main_src + '\n' +
-                 runtime_fingerprint(library) + '\n' + compiler_identity() + '\n' +
+                 runtime_fingerprint(library, fs::path(root)) + '\n' + compiler_identity() + '\n' +
                  runner_target() + '\n' + flags + '\n' + libs);
   BuildResult r;
   r.key = key;
-  const std::string root = options.cache_dir.empty() ? default_cache_dir() : options.cache_dir;
   r.directory = root + "/" + model_struct_name(model_name) + "-" + key.substr(0, 16);
   r.executable = r.directory + "/runner";
   const std::string stamp = r.directory + "/runner.sha256";

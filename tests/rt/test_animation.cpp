@@ -49,7 +49,8 @@ TEST(Animation, DecodesToTheFramesWritten) {
           r.pixel[static_cast<std::size_t>(y * 40 + x)] = 0x440154;  // viridis(0)
     frames.push_back(quantize(r));
   }
-  const fs::path p = fs::temp_directory_path() / ("hybgen_anim_" + std::to_string(::getpid()) + ".gif");
+  const fs::path p =
+      fs::temp_directory_path() / ("hybgen_anim_" + std::to_string(::getpid()) + ".gif");
   write_gif(p.string(), frames, 10);
   int err = 0;
   GifFileType* g = DGifOpenFileName(p.c_str(), &err);
