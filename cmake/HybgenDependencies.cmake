@@ -5,6 +5,8 @@ pkg_check_modules(GINAC REQUIRED IMPORTED_TARGET ginac>=1.8)
 pkg_check_modules(NETCDF REQUIRED IMPORTED_TARGET netcdf>=4.6)
 # The pictures (runtime/src/io/figures.cpp): PNG, PDF and SVG from one drawing.
 pkg_check_modules(CAIRO REQUIRED IMPORTED_TARGET cairo>=1.16)
+# Cairo's fonts (figures.cpp frees fontconfig's caches at exit under AddressSanitizer).
+pkg_check_modules(FONTCONFIG REQUIRED IMPORTED_TARGET fontconfig)
 # The frame pictures' fast PNG encoder (runtime/src/io/figures.cpp, write_png).
 find_package(PNG REQUIRED)
 # animation.gif (runtime/src/io/animation.cpp): giflib (Debian ships no pkg-config file).

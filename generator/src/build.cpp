@@ -44,7 +44,7 @@
 #define HYBGEN_CXX_COMPILER "c++"
 #endif
 #ifndef HYBGEN_RUNNER_LIBS
-#define HYBGEN_RUNNER_LIBS "-lnetcdf -lcairo -lpng -lgif"
+#define HYBGEN_RUNNER_LIBS "-lnetcdf -lcairo -lfontconfig -lpng -lgif"
 #endif
 #ifndef HYBGEN_RUNNER_INCLUDES
 #define HYBGEN_RUNNER_INCLUDES ""

@@ -771,6 +771,18 @@ std::string set_simulation_setting(Model& model, const std::string& key, const S
            "' was withdrawn: use 'hat' (the default: forward samples "
            "deposited on hat functions) or 'cell' (Ulam); both conserve mass";
   if (std::string why = model.sim.settings.set(key, v); !why.empty()) return why;
+  // The pictures' axes are the model's states: two or more of them (the runner pairs them).
+  if (key == "figure_axes") {
+    const std::vector<std::string> names = model.sim.settings.names<"figure_axes">();
+    for (const std::string& n : names)
+      if (std::find(model.state.begin(), model.state.end(), n) == model.state.end()) {
+        std::string states;
+        for (const auto& st : model.state) states += (states.empty() ? "" : ", ") + st;
+        return "'" + n + "' is not a state variable (the states: " + states + ")";
+      }
+    if (names.size() < 2 && model.state.size() > 2)
+      return "needs two or more state variables: the pictures show their pairs";
+  }
   // The derivation limits are the symbolic stage's (limits.hpp), read from the table.
   const rt::Settings& s = model.sim.settings;
   model.limits.max_expr_nodes = static_cast<std::size_t>(s.integer<"max_expr_nodes">());

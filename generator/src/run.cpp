@@ -79,7 +79,20 @@ nlohmann::json run_config(const Model& m, const std::string& out_dir,
 }
 
 nlohmann::json run_provenance(const Frontend& fe) {
-  return {{"model_path", fe.src.path()},
+  // What derive checked: the reduction's hypotheses (Lie-group models), each guard's kind of
+  // inverse reset, and derive's warnings (docs/design.md: derive --format json).
+  const nlohmann::ordered_json d = derive_json(fe.sys);
+  nlohmann::json checks = {{"warnings", d.value("warnings", nlohmann::ordered_json::array())}};
+  if (d.contains("reduction") && d["reduction"].is_object() &&
+      d["reduction"].contains("hypotheses"))
+    checks["hypotheses"] = d["reduction"]["hypotheses"];
+  nlohmann::json guards = nlohmann::json::array();
+  for (const auto& g : d["guards"])
+    guards.push_back(
+        {{"name", g.value("name", "")}, {"reset_inverse_kind", g.value("reset_inverse_kind", "")}});
+  checks["guards"] = guards;
+  return {{"checks", checks},
+          {"model_path", fe.src.path()},
           {"model_text", fe.src.text()},
           {"model_sha256", sha256_hex(fe.src.text())},
           {"equations", derive_text(fe.sys)},

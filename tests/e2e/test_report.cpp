@@ -63,6 +63,11 @@ TEST(Report, RendersItsEquationsAndItsSliderMovesTheFrames) {
     EXPECT_TRUE(fs::exists(out / f)) << f;
   const auto s = read_json_file(out / "summary.json");
   EXPECT_EQ(s["outputs"]["report"], "report.html");
+  // What derive checked is on the page: the ball's reset has a closed-form inverse.
+  const std::string page = slurp(out / "report.html");
+  EXPECT_NE(page.find("<h2>Hypotheses and checks</h2>"), std::string::npos);
+  EXPECT_NE(page.find("guard <code>ground</code>: the reset has a closed-form inverse"),
+            std::string::npos);
   // The animation: GIF89a, one graphic control block per frame (5 frames).
   const std::string gif = slurp(out / "animation.gif");
   EXPECT_EQ(gif.rfind("GIF89a", 0), 0u);

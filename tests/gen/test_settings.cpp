@@ -40,11 +40,13 @@ Model model() {
 
 /// Whether `s` holds text (one word, or a '+'-joined list of words).
 bool is_text(const rt::SettingSpec& s) {
-  return s.type == rt::SettingType::word || s.type == rt::SettingType::words;
+  return s.type == rt::SettingType::word || s.type == rt::SettingType::words ||
+         s.type == rt::SettingType::names;
 }
 
 /// A valid value of `s` other than its default, as `--set` text.
 std::string other_value(const rt::SettingSpec& s) {
+  if (s.type == rt::SettingType::names) return "x";  // kModel's state
   if (is_text(s)) {
     const std::string_view w = s.words.substr(s.words.rfind('|') + 1);  // the last word
     return std::string(w == s.word ? s.words.substr(0, s.words.find('|')) : w);
@@ -59,6 +61,7 @@ std::string other_value(const rt::SettingSpec& s) {
 
 /// A value `s` refuses, as `--set` text.
 std::string bad_value(const rt::SettingSpec& s) {
+  if (s.type == rt::SettingType::names) return "x+x";  // both sides: "'x' is given twice"
   if (is_text(s)) return "nosuchword";
   if (s.hi < 1e300) return "1e301";
   return s.lo_open ? std::to_string(s.lo) : "-1e300";
@@ -152,6 +155,43 @@ TEST(Settings, AWordListTakesEachWordOnceInAnyOrder) {
       std::string(kModel).replace(std::string(kModel).find("  t_end 2"), 9, "  t_end npy + png");
   SourceText src2("t.model", num);
   EXPECT_THROW((void)check(parse(src2), src2), ModelError);
+}
+
+TEST(Settings, FigureAxesAreStatesOfTheModel) {
+  const std::string three = R"(model box3
+state x, y, z
+mode m {
+  x' = 1
+  y' = 0
+  z' = 0
+}
+simulation {
+  domain x in [0, 1]
+  domain y in [0, 1]
+  domain z in [0, 1]
+  grid 5x5x5
+  initial 1
+  t_end 1
+}
+)";
+  SourceText src("t.model", three);
+  Model m = check(parse(src), src);
+  ASSERT_NO_THROW(apply_overrides(m, {"figure_axes=z+x"}));
+  EXPECT_EQ(m.sim.settings.names<"figure_axes">(), (std::vector<std::string>{"z", "x"}));
+  for (const char* bad :
+       {"figure_axes=x+w", "figure_axes=x", "figure_axes=x+x", "figure_axes=2x"}) {
+    Model b = check(parse(src), src);
+    try {
+      apply_overrides(b, {bad});
+      ADD_FAILURE() << bad << " accepted";
+    } catch (const UsageError& e) {
+      if (std::string(bad) == "figure_axes=x+w") {
+        EXPECT_NE(std::string(e.what()).find("'w' is not a state variable (the states: x, y, z)"),
+                  std::string::npos)
+            << e.what();
+      }
+    }
+  }
 }
 
 TEST(Settings, DefaultsAndDerivedDefaults) {

@@ -174,6 +174,9 @@ TEST_F(Figures, PairsOfAxesAndModesAndAPagePerFrame) {
   values_.assign(3 * 2 * 5 * 4 * 3 * 6, 1.0);
   run.density = values_;
   EXPECT_EQ(frame_geometry(run).panels.size(), 12u);
+  run.figure_axes = {3, 0, 1};  // figure_axes=d+a+b: 3 pairs x 2 modes
+  EXPECT_EQ(frame_geometry(run).panels.size(), 6u);
+  run.figure_axes.clear();
   FigureRequest req;
   req.pdf = true;
   req.svg = true;

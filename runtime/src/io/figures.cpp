@@ -10,6 +10,7 @@
 #include <cairo-pdf.h>
 #include <cairo-svg.h>
 #include <cairo.h>
+#include <fontconfig/fontconfig.h>
 #include <omp.h>
 #include <png.h>
 
@@ -442,13 +443,25 @@ std::vector<double> guard_on_pair(const std::vector<double>& s, const std::vecto
   return plane;
 }
 
+/// The pairs of axes the panels show: every pair of the chosen axes (figure_axes, in the
+/// order given; every axis by default). 2-D: the one pair (x, y).
+std::vector<std::pair<std::size_t, std::size_t>> axis_pairs(const RunRecord& run) {
+  std::vector<std::size_t> axes = run.figure_axes;
+  if (axes.size() < 2 || run.axes.size() == 2) {
+    axes.clear();
+    for (std::size_t a = 0; a < run.axes.size(); ++a) axes.push_back(a);
+  }
+  std::vector<std::pair<std::size_t, std::size_t>> pairs;
+  for (std::size_t i = 0; i < axes.size(); ++i)
+    for (std::size_t j = i + 1; j < axes.size(); ++j) pairs.emplace_back(axes[i], axes[j]);
+  return pairs;
+}
+
 /// Every heat panel of frame k (2-D and more): per mode in 2-D (the sum with one mode);
 /// per pair of axes in 3-D and more, in rows by mode when there are several.
 std::vector<HeatPanel> frame_panels(const RunRecord& run, std::size_t k) {
   const std::size_t N = run.axes.size(), M = run.n_mode();
-  std::vector<std::pair<std::size_t, std::size_t>> pairs;
-  for (std::size_t a = 0; a < N; ++a)
-    for (std::size_t b = a + 1; b < N; ++b) pairs.emplace_back(a, b);
+  const std::vector<std::pair<std::size_t, std::size_t>> pairs = axis_pairs(run);
   std::vector<HeatPanel> out;
   const std::vector<double> total = run.total_density(k);
   // Rows: the modes (several), or the sum.
@@ -464,7 +477,9 @@ std::vector<HeatPanel> frame_panels(const RunRecord& run, std::size_t k) {
       p.data = N == 2 ? std::vector<double>(u.begin(), u.end()) : pair_marginal(u, run.axes, a, b);
       if (N == 2) p.outside = run.outside;
       p.title = M > 1 ? "mode " + run.mode_names[row] : std::string();
-      if (N > 2) p.title += std::string(p.title.empty() ? "" : ": ") + "marginal";
+      if (N > 2)
+        p.title += std::string(p.title.empty() ? "" : ": ") + "marginal on (" + run.axis_names[a] +
+                   ", " + run.axis_names[b] + ")";
       for (const GuardField& g : run.guards) {
         // With several modes, a guard is drawn in the panels of the mode it fires from.
         if (M > 1 && g.from >= 0 && static_cast<std::size_t>(g.from) != row) continue;
@@ -535,7 +550,7 @@ FramePlan plan_frames(const RunRecord& run, const std::string& scale_mode) {
   plan.panels.resize(K);
 #pragma omp parallel for schedule(dynamic)
   for (std::size_t k = 0; k < K; ++k) plan.panels[k] = frame_panels(run, k);
-  const std::size_t pairs = N * (N - 1) / 2;
+  const std::size_t pairs = axis_pairs(run).size();
   plan.columns = run.n_mode() > 1 ? pairs : std::min<std::size_t>(pairs, 3);
   if (N == 2 && run.n_mode() > 1) plan.columns = std::min<std::size_t>(run.n_mode(), 3);
   // One scale per pair (column of a row), over every frame and mode.
@@ -858,6 +873,16 @@ FigureGeometry frame_geometry(const RunRecord& run) {
 }
 
 void write_figures(const RunRecord& run, FigureRequest& request, const std::string& dir) {
+#if defined(__SANITIZE_ADDRESS__)
+  // Under AddressSanitizer (CI's hardening stage), free Cairo's and fontconfig's caches at
+  // exit: LeakSanitizer otherwise reports the fonts fontconfig loaded for the text, which
+  // Cairo keeps for the life of the process, as leaks of every program that draws.
+  static const int registered = std::atexit([] {
+    cairo_debug_reset_static_data();
+    FcFini();
+  });
+  (void)registered;
+#endif
   const std::filesystem::path out(dir);
   const FramePlan plan = plan_frames(run, request.scale);
   const double W = plan.layout.width, H = plan.layout.height;

@@ -198,6 +198,38 @@ img { max-width: 100%; } .muted { color: #666; }
       << number(inv.value("decay_rate", 0.0)) << " per unit time</p>\n";
   }
 
+  // What derive checked.
+  if (pv.is_object() && pv.contains("checks") && pv["checks"].is_object()) {
+    const nlohmann::json& c = pv["checks"];
+    h << "<h2>Hypotheses and checks</h2>\n<ul>\n";
+    static const std::vector<std::pair<std::string, std::string>> hypotheses = {
+        {"normal", "the impact surface is a coset of a normal subgroup"},
+        {"codim1", "the subgroup has codimension one"},
+        {"left_invariant", "the Hamiltonian is left-invariant"},
+        {"transversal", "the flow crosses the impact surface transversally"}};
+    if (c.contains("hypotheses") && c["hypotheses"].is_object())
+      for (const auto& [key, words] : hypotheses)
+        if (c["hypotheses"].contains(key))
+          h << "<li>" << (c["hypotheses"][key].get<bool>() ? "&#10003; " : "&#10007; ")
+            << html(words) << " (<code>" << html(key) << "</code>)</li>\n";
+    if (c.contains("guards"))
+      for (const auto& g : c["guards"]) {
+        const std::string kind = g.value("reset_inverse_kind", "");
+        h << "<li>guard <code>" << html(g.value("name", "")) << "</code>: "
+          << (kind == "symbolic" ? std::string("the reset has a closed-form inverse")
+              : kind == "none"
+                  ? std::string("the reset has no inverse off its guard (forward methods only)")
+                  : std::string("the reset is inverted numerically (Newton)"))
+          << "</li>\n";
+      }
+    if (c.contains("warnings") && c["warnings"].is_array() && !c["warnings"].empty())
+      for (const auto& w : c["warnings"])
+        h << "<li>&#9888; " << html(w.is_string() ? w.get<std::string>() : w.dump()) << "</li>\n";
+    else
+      h << "<li>derive gave no warnings</li>\n";
+    h << "</ul>\n";
+  }
+
   // The equations.
   const std::vector<std::string> eqs = display_equations(text_of(pv, "equations_latex"));
   h << "<h2>Derived equations</h2>\n";

@@ -234,6 +234,12 @@ int run_model(const RunConfig& c) {
     }
     rec.guards.push_back(std::move(f));
   }
+  for (const std::string& name : c.settings.names<"figure_axes">()) {
+    const auto it = std::find(c.axis_names.begin(), c.axis_names.end(), name);
+    if (it == c.axis_names.end())
+      throw ConfigError("setting 'figure_axes': '" + name + "' is not a state variable");
+    rec.figure_axes.push_back(static_cast<std::size_t>(it - c.axis_names.begin()));
+  }
   rec.budget = res.budget;
   rec.atom_error = res.atom_error;
   rec.provenance = c.provenance;

@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
@@ -33,6 +34,9 @@ enum class SettingType {
   integer,  ///< A whole number in its range (stored as a double: exact up to 2^53).
   word,     ///< One of its words.
   words,    ///< Some of its words, joined by '+' (`netcdf+png`), each at most once.
+  /// Names of the model's own (state variables), joined by '+', each at most once; empty for
+  /// the default. The runner checks the syntax, the checker that each is a state.
+  names,
 };
 
 /// One row of the settings table.
@@ -98,6 +102,9 @@ inline constexpr std::array kSettings = {
                 "colour scale of the pictures, fixed for the whole run: linear from 0, log over "
                 "four decades, or auto (log when the maximum is over 100 times the 99th "
                 "percentile)"},
+    SettingSpec{"figure_axes", SettingType::names, 0.0, "", 0, 0, false, "", "all",
+                "the state axes whose pairs the pictures show in 3-D and more, joined by '+' "
+                "(default: every axis)"},
     SettingSpec{"threads", SettingType::integer, 0, "", 0, 4096, false, "", "all",
                 "worker threads of the runner (0: $OMP_NUM_THREADS, else one per core)"},
     SettingSpec{"max_expr_nodes", SettingType::integer, 200000, "", 100, 1e12, false, "", "derive",
@@ -209,6 +216,7 @@ inline std::string setting_range(const SettingSpec& s) {
   if (s.type == SettingType::word) return "one of: " + detail::word_list(s.words);
   if (s.type == SettingType::words)
     return "some of: " + detail::word_list(s.words) + ", joined by '+'";
+  if (s.type == SettingType::names) return "state variables joined by '+'";
   const bool integer = s.type == SettingType::integer;
   if (s.lo == 0 && s.lo_open && s.hi >= 1e300) return integer ? "a positive integer" : "positive";
   if (s.hi >= 1e300)
@@ -219,6 +227,7 @@ inline std::string setting_range(const SettingSpec& s) {
 
 /// The default of a setting as text.
 inline std::string setting_default(const SettingSpec& s) {
+  if (s.type == SettingType::names && s.word.empty()) return "every axis";
   if (s.type == SettingType::word || s.type == SettingType::words) return std::string(s.word);
   if (s.number == 0 && s.lo_open) return "automatic";  // outside the range: the help says how
   return detail::fmt_g(s.number);
@@ -252,6 +261,23 @@ inline std::string setting_problem(const SettingSpec& s, const SettingValue& v) 
     }
     return "";
   }
+  if (s.type == SettingType::names) {
+    if (v.has_number) return "needs " + setting_range(s);
+    if (v.word.empty()) return "";  // the default: every axis
+    std::vector<std::string_view> seen;
+    for (const std::string_view w : detail::split_plus(v.word)) {
+      const bool identifier = !w.empty() &&
+                              (std::isalpha(static_cast<unsigned char>(w[0])) || w[0] == '_') &&
+                              std::all_of(w.begin(), w.end(), [](char c) {
+                                return std::isalnum(static_cast<unsigned char>(c)) || c == '_';
+                              });
+      if (!identifier) return "'" + std::string(w) + "' is not a name (" + setting_range(s) + ")";
+      if (std::find(seen.begin(), seen.end(), w) != seen.end())
+        return "'" + std::string(w) + "' is given twice";
+      seen.push_back(w);
+    }
+    return "";
+  }
   if (!v.has_number) return "needs a number (" + setting_range(s) + ")";
   const double x = v.number;
   const bool in = std::isfinite(x) && (s.lo_open ? x > s.lo : x >= s.lo) && x <= s.hi;
@@ -276,7 +302,8 @@ class Settings {
     const std::size_t i = setting_index(name);
     if (i == kSettings.size()) return "unknown setting";
     if (std::string why = setting_problem(kSettings[i], v); !why.empty()) return why;
-    if (kSettings[i].type == SettingType::word || kSettings[i].type == SettingType::words)
+    if (kSettings[i].type == SettingType::word || kSettings[i].type == SettingType::words ||
+        kSettings[i].type == SettingType::names)
       word_[i] = v.word;
     else
       number_[i] = v.number;
@@ -322,6 +349,15 @@ class Settings {
       if (part == w) return true;
     return false;
   }
+  /// The names of a names setting, in order (empty: the default).
+  template <SettingName N>
+  std::vector<std::string> names() const {
+    constexpr std::size_t i = checked<N>(SettingType::names);
+    std::vector<std::string> out;
+    if (!word_[i].empty())
+      for (const std::string_view part : detail::split_plus(word_[i])) out.emplace_back(part);
+    return out;
+  }
   /// Set a number directly (a derived default such as dt = t_end/10); unchecked.
   template <SettingName N>
   void put(double x) {
@@ -337,7 +373,8 @@ class Settings {
     for (std::size_t i = 0; i < kSettings.size(); ++i) {
       const SettingSpec& s = kSettings[i];
       if (s.methods == "derive") continue;
-      if (s.type == SettingType::word || s.type == SettingType::words)
+      if (s.type == SettingType::word || s.type == SettingType::words ||
+          s.type == SettingType::names)
         j[std::string(s.name)] = word_[i];
       else if (s.type == SettingType::integer)
         j[std::string(s.name)] = static_cast<long long>(number_[i]);

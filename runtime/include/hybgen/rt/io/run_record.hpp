@@ -44,9 +44,11 @@ struct RunRecord {
   std::span<const double> density;       ///< [frame][mode][node] (see the invariant above).
   std::vector<std::uint8_t> outside;     ///< 1 at nodes outside the support (empty: none).
   std::vector<GuardField> guards;        ///< Every guard's s at the nodes.
-  MassBudget budget;                     ///< Per frame time (empty: no budget).
-  std::vector<double> atom_error;        ///< Estimated |error| of budget.atom (may be empty).
-  nlohmann::json summary;                ///< summary.json as written (method blocks, timings).
+  /// The axes whose pairs the pictures show (setting figure_axes; empty: every axis).
+  std::vector<std::size_t> figure_axes;
+  MassBudget budget;               ///< Per frame time (empty: no budget).
+  std::vector<double> atom_error;  ///< Estimated |error| of budget.atom (may be empty).
+  nlohmann::json summary;          ///< summary.json as written (method blocks, timings).
   /// From the configuration: model_text, model_path, model_sha256, equations (text),
   /// equations_latex,
   /// hybgen_version (generator/src/run.cpp, run_provenance); may be empty.
