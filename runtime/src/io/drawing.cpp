@@ -3,6 +3,7 @@
 #include "drawing.hpp"
 
 #include <cairo-pdf.h>
+#include <cairo-svg.h>
 #include <png.h>
 
 #include <algorithm>
@@ -395,12 +396,13 @@ void to_png(const std::string& path, double w, double h, const std::function<voi
   if (!path.empty()) write_png(path, raster);
 }
 
-/// Draw `pages` pages with `draw(cr, page)` into a PDF at `path`.
-void to_pdf(const std::string& path, double w, double h, std::size_t pages,
-            const std::function<void(cairo_t*, std::size_t)>& draw) {
-  cairo_surface_t* s = cairo_pdf_surface_create(path.c_str(), w, h);
+namespace {
+
+/// Draw `pages` pages on the vector surface `s` (PDF or SVG) of `path`, finish it and report
+/// its status.
+void to_vector(cairo_surface_t* s, const std::string& path, std::size_t pages,
+               const std::function<void(cairo_t*, std::size_t)>& draw) {
   check_surface(s, path);
-  cairo_pdf_surface_set_metadata(s, CAIRO_PDF_METADATA_CREATOR, "hybgen");
   cairo_t* cr = cairo_create(s);
   for (std::size_t p = 0; p < pages; ++p) {
     draw(cr, p);
@@ -412,6 +414,22 @@ void to_pdf(const std::string& path, double w, double h, std::size_t pages,
   cairo_surface_destroy(s);
   if (st != CAIRO_STATUS_SUCCESS)
     throw std::runtime_error("cannot write '" + path + "': " + cairo_status_to_string(st));
+}
+
+}  // namespace
+
+void to_pdf(const std::string& path, double w, double h, std::size_t pages,
+            const std::function<void(cairo_t*, std::size_t)>& draw) {
+  cairo_surface_t* s = cairo_pdf_surface_create(path.c_str(), w, h);
+  if (cairo_surface_status(s) == CAIRO_STATUS_SUCCESS)
+    cairo_pdf_surface_set_metadata(s, CAIRO_PDF_METADATA_CREATOR, "hybgen");
+  to_vector(s, path, pages, draw);
+}
+
+void to_svg(const std::string& path, double w, double h,
+            const std::function<void(cairo_t*)>& draw) {
+  to_vector(cairo_svg_surface_create(path.c_str(), w, h), path, 1,
+            [&](cairo_t* cr, std::size_t) { draw(cr); });
 }
 
 }  // namespace hybgen::rt::drawing

@@ -122,5 +122,7 @@ void to_png(const std::string& path, double w, double h, const std::function<voi
 /// Draw `pages` pages with `draw(cr, page)` into a PDF at `path`.
 void to_pdf(const std::string& path, double w, double h, std::size_t pages,
             const std::function<void(cairo_t*, std::size_t)>& draw);
+/// Draw with `draw` into an SVG at `path`.
+void to_svg(const std::string& path, double w, double h, const std::function<void(cairo_t*)>& draw);
 
 }  // namespace hybgen::rt::drawing

@@ -6,7 +6,6 @@
 
 #include "hybgen/rt/io/figures.hpp"
 
-#include <cairo-svg.h>
 #include <cairo.h>
 #include <fontconfig/fontconfig.h>
 #include <omp.h>
@@ -466,17 +465,8 @@ void write_figures(const RunRecord& run, FigureRequest& request, const std::stri
       });
     if (request.svg)
       guarded([&] {
-        const std::string path = (out / (base + ".svg")).string();
-        cairo_surface_t* s = cairo_svg_surface_create(path.c_str(), W, H);
-        check_surface(s, path);
-        cairo_t* cr = cairo_create(s);
-        draw_frame(cr, run, plan, k);
-        cairo_destroy(cr);
-        cairo_surface_finish(s);
-        const cairo_status_t st = cairo_surface_status(s);
-        cairo_surface_destroy(s);
-        if (st != CAIRO_STATUS_SUCCESS)
-          throw std::runtime_error("cannot write '" + path + "': " + cairo_status_to_string(st));
+        to_svg((out / (base + ".svg")).string(), W, H,
+               [&](cairo_t* cr) { draw_frame(cr, run, plan, k); });
       });
   }
   if (error) std::rethrow_exception(error);
