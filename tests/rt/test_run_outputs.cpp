@@ -155,6 +155,31 @@ TEST_F(RunOutputs, AFailedWriteNamesTheFileAndLeavesNoTornNetcdf) {
   fs::create_directories(dir_);
 }
 
+TEST(Marginal, KeepsTheAxesInTheOrderGivenAndIntegratesTheRest) {
+  // u(a, b, c) = a + 10 b + 100 c on a 2 x 3 x 2 grid of unit spacing: the trapezoid weights
+  // are 1/2 at both ends of each axis (and 1 inside).
+  const std::vector<GridAxis> axes = {{0, 1, 2}, {0, 2, 3}, {0, 1, 2}};
+  std::vector<double> u(12);
+  for (std::size_t i = 0; i < 2; ++i)
+    for (std::size_t j = 0; j < 3; ++j)
+      for (std::size_t k = 0; k < 2; ++k)
+        u[(i * 3 + j) * 2 + k] =
+            static_cast<double>(i) + 10.0 * static_cast<double>(j) + 100.0 * static_cast<double>(k);
+  // On (c, a): ∫ over b with weights 1/2, 1, 1/2 (sum 2): 2 (a + 100 c) + 10 (0 + 1 + 1).
+  const std::vector<double> ca = marginal(u, axes, {2, 0});
+  ASSERT_EQ(ca.size(), 4u);
+  for (std::size_t k = 0; k < 2; ++k)
+    for (std::size_t i = 0; i < 2; ++i)
+      EXPECT_DOUBLE_EQ(ca[k * 2 + i],
+                       2 * (static_cast<double>(i) + 100.0 * static_cast<double>(k)) + 20)
+          << k << "," << i;
+  // Nothing kept: the whole integral, equal to the marginal on (a) integrated over a.
+  const std::vector<double> a = marginal(u, axes, {0});
+  const std::vector<double> all = marginal(u, axes, {});
+  ASSERT_EQ(all.size(), 1u);
+  EXPECT_DOUBLE_EQ(all[0], 0.5 * a[0] + 0.5 * a[1]);
+}
+
 TEST_F(RunOutputs, DeferredDurabilitySyncsOnce) {
   // Inside the scope the files land (renamed into place) before the one sync; commit
   // reports the sync's failure by naming the directory.

@@ -35,35 +35,6 @@ using namespace drawing;
 
 // ------------------------------------------------------------------ a run's panels
 
-/// Trapezoid weights of an axis.
-std::vector<double> weights(const GridAxis& a) {
-  return trapezoid_rule(a).weights;
-}
-
-/// The marginal of u (C order over `axes`) on the pair (a, b), integrating the others.
-std::vector<double> pair_marginal(std::span<const double> u, const std::vector<GridAxis>& axes,
-                                  std::size_t a, std::size_t b) {
-  const std::size_t N = axes.size();
-  std::vector<std::vector<double>> w(N);
-  for (std::size_t k = 0; k < N; ++k)
-    if (k != a && k != b) w[k] = weights(axes[k]);
-  const auto na = static_cast<std::size_t>(axes[a].n), nb = static_cast<std::size_t>(axes[b].n);
-  std::vector<double> out(na * nb, 0.0);
-  std::vector<std::size_t> idx(N, 0);
-  for (std::size_t i = 0; i < u.size(); ++i) {
-    std::size_t rem = i;
-    for (std::size_t k = N; k-- > 0;) {
-      idx[k] = rem % static_cast<std::size_t>(axes[k].n);
-      rem /= static_cast<std::size_t>(axes[k].n);
-    }
-    double weight = 1;
-    for (std::size_t k = 0; k < N; ++k)
-      if (k != a && k != b) weight *= w[k][idx[k]];
-    out[idx[a] * nb + idx[b]] += weight * u[i];
-  }
-  return out;
-}
-
 /// The guard's s on the pair plane (a, b) when it does not depend on the other axes
 /// (within 1e-9 of its range), else empty.
 std::vector<double> guard_on_pair(const std::vector<double>& s, const std::vector<GridAxis>& axes,
@@ -121,7 +92,7 @@ std::vector<HeatPanel> frame_panels(const RunRecord& run, std::size_t k) {
       HeatPanel p;
       p.x = {run.axis_names[a], run.axes[a]};
       p.y = {run.axis_names[b], run.axes[b]};
-      p.data = N == 2 ? std::vector<double>(u.begin(), u.end()) : pair_marginal(u, run.axes, a, b);
+      p.data = N == 2 ? std::vector<double>(u.begin(), u.end()) : marginal(u, run.axes, {a, b});
       if (N == 2) p.outside = run.outside;
       p.title = M > 1 ? "mode " + run.mode_names[row] : std::string();
       if (N > 2)

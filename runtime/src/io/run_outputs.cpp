@@ -45,40 +45,6 @@ class FirstError {
   std::exception_ptr error_;
 };
 
-/// The marginal of `u` (C order, `shape`) on the axes `keep`, integrating the others with
-/// the trapezoid rule of their grid axes.
-std::vector<double> marginal(const std::vector<double>& u, const std::vector<GridAxis>& axes,
-                             const std::vector<std::size_t>& keep) {
-  const std::size_t N = axes.size();
-  std::vector<std::vector<double>> w(N);
-  std::vector<bool> kept(N, false);
-  for (std::size_t a : keep) kept[a] = true;
-  for (std::size_t a = 0; a < N; ++a)
-    if (!kept[a]) w[a] = trapezoid_rule(axes[a]).weights;
-  std::size_t n_out = 1;
-  for (std::size_t a : keep) n_out *= static_cast<std::size_t>(axes[a].n);
-  std::vector<double> out(n_out, 0.0);
-  std::vector<std::size_t> idx(N, 0);
-  for (std::size_t i = 0; i < u.size(); ++i) {
-    // idx = the multi-index of node i (C order).
-    std::size_t rem = i;
-    for (std::size_t a = N; a-- > 0;) {
-      idx[a] = rem % static_cast<std::size_t>(axes[a].n);
-      rem /= static_cast<std::size_t>(axes[a].n);
-    }
-    double weight = 1.0;
-    std::size_t o = 0;
-    for (std::size_t a = 0; a < N; ++a) {
-      if (kept[a])
-        o = o * static_cast<std::size_t>(axes[a].n) + idx[a];
-      else
-        weight *= w[a][idx[a]];
-    }
-    out[o] += weight * u[i];
-  }
-  return out;
-}
-
 /// The frame's VTK image: the summed density and each mode's (several modes) on the grid,
 /// or for 4 and more axes their marginals on the first three (VTK images have three axes).
 void write_image(const RunRecord& run, std::size_t k, const std::vector<double>& total,
@@ -118,24 +84,11 @@ std::string resolution_warning(const RunRecord& run) {
   const MassBudget& b = run.budget;
   const std::size_t K = run.times.size();
   if (K == 0 || b.mass.size() != K || b.mass_error.size() != K || !(b.mass0 > 0)) return "";
-  // Trapezoid weights of the whole grid (a product over the axes).
-  std::vector<std::vector<double>> w;
-  for (const GridAxis& a : run.axes) w.push_back(trapezoid_rule(a).weights);
-  const std::size_t N = run.axes.size();
   double worst = 0, worst_sum = 0;
   std::size_t worst_k = K;
   for (std::size_t k = 0; k < K; ++k) {
     const std::vector<double> u = run.total_density(k);
-    double sum = 0;
-    for (std::size_t i = 0; i < u.size(); ++i) {
-      std::size_t rem = i;
-      double weight = 1;
-      for (std::size_t a = N; a-- > 0;) {
-        weight *= w[a][rem % static_cast<std::size_t>(run.axes[a].n)];
-        rem /= static_cast<std::size_t>(run.axes[a].n);
-      }
-      sum += weight * u[i];
-    }
+    const double sum = marginal(u, run.axes, {}).front();  // the trapezoid sum of the nodes
     const double gap = std::fabs(sum - b.mass[k]);
     if (gap > 0.05 * b.mass0 && gap > 10 * b.mass_error[k] && gap > worst)
       worst = gap, worst_sum = sum, worst_k = k;

@@ -21,6 +21,37 @@
 
 namespace hybgen::rt {
 
+/// The marginal of `u` (C order over `axes`) on the axes `keep`, in that order (the first
+/// slowest in the result), integrating the others with the trapezoid rule of their grid
+/// axes. `keep` empty: the integral of `u` over the whole grid, as the one value.
+inline std::vector<double> marginal(std::span<const double> u, const std::vector<GridAxis>& axes,
+                                    const std::vector<std::size_t>& keep) {
+  const std::size_t N = axes.size();
+  std::vector<std::vector<double>> w(N);
+  std::vector<bool> kept(N, false);
+  for (const std::size_t a : keep) kept[a] = true;
+  for (std::size_t a = 0; a < N; ++a)
+    if (!kept[a]) w[a] = trapezoid_rule(axes[a]).weights;
+  std::size_t n_out = 1;
+  for (const std::size_t a : keep) n_out *= static_cast<std::size_t>(axes[a].n);
+  std::vector<double> out(n_out, 0.0);
+  std::vector<std::size_t> idx(N, 0);
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    std::size_t rem = i;  // idx = the multi-index of node i (C order)
+    for (std::size_t a = N; a-- > 0;) {
+      idx[a] = rem % static_cast<std::size_t>(axes[a].n);
+      rem /= static_cast<std::size_t>(axes[a].n);
+    }
+    double weight = 1.0;
+    for (std::size_t a = 0; a < N; ++a)
+      if (!kept[a]) weight *= w[a][idx[a]];
+    std::size_t o = 0;
+    for (const std::size_t a : keep) o = o * static_cast<std::size_t>(axes[a].n) + idx[a];
+    out[o] += weight * u[i];
+  }
+  return out;
+}
+
 /// A guard's surface function s sampled at the grid's nodes (the surface is s = 0): the
 /// pictures draw its zero contour.
 struct GuardField {
