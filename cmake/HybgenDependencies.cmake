@@ -18,6 +18,26 @@ find_package(OpenSSL REQUIRED COMPONENTS Crypto)
 # Sparse transfer operators (runtime/transfer.hpp) and their spectra (invariant.hpp).
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)
 find_package(Spectra REQUIRED)
+# The distributed backend (`--set backend=mpi`, runtime/src/mpi/): MPI, PETSc and SLEPc
+# from Debian's packages (libopenmpi-dev, petsc-dev, slepc-dev; scripts/setup.sh --mpi).
+# AUTO builds it when all three are found; ON requires them; OFF leaves it out.
+set(HYBGEN_MPI AUTO CACHE STRING "Build the MPI/PETSc/SLEPc backend: AUTO, ON or OFF")
+set_property(CACHE HYBGEN_MPI PROPERTY STRINGS AUTO ON OFF)
+set(HYBGEN_WITH_MPI OFF)
+if(NOT HYBGEN_MPI STREQUAL "OFF")
+  set(_mpi_required "")
+  if(HYBGEN_MPI STREQUAL "ON")
+    set(_mpi_required REQUIRED)
+  endif()
+  set(MPI_CXX_SKIP_MPICXX ON)  # the C API only: no libmpi_cxx
+  find_package(MPI COMPONENTS CXX ${_mpi_required})
+  pkg_check_modules(PETSC ${_mpi_required} IMPORTED_TARGET PETSc>=3.18)
+  pkg_check_modules(SLEPC ${_mpi_required} IMPORTED_TARGET SLEPc>=3.18)
+  if(MPI_CXX_FOUND AND PETSC_FOUND AND SLEPC_FOUND)
+    set(HYBGEN_WITH_MPI ON)
+  endif()
+endif()
+message(STATUS "hybgen: the MPI backend (backend=mpi): ${HYBGEN_WITH_MPI}")
 if(HYBGEN_BUILD_TESTS)
   find_package(GTest REQUIRED)
 endif()

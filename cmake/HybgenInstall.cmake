@@ -4,6 +4,7 @@
 #   P/include/hybgen/rt/...        the runtime's headers (the generated runners include them)
 #   P/lib/libhybgen_runner.a       the runtime compiled for 1..6 states (runners link it)
 #   P/lib/libhybgen_io.a           the writers (run.nc, pictures, arrays)
+#   P/lib/libhybgen_mpi.a          the MPI backend, when built (runners with backend=mpi)
 #   P/lib/cmake/hybgen/            hybgenConfig.cmake: find_package(hybgen) gives hybgen::rt,
 #                                  hybgen::io and hybgen::runner
 # An installed hybgen finds its runtime beside itself (generator/src/build.cpp,
@@ -19,6 +20,10 @@ set_target_properties(hybgen_io PROPERTIES EXPORT_NAME io)
 set_target_properties(hybgen_runner PROPERTIES EXPORT_NAME runner)
 install(TARGETS hybgen_rt hybgen_io hybgen_runner EXPORT hybgenTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR})
+if(HYBGEN_WITH_MPI)
+  # A file beside the others, not an exported target: runners link it by path (build.cpp).
+  install(FILES $<TARGET_FILE:hybgen_mpi> DESTINATION ${CMAKE_INSTALL_LIBDIR})
+endif()
 install(EXPORT hybgenTargets NAMESPACE hybgen:: DESTINATION ${CMAKE_INSTALL_LIBDIR}/cmake/hybgen)
 include(CMakePackageConfigHelpers)
 configure_package_config_file(cmake/hybgenConfig.cmake.in

@@ -165,6 +165,11 @@ int main(int argc, char** argv) {
       "grid=N1xN2..., domain.<state>=[a,b] and any parameter; docs/settings.md):\n" +
       hybgen::rt::settings_help());
   run->add_flag("-q,--quiet", quiet, "no progress output");
+  int ranks = 0;
+  run->add_option("--ranks", ranks,
+                  "run on N MPI ranks (mpiexec -n N): the same as --set backend=mpi --set "
+                  "ranks=N (docs/distributed.md)")
+      ->check(CLI::Range(1, 1000000));
   std::size_t jobs = 0;
   auto* sweep = app.add_subcommand(
       "sweep", "run one runner over a grid of parameter or setting values, into one table");
@@ -196,6 +201,10 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     app.exit(e);
     return static_cast<int>(ExitCode::UsageError);
+  }
+  if (ranks > 0) {
+    sets.push_back("backend=mpi");
+    sets.push_back("ranks=" + std::to_string(ranks));
   }
   const Request req{model, sets, unreduced ? ReduceTarget::Unreduced : ReduceTarget::Reduced};
   try {

@@ -1,14 +1,19 @@
 #!/usr/bin/env bash
 # Install what is missing (Debian 12 packages only) and build into build/: hybgen and its
 # runtime library (what `hybgen run` needs), or with --tests everything (tests, benchmarks).
+# --mpi adds the distributed backend (MPI, PETSc, SLEPc: --set backend=mpi, --ranks N;
+# docs/distributed.md); --tests includes it, since CI runs its agreement tests.
 # Environment: BUILD_DIR (default build), HYBGEN_WERROR (ON in CI).
 set -euo pipefail
 targets=(--target hybgen)
-case "${1:-}" in
-  "") ;;
-  --tests) targets=() ;;
-  *) echo "usage: scripts/setup.sh [--tests]" >&2; exit 2 ;;
-esac
+mpi=OFF
+for arg in "$@"; do
+  case "$arg" in
+    --tests) targets=(); mpi=ON ;;
+    --mpi) mpi=ON ;;
+    *) echo "usage: scripts/setup.sh [--tests] [--mpi]" >&2; exit 2 ;;
+  esac
+done
 cd "$(dirname "$0")/.."
 
 # What hybgen and its runtime build with (every run needs these).
@@ -18,6 +23,10 @@ packages=(build-essential cmake ninja-build pkg-config libginac-dev libcln-dev l
           libcairo2-dev fonts-dejavu-core  # pictures (runtime/src/io/figures.cpp)
           libpng-dev libgif-dev          # frames (figures.cpp) and animation.gif (animation.cpp)
           libjs-katex)                   # report.html's equations (runtime/src/io/report.cpp)
+# The distributed backend (--mpi, and --tests): Open MPI with its launcher, PETSc, SLEPc.
+if [[ $mpi == ON ]]; then
+  packages+=(libopenmpi-dev openmpi-bin petsc-dev slepc-dev)
+fi
 # What the tests, the benchmarks and CI need besides (--tests).
 if ((${#targets[@]} == 0)); then
   packages+=(libgtest-dev libbenchmark-dev
@@ -43,6 +52,8 @@ BUILD_DIR=${BUILD_DIR:-build}
 WERROR=${HYBGEN_WERROR:-$([[ "${CI:-}" == "true" ]] && echo ON || echo OFF)}
 # Without --tests the test and benchmark packages may be missing: do not configure them.
 EXTRAS=$( ((${#targets[@]} == 0)) && echo ON || echo OFF)
+# --mpi requires the backend; otherwise it is built when its packages are there (AUTO).
+MPI_OPTION=$([[ $mpi == ON ]] && echo ON || echo AUTO)
 cmake -S . -B "$BUILD_DIR" -G Ninja -DCMAKE_BUILD_TYPE=Release -DHYBGEN_WERROR="$WERROR" \
-  -DHYBGEN_BUILD_TESTS="$EXTRAS" -DHYBGEN_BUILD_BENCH="$EXTRAS" >/dev/null
+  -DHYBGEN_BUILD_TESTS="$EXTRAS" -DHYBGEN_BUILD_BENCH="$EXTRAS" -DHYBGEN_MPI="$MPI_OPTION" >/dev/null
 cmake --build "$BUILD_DIR" -j"$(nproc)" "${targets[@]}"

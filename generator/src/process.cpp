@@ -7,8 +7,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <iostream>
 
@@ -92,12 +94,36 @@ int interrupt_signal() {
 
 pid_t start_process(const std::string& exe, const std::string& arg, const InterruptGuard& guard,
                     const Environment& env) {
+  return start_process(std::vector<std::string>{exe, arg}, guard, env);
+}
+
+std::string find_program(const std::string& name) {
+  if (name.empty() || name.find('/') != std::string::npos) return name;
+  const char* path = std::getenv("PATH");
+  std::string dirs = path ? path : "/usr/bin:/bin";
+  std::size_t at = 0;
+  while (at <= dirs.size()) {
+    const std::size_t end = std::min(dirs.find(':', at), dirs.size());
+    const std::string dir = end > at ? dirs.substr(at, end - at) : ".";
+    const std::string candidate = dir + "/" + name;
+    if (::access(candidate.c_str(), X_OK) == 0) return candidate;
+    at = end + 1;
+  }
+  return "";
+}
+
+pid_t start_process(const std::vector<std::string>& command, const InterruptGuard& guard,
+                    const Environment& env) {
+  if (command.empty()) throw InternalError("start_process: an empty command");
   // Everything the child needs is prepared before fork: between fork and exec it calls
   // async-signal-safe functions only.
   const std::vector<std::string> envs = child_environment(env);
   std::vector<char*> envp;
   for (const auto& e : envs) envp.push_back(const_cast<char*>(e.c_str()));
   envp.push_back(nullptr);
+  std::vector<char*> argv;
+  for (const auto& a : command) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
   std::size_t slot = kMaxChildren;
   for (std::size_t i = 0; i < kMaxChildren && slot == kMaxChildren; ++i)
     if (g_children[i] == 0) slot = i;
@@ -117,11 +143,7 @@ pid_t start_process(const std::string& exe, const std::string& arg, const Interr
   if (pid == 0) {
     guard.restore();
     ::sigprocmask(SIG_SETMASK, &mask, nullptr);
-    ::execve(exe.c_str(),
-             std::array<char*, 3>{const_cast<char*>(exe.c_str()), const_cast<char*>(arg.c_str()),
-                                  nullptr}
-                 .data(),
-             envp.data());
+    ::execve(argv[0], argv.data(), envp.data());
     static const char msg[] = "hybgen: cannot execute the runner\n";
     [[maybe_unused]] const auto n = ::write(STDERR_FILENO, msg, sizeof msg - 1);
     ::_exit(70);
@@ -157,7 +179,12 @@ std::pair<pid_t, int> wait_process(pid_t pid) {
 
 int run_process(const std::string& exe, const std::string& arg, const InterruptGuard& guard,
                 const Environment& env) {
-  const pid_t pid = start_process(exe, arg, guard, env);
+  return run_process(std::vector<std::string>{exe, arg}, guard, env);
+}
+
+int run_process(const std::vector<std::string>& command, const InterruptGuard& guard,
+                const Environment& env) {
+  const pid_t pid = start_process(command, guard, env);
   if (pid < 0) return 128 + g_interrupt;
   return wait_process(pid).second;
 }

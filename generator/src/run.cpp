@@ -6,9 +6,11 @@
 
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <iostream>
+#include <sstream>
 
 #include "hybgen/gen/emit.hpp"
 #include "hybgen/gen/errors.hpp"
@@ -32,6 +34,7 @@ BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, 
   const GeneratedFiles files = emit(file_sys);  // stage 4: IR -> sources
   BuildOptions opt = options;
   opt.progress = !quiet;
+  opt.mpi = fe.model.sim.settings.word<"backend">() == "mpi";
   BuildResult b = build_runner(files, fe.model.name, opt);  // stage 5: sources -> runner
   if (!quiet) {
     char took[48];
@@ -41,8 +44,29 @@ BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, 
   return b;
 }
 
+std::vector<std::string> runner_command(const rt::Settings& settings, const std::string& runner,
+                                        const std::string& config) {
+  if (settings.word<"backend">() != "mpi") return {runner, config};
+  std::vector<std::string> command;
+  const char* launcher = std::getenv("HYBGEN_MPIEXEC");
+  std::istringstream words(launcher && *launcher ? launcher : "mpiexec");
+  for (std::string w; words >> w;) command.push_back(w);
+  const std::string path = find_program(command.front());
+  if (path.empty())
+    throw UsageError("backend=mpi: the MPI launcher '" + command.front() +
+                     "' is not on PATH (install openmpi-bin: bash scripts/setup.sh --mpi; or set "
+                     "HYBGEN_MPIEXEC to the launcher's command)");
+  command.front() = path;
+  command.insert(command.end(),
+                 {"-n", std::to_string(settings.integer<"ranks">()), runner, config});
+  return command;
+}
+
 void check_runnable(const Frontend& fe) {
   const Model& m = fe.model;
+  if (m.sim.settings.integer<"ranks">() > 1 && m.sim.settings.word<"backend">() != "mpi")
+    throw UsageError("ranks=" + std::to_string(m.sim.settings.integer<"ranks">()) +
+                     " runs that many MPI ranks, which needs backend=mpi (--ranks N sets both)");
   if (!m.sim.present)
     throw ModelError(m.path, {1, 1},
                      "the model has no simulation block, so there is nothing to run");
@@ -131,7 +155,7 @@ int run_model(const Frontend& fe, const RunOptions& options) {
   }
   // An interrupt is what interrupt_signal() says, not a runner's exit status above 128 (which
   // is a failure like any other).
-  const int rc = run_process(b.executable, config, interrupt_guard);
+  const int rc = run_process(runner_command(m.sim.settings, b.executable, config), interrupt_guard);
   stop_if_interrupted(tx);
   if (rc != 0) {
     tx.abort();
@@ -169,7 +193,7 @@ int run_preflight(const Frontend& fe, const BuildOptions& build, bool quiet) {
   std::error_code ec;
   try {
     write_file_atomic(config, cfg.dump(2) + "\n");
-    rc = run_process(b.executable, config, interrupt_guard);
+    rc = run_process(runner_command(m.sim.settings, b.executable, config), interrupt_guard);
   } catch (...) {
     fs::remove_all(dir, ec);
     throw;

@@ -358,7 +358,9 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
   std::size_t next = 0, done = 0;
   while (done < points.size()) {
     while (running.pids.size() < jobs && next < points.size()) {
-      const pid_t pid = start_process(runner.executable, points[next].config, interrupt_guard, env);
+      const pid_t pid = start_process(runner_command(points[next].fe->model.sim.settings,
+                                                     runner.executable, points[next].config),
+                                      interrupt_guard, env);
       if (pid < 0) break;  // interrupted: start nothing more
       running.pids[pid] = next++;
     }

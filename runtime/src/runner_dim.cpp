@@ -12,11 +12,12 @@
 namespace hybgen::rt {
 
 template <>
-int table_runner_main_dim<HYBGEN_TABLE_DIM>(const ModelTable& table, int argc, char** argv) {
+int table_runner_main_dim<HYBGEN_TABLE_DIM>(const ModelTable& table, int argc, char** argv,
+                                            const Backend& backend) {
   using M = TableModel<HYBGEN_TABLE_DIM>;
   static_assert(HybridModel<M>);
   M::install(table);
-  return runner_main<M>(argc, argv);
+  return runner_main<M>(argc, argv, backend);
 }
 
 }  // namespace hybgen::rt

@@ -12,18 +12,20 @@ namespace hybgen::rt {
 namespace {
 
 template <int... Ns>
-int dispatch(std::integer_sequence<int, Ns...>, const ModelTable& table, int argc, char** argv) {
+int dispatch(std::integer_sequence<int, Ns...>, const ModelTable& table, int argc, char** argv,
+             const Backend& backend) {
   int status = exit_status(ExitCode::Internal);
   // Ns are 0-based: dimension Ns + 1.
-  ((table.n_state == Ns + 1 ? (status = table_runner_main_dim<Ns + 1>(table, argc, argv), true)
-                            : false) ||
+  ((table.n_state == Ns + 1
+        ? (status = table_runner_main_dim<Ns + 1>(table, argc, argv, backend), true)
+        : false) ||
    ...);
   return status;
 }
 
 }  // namespace
 
-int table_runner_main(const ModelTable& table, int argc, char** argv) {
+int table_runner_main(const ModelTable& table, int argc, char** argv, const Backend& backend) {
   if (!table_fits(table.n_state, table.n_guard)) {
     std::fprintf(stderr,
                  "hybgen: error: the runtime library runs models of 1 to %d states and at most "
@@ -32,7 +34,7 @@ int table_runner_main(const ModelTable& table, int argc, char** argv) {
                  kTableMaxState, kTableMaxGuards, table.name, table.n_state, table.n_guard);
     return exit_status(ExitCode::Internal);
   }
-  return dispatch(std::make_integer_sequence<int, kTableMaxState>{}, table, argc, argv);
+  return dispatch(std::make_integer_sequence<int, kTableMaxState>{}, table, argc, argv, backend);
 }
 
 }  // namespace hybgen::rt

@@ -40,7 +40,13 @@ struct BuildOptions {
   /// Compile the whole runtime into the runner, kernels inlined, instead of linking the
   /// precompiled library (which a model outside its shapes always does).
   bool inline_runtime = false;
+  /// Build against the MPI backend (hybgen::mpi: the setting backend=mpi); a hybgen built
+  /// without it refuses (BuildError, saying what to install).
+  bool mpi = false;
 };
+
+/// Whether this hybgen can build runners with backend=mpi (built with hybgen::mpi).
+bool mpi_available();
 
 /// Whether the runner of `files` is built against the precompiled runtime library (else
 /// with the runtime inlined): the model fits the library's shapes and `inline_runtime` is off.

@@ -51,6 +51,15 @@ using Environment = std::vector<std::pair<std::string, std::string>>;
 pid_t start_process(const std::string& exe, const std::string& arg, const InterruptGuard& guard,
                     const Environment& env = {});
 
+/// start_process for a whole command line: `command[0]` (a path) with the arguments
+/// `command` (command[0] included, as argv). Throws InternalError on an empty command.
+pid_t start_process(const std::vector<std::string>& command, const InterruptGuard& guard,
+                    const Environment& env = {});
+
+/// The path of the program `name`: itself when it contains a '/', else the first
+/// executable file of that name on $PATH; "" when there is none.
+std::string find_program(const std::string& name);
+
 /// Wait for the child `pid` (or any child when -1) and return its pid and exit code:
 /// its exit status; 70 if it was killed by a signal (said on stderr); 128 + the signal if
 /// hybgen was interrupted.
@@ -58,6 +67,10 @@ std::pair<pid_t, int> wait_process(pid_t pid = -1);
 
 /// start_process then wait_process: the child's exit code by the same rule.
 int run_process(const std::string& exe, const std::string& arg, const InterruptGuard& guard,
+                const Environment& env = {});
+
+/// start_process then wait_process for a whole command line.
+int run_process(const std::vector<std::string>& command, const InterruptGuard& guard,
                 const Environment& env = {});
 
 /// Send SIGTERM to each child of `pids` and wait for it (when a caller unwinds while

@@ -6,6 +6,7 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "hybgen/gen/build.hpp"
 #include "hybgen/gen/frontend.hpp"
@@ -24,6 +25,12 @@ struct RunOptions {
 /// not change with --set: the runner reads the values from its configuration) and build or
 /// reuse the runner. Says what it does on stderr unless `quiet`.
 BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, bool quiet);
+
+/// The command line that runs `runner` on `config`: the runner itself, or with backend=mpi
+/// the MPI launcher ($HYBGEN_MPIEXEC, split at spaces, else `mpiexec`) with `-n ranks`
+/// first. Throws UsageError when the launcher is not found.
+std::vector<std::string> runner_command(const rt::Settings& settings, const std::string& runner,
+                                        const std::string& config);
 
 /// Throw the located error that stops `fe`'s model from running at all: no simulation
 /// block, or the characteristics method with a reset that has no inverse off its guard.

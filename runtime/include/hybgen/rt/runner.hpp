@@ -14,6 +14,7 @@
 /// previous outputs are untouched and `hybgen run` says so.
 
 #include <omp.h>
+#include <sys/resource.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -28,6 +29,7 @@
 #include <string>
 #include <vector>
 
+#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/exit_codes.hpp"
 #include "hybgen/rt/io/atomic_file.hpp"
 #include "hybgen/rt/io/run_outputs.hpp"
@@ -64,6 +66,12 @@ class ConfigError : public std::runtime_error {
   /// Construct with a message.
   explicit ConfigError(const std::string& m) : std::runtime_error(m) {}
 };
+
+/// The peak resident set size of this process so far, in bytes (getrusage).
+inline double peak_resident_bytes() {
+  rusage u{};
+  return ::getrusage(RUSAGE_SELF, &u) == 0 ? 1024.0 * static_cast<double>(u.ru_maxrss) : 0.0;
+}
 
 /// Output times 0, dt, 2 dt, ... up to t_end (t_end itself always included).
 inline std::vector<double> output_times(double t_end, double dt) {
@@ -126,15 +134,21 @@ RunConfig read_config(const std::string& path) {
 /// Solve with the configured method, write the outputs and the summary; returns the exit
 /// code.
 template <HybridModel M>
-int run_model(const RunConfig& c) {
+int run_model(const RunConfig& config, const Backend& backend = serial_backend()) {
   constexpr std::size_t N = state_dim_v<M>;
   using Clock = std::chrono::steady_clock;
+  // Rank 0 prints and writes; every rank solves its share (core/backend.hpp).
+  RunConfig c = config;
+  c.quiet = c.quiet || !backend.root();
   const double* par = c.params.data();
   // Worker threads: the setting when given, else OpenMP's default ($OMP_NUM_THREADS, or one
-  // per core). Particles are the same for any count (counter-based streams); sums over
-  // threads (the budget's cubatures) may differ in the last digits.
+  // per core, shared by the ranks on this machine). Particles are the same for any count
+  // (counter-based streams); sums over threads (the budget's cubatures) may differ in the
+  // last digits.
   if (const long long threads = c.settings.integer<"threads">(); threads > 0)
     omp_set_num_threads(static_cast<int>(threads));
+  else if (backend.ranks_here() > 1 && std::getenv("OMP_NUM_THREADS") == nullptr)
+    omp_set_num_threads(std::max(1, omp_get_num_procs() / backend.ranks_here()));
   TensorGrid<N> grid;
   for (std::size_t a = 0; a < N; ++a) grid.axes[a] = c.axes[a];
   const double dt = c.settings.real<"dt">();
@@ -166,15 +180,18 @@ int run_model(const RunConfig& c) {
     popt.backward = method == "characteristics";  // the one method that inverts Δ
     const PreflightFailure<N> pf = preflight<M>(grid, par, popt, &seeds, &notes);
     for (const auto& note : notes)
-      std::fprintf(stderr,
-                   "hybgen: warning: %s, at an isolated point only (measure zero: no mass is "
-                   "there); the scan excludes it, but a grid node exactly there has no finite "
-                   "density (choose a grid without a node at that point)\n",
-                   describe_preflight<M>(note).c_str());
+      if (backend.root())
+        std::fprintf(stderr,
+                     "hybgen: warning: %s, at an isolated point only (measure zero: no mass is "
+                     "there); the scan excludes it, but a grid node exactly there has no finite "
+                     "density (choose a grid without a node at that point)\n",
+                     describe_preflight<M>(note).c_str());
     if (!pf.ok()) {
-      std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
+      if (backend.root())
+        std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
       return exit_status(ExitCode::Numerical);
     }
+    if (c.preflight_only && !backend.root()) return exit_status(ExitCode::Success);
     if (c.preflight_only) {
       std::size_t enumerated = 0;
       for (const auto& sd : seeds) enumerated += sd.empty() ? 0 : 1;
@@ -189,12 +206,18 @@ int run_model(const RunConfig& c) {
     }
   }
   ms.preimage_seeds = &seeds;
+  ms.backend = &backend;
   MethodResult<N> res;
   try {
     res = solve_method<M>(grid, times, dt, par, ms);
   } catch (const std::invalid_argument& e) {
     throw ConfigError(e.what());  // e.g. an output time that is not a multiple of the step
   }
+  // The largest resident size of any rank (collective: before the ranks part).
+  const double peak_bytes = backend.max(peak_resident_bytes());
+  // Every rank knows whether the method failed (the failures are agreed across ranks); the
+  // result is complete on rank 0, which alone writes it.
+  if (!backend.root()) return exit_status(res.ok() ? ExitCode::Success : ExitCode::Numerical);
   for (const auto& w : res.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
   if (!res.ok()) {
     std::fprintf(stderr, "hybgen: numerical failure: %s\n", res.failure.c_str());
@@ -282,6 +305,9 @@ int run_model(const RunConfig& c) {
     params[M::param_names[j]] = c.params[j];
   s["parameters"] = params;
   s["threads"] = omp_get_max_threads();  // the worker threads this run had (setting `threads`)
+  s["backend"] = std::string(backend.name());
+  s["ranks"] = backend.ranks();                  // processes (threads each)
+  s["peak_memory_bytes_per_rank"] = peak_bytes;  // up to the solve's end, the largest rank
   s["initial_mass"] = mb.mass0;
   s["mass"] = mb.mass;
   s["outflow"] = mb.outflow;
@@ -357,8 +383,10 @@ int run_model(const RunConfig& c) {
 }
 
 /// Entry point of a generated runner.
+/// `backend`: the ranks of the run (core/backend.hpp); a runner built with backend=mpi
+/// passes hybgen::mpi's (hybgen/rt/mpi.hpp, mpi_main).
 template <HybridModel M>
-int runner_main(int argc, char** argv) {
+int runner_main(int argc, char** argv, const Backend& backend = serial_backend()) {
   if (argc != 2) {
     std::fprintf(stderr, "usage: %s CONFIG.json (written by `hybgen run`)\n",
                  argc ? argv[0] : "runner");
@@ -366,12 +394,16 @@ int runner_main(int argc, char** argv) {
   }
   try {
     const RunConfig c = read_config<M>(argv[1]);
-    return run_model<M>(c);
+    return run_model<M>(c, backend);
   } catch (const ConfigError& e) {
-    std::fprintf(stderr, "hybgen: error: %s\n", e.what());
+    // Every rank reads the same config: rank 0 says it once.
+    if (backend.root()) std::fprintf(stderr, "hybgen: error: %s\n", e.what());
     return exit_status(ExitCode::UsageError);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "hybgen: error: %s\n", e.what());
+    if (backend.ranks() > 1)
+      std::fprintf(stderr, "hybgen: error: (rank %d) %s\n", backend.rank(), e.what());
+    else
+      std::fprintf(stderr, "hybgen: error: %s\n", e.what());
     // Ended without the exit handlers: after a failed write of run.nc (a full disk), HDF5's
     // own handler (H5_term_library) crashes on the file NetCDF could not close. Nothing of
     // this process needs cleaning: hybgen removes its staging directory

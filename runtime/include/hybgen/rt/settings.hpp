@@ -106,7 +106,14 @@ inline constexpr std::array kSettings = {
                 "the state axes whose pairs the pictures show in 3-D and more, joined by '+' "
                 "(default: every axis)"},
     SettingSpec{"threads", SettingType::integer, 0, "", 0, 4096, false, "", "all",
-                "worker threads of the runner (0: $OMP_NUM_THREADS, else one per core)"},
+                "worker threads of the runner (0: $OMP_NUM_THREADS, else one per core, shared "
+                "by the ranks on a machine)"},
+    SettingSpec{"backend", SettingType::word, 0.0, "openmp", 0, 0, false, "openmp|mpi", "all",
+                "openmp: one process (the default); mpi: ranks under mpiexec with PETSc and "
+                "SLEPc (docs/distributed.md)"},
+    SettingSpec{"ranks", SettingType::integer, 1, "", 1, 1e6, false, "", "all",
+                "backend=mpi: the processes `hybgen run` starts (mpiexec -n; `--ranks N` sets "
+                "both)"},
     SettingSpec{"max_expr_nodes", SettingType::integer, 200000, "", 100, 1e12, false, "", "derive",
                 "largest derived expression, in tree nodes"},
     SettingSpec{"max_expand_terms", SettingType::real, 1e5, "", 1, 1e300, false, "", "derive",

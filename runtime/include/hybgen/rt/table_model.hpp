@@ -21,6 +21,7 @@
 #include <cstddef>
 #include <span>
 
+#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/model.hpp"
 
 namespace hybgen::rt {
@@ -172,11 +173,14 @@ struct TableModel {
 /// `runner_main` (runner.hpp) on TableModel<N> with `table` installed; instantiated in the
 /// library for N = 1..kTableMaxState (runtime/src/runner_dim.cpp).
 template <int N>
-int table_runner_main_dim(const ModelTable& table, int argc, char** argv);
+int table_runner_main_dim(const ModelTable& table, int argc, char** argv, const Backend& backend);
 
 /// Run the runner's main program on the model of `table` (runtime/src/runner_table.cpp):
 /// the entry point of a runner built against the library. Exit codes as `runner_main`;
 /// a table the library cannot run (`table_fits`) is exit 70, since the builder checks it.
-int table_runner_main(const ModelTable& table, int argc, char** argv);
+/// `backend`: the ranks of the run (core/backend.hpp; a runner built with backend=mpi
+/// passes hybgen::mpi's, through mpi_main in hybgen/rt/mpi.hpp).
+int table_runner_main(const ModelTable& table, int argc, char** argv,
+                      const Backend& backend = serial_backend());
 
 }  // namespace hybgen::rt

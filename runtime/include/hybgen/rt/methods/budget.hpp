@@ -1111,20 +1111,24 @@ struct ZenoValues {
   std::span<const double> times;                    ///< Output times.
   const double* par = nullptr;                      ///< Parameters.
   ForwardOptions fopt{};                            ///< Options of the forward flows.
-  std::string failure;                              ///< First failure (describe), or empty.
+  const Backend* backend = nullptr;  ///< Ranks sharing the points (null: this process).
+  std::string failure;               ///< First failure (describe), or empty.
 
   /// U[i·K + k] as above, OpenMP over the points.
   bool operator()(std::span<const Cell<N>>, std::span<const std::array<double, N>> pts, std::size_t,
                   std::vector<double>& U) {
     const std::size_t K = times.size();
     const auto P = static_cast<long long>(pts.size());
+    const Backend& b = backend ? *backend : serial_backend();
+    const Block mine = b.block(pts.size());
     std::atomic<long long> first_fail{P};
     std::string msg;
 #pragma omp parallel
     {
       ForwardFlow<M> flow(par, fopt);
 #pragma omp for schedule(dynamic, 8)
-      for (long long ii = 0; ii < P; ++ii) {
+      for (auto ii = static_cast<long long>(mine.begin); ii < static_cast<long long>(mine.end);
+           ++ii) {
         if (ii > first_fail.load(std::memory_order_relaxed)) continue;
         const auto i = static_cast<std::size_t>(ii);
         const std::array<double, N>& x = pts[i];
@@ -1148,6 +1152,19 @@ struct ZenoValues {
           for (std::size_t k = 0; k < K; ++k)
             if (times[k] >= r.t_stop) U[i * K + k] += u0;
         }
+      }
+    }
+    if (b.ranks() > 1) {
+      // Point i's K values are U[i·K, (i + 1)·K): the blocks of points tile U in rank order.
+      const std::vector<double> all =
+          b.all_gather(std::span<const double>(U.data() + mine.begin * K, mine.size() * K));
+      std::copy(all.begin(), all.end(), U.begin());
+      const std::int64_t first = b.min(std::int64_t{first_fail.load()});
+      if (first < P) {
+        const std::int64_t owner =
+            b.min(first_fail.load() == first ? std::int64_t{b.rank()} : b.ranks());
+        msg = b.broadcast(msg, static_cast<int>(owner));
+        first_fail.store(first);
       }
     }
     if (first_fail.load() < P) {
@@ -1188,6 +1205,7 @@ AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<c
   detail::ZenoValues<M> values;
   values.times = times;
   values.par = par;
+  values.backend = opt.backend;
   values.fopt.ode = opt.ode;
   values.fopt.graze_tol = opt.graze_tol;
   // The run's event cap (`max_events`, 100000 by default), not the forward flow's 1000: a

@@ -60,6 +60,7 @@
 #include <string>
 #include <vector>
 
+#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/core/geometry.hpp"
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/core/names.hpp"
@@ -88,6 +89,10 @@ struct CharacteristicsOptions {
   /// branch, weight 1/|J|, as the paper's general theorem sums them). Empty or null for a
   /// guard: its reset is taken as injective on S_g (one pre-image: Δ⁻¹ or Newton from y).
   const std::vector<std::vector<double>>* preimage_seeds = nullptr;
+  /// The ranks sharing the points (null: this process alone). Each traces its block of the
+  /// (mode, point) pairs and every rank receives every value: a characteristic does not
+  /// depend on its neighbours, so the values are the same bits for any number of ranks.
+  const Backend* backend = nullptr;
 };
 
 /// Context for evaluating on a face of the box [lo, hi] (boundary flux): the value is the
@@ -670,13 +675,16 @@ Solution<state_dim_v<M>> solve_points(std::size_t n_point, PointFn&& point, Face
   if (sol.n_time == 0 || n_point == 0) return sol;
   const auto total = static_cast<long long>(sol.n_mode * n_point);
   const auto np = static_cast<long long>(n_point);
+  const Backend& backend = opt.backend ? *opt.backend : serial_backend();
+  const Block mine = backend.block(static_cast<std::size_t>(total));
   std::atomic<long long> first_fail{total};
 #pragma omp parallel
   {
     Tracer<M> tracer(par, opt);
     std::vector<double> buf(sol.n_time);
 #pragma omp for schedule(dynamic, 16)
-    for (long long idx = 0; idx < total; ++idx) {
+    for (auto idx = static_cast<long long>(mine.begin); idx < static_cast<long long>(mine.end);
+         ++idx) {
       // Failures are reported for the smallest index: later ones need not be traced.
       if (idx > first_fail.load(std::memory_order_relaxed)) continue;
       const auto m = static_cast<std::size_t>(idx / np);
@@ -697,6 +705,18 @@ Solution<state_dim_v<M>> solve_points(std::size_t n_point, PointFn&& point, Face
       }
       for (std::size_t k = 0; k < sol.n_time; ++k) sol.u[sol.index(k, m, i)] = buf[k];
     }
+  }
+  if (backend.ranks() > 1) {
+    // Frame k holds the pairs in the order idx = m·n_point + i: each rank's block is one
+    // contiguous piece of it, and the blocks tile it in rank order.
+    const auto size = static_cast<std::size_t>(total);
+    for (std::size_t k = 0; k < sol.n_time; ++k) {
+      double* frame = sol.u.data() + k * size;
+      const std::vector<double> all =
+          backend.all_gather(std::span<const double>(frame + mine.begin, mine.size()));
+      std::copy(all.begin(), all.end(), frame);
+    }
+    agree_first_failure(backend, first_fail.load(), sol.failure, total);
   }
   return sol;
 }

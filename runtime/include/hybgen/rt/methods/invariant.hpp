@@ -49,6 +49,7 @@
 #include <string>
 #include <vector>
 
+#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
 
 namespace hybgen::rt {
@@ -110,17 +111,57 @@ inline double l1(const std::vector<double>& v) {
 }  // namespace detail
 
 /// The invariant density of `op` (the leading eigenvector of P, as densities of unit mass)
-/// and its leading eigenvalues (see the file comment for methods and tolerances).
+/// and its leading eigenvalues (see the file comment for methods and tolerances). A
+/// distributed operator (transfer.hpp, `distributed`) is solved by its backend's
+/// eigen-solver (SLEPc's Krylov–Schur, runtime/src/mpi/petsc_matrix.cpp) with the same
+/// selection of the Perron root, the same power-iteration fallback and the same
+/// normalisation, on every rank's owned entries; the density is gathered on rank 0.
 template <std::size_t N>
 InvariantResult invariant_density(const TransferOperator<N>& op, const InvariantOptions& opt = {}) {
   const auto n = static_cast<Eigen::Index>(op.size());
   if (opt.n_eigen < 2) throw std::invalid_argument("invariant: n_eigen must be >= 2");
   if (n < 4) throw std::invalid_argument("invariant: the operator is too small");
+  const Backend& b = op.distributed && op.backend ? *op.backend : serial_backend();
+  const Block own = op.distributed ? op.owned : Block{0, op.size()};
+  const std::size_t L = own.size();
+  // y = P x on the owned entries; Σ over every rank's entries.
+  auto apply = [&](const double* x, double* y) {
+    if (op.distributed)
+      op.distributed->multiply(std::span<const double>(x, L), std::span<double>(y, L));
+    else
+      detail::csr_matvec(op.P, x, y);
+  };
+  auto l1 = [&](const std::vector<double>& v) { return b.sum(detail::l1(v)); };
   InvariantResult res;
-  std::vector<double> v(static_cast<std::size_t>(n), 0.0);
+  std::vector<double> v(L, 0.0);
   double lam1 = 0.0, lam2_abs = std::numeric_limits<double>::quiet_NaN();
   bool have = false;
-  if (!opt.force_power) {
+  // The eigenvalues with the Perron root first, n_eigen of them.
+  auto take = [&](const std::vector<std::complex<double>>& ev, int lead) {
+    res.eigenvalues.push_back(ev[static_cast<std::size_t>(lead)]);
+    for (std::size_t j = 0; j < ev.size(); ++j)
+      if (static_cast<int>(j) != lead) res.eigenvalues.push_back(ev[j]);
+    if (res.eigenvalues.size() > static_cast<std::size_t>(opt.n_eigen))
+      res.eigenvalues.resize(static_cast<std::size_t>(opt.n_eigen));
+    lam1 = res.eigenvalues[0].real();
+    lam2_abs = res.eigenvalues.size() > 1 ? std::abs(res.eigenvalues[1]) : 0.0;
+  };
+  if (!opt.force_power && op.distributed) {
+    EigenRequest req;
+    req.n_eigen = std::min<int>(std::max(opt.n_eigen, opt.search), static_cast<int>(n) - 2);
+    req.ncv = opt.ncv;
+    req.tol = opt.tol;
+    req.max_iterations = opt.max_restarts;
+    EigenAnswer a = op.distributed->eigen(req);
+    res.iterations = a.iterations;
+    if (a.lead >= 0 && a.vector.size() == L) {
+      v = std::move(a.vector);
+      take(a.eigenvalues, a.lead);
+      res.method = a.solver;
+      res.converged = a.converged;
+      have = true;
+    }
+  } else if (!opt.force_power) {
     const Eigen::Index nev = std::min<Eigen::Index>(std::max(opt.n_eigen, opt.search), n - 2);
     const Eigen::Index ncv = std::min<Eigen::Index>(
         n, opt.ncv > 0 ? opt.ncv : std::max<Eigen::Index>(2 * nev + 1, 5 * nev));
@@ -133,19 +174,11 @@ InvariantResult invariant_density(const TransferOperator<N>& op, const Invariant
                  Spectra::SortRule::LargestMagn);
     res.iterations = static_cast<long>(eigs.num_iterations());
     if (eigs.info() == Spectra::CompInfo::Successful) {
-      const Eigen::VectorXcd ev = eigs.eigenvalues();
-      const Eigen::MatrixXcd vecs = eigs.eigenvectors();
-      // The Perron root: the real, non-negative eigenvalue of largest magnitude (ties in
-      // magnitude, e.g. a rotation's e^{±iθ}, never beat it: ρ is the spectral radius).
-      Eigen::Index lead = -1;
-      for (Eigen::Index j = 0; j < ev.size(); ++j) {
-        const double scale = std::max(std::abs(ev[j]), 1e-300);
-        if (std::fabs(ev[j].imag()) <= 1e-8 * scale && ev[j].real() >= 0.0 &&
-            (lead < 0 || ev[j].real() > ev[lead].real()))
-          lead = j;
-      }
+      const Eigen::VectorXcd evx = eigs.eigenvalues();
+      const std::vector<std::complex<double>> ev(evx.data(), evx.data() + evx.size());
+      const int lead = perron_index(ev);
       if (lead >= 0) {
-        lam1 = ev[lead].real();
+        const Eigen::MatrixXcd vecs = eigs.eigenvectors();
         // A real eigenvalue's eigenvector up to a complex phase: rotate its largest entry real.
         Eigen::Index big = 0;
         for (Eigen::Index r = 1; r < n; ++r)
@@ -153,12 +186,7 @@ InvariantResult invariant_density(const TransferOperator<N>& op, const Invariant
         const std::complex<double> phase = std::conj(vecs(big, lead)) / std::abs(vecs(big, lead));
         for (Eigen::Index r = 0; r < n; ++r)
           v[static_cast<std::size_t>(r)] = (vecs(r, lead) * phase).real();
-        res.eigenvalues.push_back(ev[lead]);
-        for (Eigen::Index j = 0; j < ev.size(); ++j)
-          if (j != lead) res.eigenvalues.push_back(ev[j]);
-        if (res.eigenvalues.size() > static_cast<std::size_t>(opt.n_eigen))
-          res.eigenvalues.resize(static_cast<std::size_t>(opt.n_eigen));
-        lam2_abs = res.eigenvalues.size() > 1 ? std::abs(res.eigenvalues[1]) : 0.0;
+        take(ev, lead);
         res.method = "spectra";
         res.converged = true;
         have = true;
@@ -174,8 +202,8 @@ InvariantResult invariant_density(const TransferOperator<N>& op, const Invariant
     double prev_diff = 0.0, ratio = std::numeric_limits<double>::quiet_NaN();
     long it = 0;
     for (; it < opt.power_max_iter; ++it) {
-      detail::csr_matvec(op.P, v.data(), y.data());
-      const double norm = detail::l1(y);
+      apply(v.data(), y.data());
+      const double norm = l1(y);
       if (!(norm > 0.0)) break;  // nilpotent: everything leaves
       lam1 = norm;               // Σ|P v| / Σ|v| with Σ|v| = 1
       double diff = 0.0;
@@ -183,6 +211,7 @@ InvariantResult invariant_density(const TransferOperator<N>& op, const Invariant
         y[r] /= norm;
         diff += std::fabs(y[r] - v[r]);
       }
+      diff = b.sum(diff);
       v.swap(y);
       if (prev_diff > 0.0) ratio = diff / prev_diff;
       prev_diff = diff;
@@ -200,24 +229,27 @@ InvariantResult invariant_density(const TransferOperator<N>& op, const Invariant
   // Residual in P's variable, then sign and mass normalisation.
   {
     std::vector<double> y(v.size());
-    detail::csr_matvec(op.P, v.data(), y.data());
+    apply(v.data(), y.data());
     double num = 0.0;
     for (std::size_t r = 0; r < y.size(); ++r) num += std::fabs(y[r] - lam1 * v[r]);
-    res.residual = num / std::max(detail::l1(v), 1e-300);
+    res.residual = b.sum(num) / std::max(l1(v), 1e-300);
   }
   // P's variable → densities: the operator acts on node masses.
-  res.density.resize(v.size());
+  std::vector<double> density(L);
   double mass = 0.0;
-  for (std::size_t r = 0; r < v.size(); ++r) {
-    res.density[r] = v[r] / op.weight[r];
-    mass += op.weight[r] * res.density[r];
+  for (std::size_t r = 0; r < L; ++r) {
+    density[r] = v[r] / op.weight[own.begin + r];
+    mass += op.weight[own.begin + r] * density[r];
   }
+  mass = b.sum(mass);
   if (mass == 0.0) mass = 1.0;
-  res.min_value = std::numeric_limits<double>::infinity();
-  for (double& u : res.density) {
+  double low = std::numeric_limits<double>::infinity();
+  for (double& u : density) {
     u /= mass;
-    res.min_value = std::min(res.min_value, u);
+    low = std::min(low, u);
   }
+  res.min_value = -b.max(-low);
+  res.density = op.distributed ? b.gather(density) : std::move(density);
   const double ratio = lam1 > 0.0 ? lam2_abs / lam1 : std::numeric_limits<double>::quiet_NaN();
   res.gap = 1.0 - ratio;
   res.decay_rate = -std::log(ratio) / op.step;

@@ -66,6 +66,9 @@ struct MethodSettings {
   /// characteristics: per guard, the pre-flight's seeds for enumerating pre-images
   /// (CharacteristicsOptions::preimage_seeds); null or empty: every reset is injective.
   const std::vector<std::vector<double>>* preimage_seeds = nullptr;
+  /// The ranks sharing the work (core/backend.hpp); null: this process alone. Every rank
+  /// calls the method; the result is complete on rank 0.
+  const Backend* backend = nullptr;
 
   /// Set a number setting; throws std::invalid_argument when the table refuses it.
   MethodSettings& set(std::string_view name, double x) {
@@ -136,6 +139,7 @@ inline CharacteristicsOptions trace_options(const MethodSettings& s) {
   CharacteristicsOptions opt;
   set_ode_settings(s, opt);
   opt.preimage_seeds = s.preimage_seeds;
+  opt.backend = s.backend;
   return opt;
 }
 
@@ -146,6 +150,7 @@ inline TransferOptions transfer_options(const MethodSettings& s, double dt) {
   o.scheme = parse_scheme(s.settings.word<"scheme">());
   o.samples_per_axis = static_cast<int>(s.settings.integer<"samples">());
   set_ode_settings(s, o.forward);
+  o.backend = s.backend;
   return o;
 }
 
@@ -157,7 +162,8 @@ nlohmann::json operator_summary(const TransferOptions& o, const TransferOperator
           {"samples_per_axis", op.samples_per_axis},
           {"column_defect", op.column_defect},
           {"rows", op.size()},
-          {"nonzeros", static_cast<std::size_t>(op.P.nonZeros())},
+          {"nonzeros", op.nonzeros()},
+          {"matrix_bytes_per_rank", op.matrix_bytes()},
           {"assembly_seconds", op.seconds}};
 }
 
@@ -175,8 +181,10 @@ bool assembly_failed(const TransferOperator<N>& op, MethodResult<N>& r,
 template <HybridModel M>
 TransferOperator<state_dim_v<M>> assemble(const TensorGrid<state_dim_v<M>>& grid, const double* par,
                                           TransferOptions o, bool quiet) {
+  // Each rank assembles its block of the columns: rank 0's bar counts its own share.
+  const Backend& backend = o.backend ? *o.backend : serial_backend();
   Progress progress("transfer operator: assembly",
-                    grid.size() * static_cast<std::size_t>(M::n_mode), quiet);
+                    backend.block(grid.size() * static_cast<std::size_t>(M::n_mode)).size(), quiet);
   o.progress = &progress;
   return assemble_transfer<M>(grid, par, o);
 }
@@ -194,7 +202,9 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   CharacteristicsOptions opt = detail::trace_options(s);
   const auto t0 = detail::MethodClock::now();
   {
-    Progress progress("characteristics", grid.size() * static_cast<std::size_t>(M::n_mode),
+    const Backend& backend = s.backend ? *s.backend : serial_backend();
+    Progress progress("characteristics",
+                      backend.block(grid.size() * static_cast<std::size_t>(M::n_mode)).size(),
                       s.quiet);
     opt.progress = &progress;
     r.solution = solve_grid<M>(grid, times, par, opt);
@@ -369,8 +379,11 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   po.particles = static_cast<std::size_t>(s.settings.integer<"particles">());
   po.seed = static_cast<std::uint64_t>(s.settings.integer<"seed">());
   detail::set_ode_settings(s, po.forward);
+  po.backend = s.backend;
   const auto t0 = detail::MethodClock::now();
-  Progress progress("particles", po.particles, s.quiet);
+  // Each rank advances its own block: rank 0's bar counts its own share.
+  const Backend& backend = s.backend ? *s.backend : serial_backend();
+  Progress progress("particles", backend.block(po.particles).size(), s.quiet);
   po.progress = &progress;
   ParticleRun<N> run = solve_particles<M>(grid, times, par, po);
   progress.finish();

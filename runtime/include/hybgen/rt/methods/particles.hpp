@@ -27,7 +27,9 @@
 ///
 /// Randomness: particle i draws from its own SplitMix64 stream seeded by (seed, i), so the
 /// particles — and, with the integer accumulation below, every output bit — do not depend
-/// on the number of threads or the schedule.
+/// on the number of threads or the schedule, nor on the number of ranks: with a backend of
+/// R ranks (core/backend.hpp) each pushes its block of the indices, and the integer sums
+/// and max|w| are reduced across ranks exactly.
 ///
 /// Deposit: cloud-in-cell. A particle of weight w at y in the grid box adds w·λ_j(y) to the 2ᴺ
 /// corner nodes j of its grid cell (multilinear weights, Σ_j λ_j = 1); node sums are divided
@@ -64,6 +66,7 @@
 #include <string>
 #include <vector>
 
+#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/core/geometry.hpp"
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/core/names.hpp"
@@ -91,6 +94,8 @@ struct ParticleOptions {
   /// stay below this; above it one shared array with atomic adds.
   std::size_t private_deposit_bytes = std::size_t{256} << 20;
   Progress* progress = nullptr;  ///< Advanced once per particle pushed when set.
+  /// The ranks sharing the particles (null: this process alone); the result is on rank 0.
+  const Backend* backend = nullptr;
 };
 
 /// A counter-based random stream: SplitMix64 (Steele, Lea, Flood 2014) started at a state
@@ -385,6 +390,10 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   const std::size_t nm = static_cast<std::size_t>(M::n_mode);
   const std::size_t nodes = grid.size();
   const auto n = static_cast<long long>(opt.particles);
+  const Backend& backend = opt.backend ? *opt.backend : serial_backend();
+  const Block mine_block = backend.block(opt.particles);
+  const auto first = static_cast<long long>(mine_block.begin);
+  const auto last = static_cast<long long>(mine_block.end);
   ParticleRun<N> run;
   run.particles = opt.particles;
   run.solution.n_time = K;
@@ -403,13 +412,14 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   double wmax = 0.0;
   long long traced = 0;
 #pragma omp parallel for reduction(max : wmax) reduction(+ : traced) schedule(static)
-  for (long long i = 0; i < n; ++i) {
+  for (long long i = first; i < last; ++i) {
     const double w = std::fabs(sampler.draw(static_cast<std::size_t>(i)).weight);
     if (!std::isfinite(w)) continue;
     wmax = std::max(wmax, w);
     if (w > 0.0) ++traced;
   }
-  run.traced = static_cast<std::size_t>(traced);
+  wmax = backend.max(wmax);
+  run.traced = static_cast<std::size_t>(backend.sum(std::int64_t{traced}));
   const double nd = static_cast<double>(std::max<long long>(n, 1));
   const double scale = wmax > 0.0 ? std::ldexp(1.0, 61 - std::ilogb(nd * wmax)) : 1.0;
   const double scale2 = wmax > 0.0 ? std::ldexp(1.0, 61 - std::ilogb(nd * wmax * wmax)) : 1.0;
@@ -455,7 +465,7 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
       std::int64_t local_mass0 = 0, local_sampled = 0;
       bool local_bad = false;
 #pragma omp for schedule(dynamic, 64)
-      for (long long ii = 0; ii < n; ++ii) {
+      for (long long ii = first; ii < last; ++ii) {
         if (opt.progress) opt.progress->advance();
         if (ii > first_fail.load(std::memory_order_relaxed)) continue;
         const auto i = static_cast<std::size_t>(ii);
@@ -541,7 +551,15 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
       }
     }
   }
-  if (non_finite_weight) throw std::runtime_error("particles: non-finite initial density");
+  // Across ranks: integer sums (exact, so the same bits for any number of ranks), the
+  // deposit onto rank 0, and the failure of the smallest index.
+  backend.sum(std::span<std::int64_t>(sums));
+  backend.sum_to_root(std::span<std::int64_t>(acc));
+  mass0 = backend.sum(mass0);
+  sampled = backend.sum(sampled);
+  if (backend.any(non_finite_weight))
+    throw std::runtime_error("particles: non-finite initial density");
+  agree_first_failure(backend, first_fail.load(), failure, n);
   run.failure = failure;
   // Densities: node sums over dual-cell volumes.
   const double inv = 1.0 / scale;

@@ -78,6 +78,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <span>
 #include <sstream>
 #include <stdexcept>
@@ -85,6 +86,7 @@
 #include <utility>
 #include <vector>
 
+#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/core/geometry.hpp"
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/core/names.hpp"
@@ -135,6 +137,10 @@ struct TransferOptions {
   /// point within the step), not only deep inside the cascade.
   ForwardOptions forward{.ode = {}, .max_events = 1000, .zeno_time = 1.0, .zeno_ratio = 0.999};
   Progress* progress = nullptr;  ///< Advanced once per assembled column when set.
+  /// The ranks sharing the operator (null: this process alone). With several, each assembles
+  /// the columns of its block and the matrix is the backend's (`DistributedMatrix`, PETSc),
+  /// its rows distributed by the same blocks.
+  const Backend* backend = nullptr;
 };
 
 /// Largest |Σ_j P_ji + outflow_i + atom_i − 1| over the columns that the assembly accepts:
@@ -163,8 +169,14 @@ struct TransferOperator {
   TransferScheme scheme = TransferScheme::hat;  ///< Scheme.
   int samples_per_axis = 0;                     ///< Sample points per axis and cell used.
   /// M^{n+1} = P M^n on node masses M_r = weight_r·u_r; P_jr = fraction of cell r's mass that
-  /// lands on node j.
+  /// lands on node j. Empty when `distributed` holds the matrix.
   CsrMatrix P;
+  /// The matrix over several ranks (a backend with several); null: `P` is the matrix.
+  std::shared_ptr<DistributedMatrix> distributed;
+  const Backend* backend = nullptr;  ///< The ranks of `distributed` (null: this process).
+  /// The state indices this rank assembled, owns as rows and holds as vector entries;
+  /// outflow, atom and weight are valid there ([0, size()) in one process).
+  Block owned{};
   std::vector<double> weight;   ///< Trapezoid weight (= dual-cell volume) of every index r.
   std::vector<double> outflow;  ///< Fraction of cell r leaving the box or the support.
   std::vector<double> atom;     ///< Fraction of cell r that reaches a Zeno point within h.
@@ -177,6 +189,19 @@ struct TransferOperator {
 
   /// Length of the state vector, n_mode·n_node.
   std::size_t size() const { return n_mode * n_node; }
+  /// Non-zeros of the whole matrix.
+  std::size_t nonzeros() const {
+    return distributed ? distributed->nonzeros() : static_cast<std::size_t>(P.nonZeros());
+  }
+  /// Bytes of the matrix on the rank holding most (collective when distributed): values,
+  /// indices and row pointers (and PETSc's communication plan).
+  std::size_t matrix_bytes() const {
+    if (distributed && backend)
+      return static_cast<std::size_t>(
+          backend->max(static_cast<double>(distributed->local_bytes())));
+    return static_cast<std::size_t>(P.nonZeros()) * (sizeof(double) + sizeof(int)) +
+           static_cast<std::size_t>(P.rows() + 1) * sizeof(int);
+  }
   /// Whether the assembly succeeded everywhere.
   bool ok() const { return failure.ok() && failure_message.empty(); }
 };
@@ -260,6 +285,7 @@ TransferOperator<N> empty_operator(const TensorGrid<N>& grid, int n_mode, double
   op.step = step;
   op.scheme = scheme;
   op.weight = trapezoid_weights(grid, op.n_mode);
+  op.owned = {0, op.size()};
   return op;
 }
 
@@ -387,43 +413,65 @@ bool deposit(TransferScheme scheme, const TensorGrid<N>& grid, const std::array<
 }
 
 /// Conservation, column by column: Σ_j P_jr + outflow_r + atom_r = 1 and P_jr ≥ 0. It holds
-/// by construction (fractions of the samples in the support, deposit weights summing to 1);
-/// sets op.column_defect, and op.failure_message (naming the node) when the defect exceeds
+/// by construction (fractions of the samples in the support, deposit weights summing to 1).
+/// `each(f)` calls f(row, column, value) for every entry this rank assembled (all of its
+/// owned columns' entries). Sets op.column_defect (the largest over all ranks), and
+/// op.failure_message (naming the node, from the rank that owns it) when the defect exceeds
 /// kColumnTol or an entry is negative or not finite: such an operator is never marched.
-template <HybridModel M>
-void check_columns(TransferOperator<state_dim_v<M>>& op) {
-  const auto R = static_cast<std::size_t>(op.P.rows());
-  if (R == 0) return;
-  std::vector<double> col(op.outflow.begin(), op.outflow.end());
-  for (std::size_t r = 0; r < R; ++r) col[r] += op.atom[r];
-  const int* outer = op.P.outerIndexPtr();
-  const int* inner = op.P.innerIndexPtr();
-  const double* val = op.P.valuePtr();
+template <HybridModel M, class ForEach>
+void check_columns(TransferOperator<state_dim_v<M>>& op, const Backend& b, ForEach&& each) {
+  const Block own = op.owned;
+  const std::size_t R = op.size();
+  std::vector<double> col(own.size());
+  for (std::size_t r = own.begin; r < own.end; ++r) col[r - own.begin] = op.outflow[r] + op.atom[r];
   std::size_t negative = R;  // the column of a negative or non-finite entry, if any
-  for (std::size_t r = 0; r < R; ++r)
-    for (int k = outer[r]; k < outer[r + 1]; ++k) {
-      col[static_cast<std::size_t>(inner[k])] += val[k];
-      if (!(val[k] >= 0.0) || !std::isfinite(val[k])) negative = static_cast<std::size_t>(inner[k]);
-    }
-  op.column_defect = 0.0;
-  std::size_t worst = 0;
-  for (std::size_t r = 0; r < R; ++r) {
-    const double d = std::fabs(col[r] - 1.0);
-    if (!(d <= op.column_defect)) {
-      op.column_defect = std::isfinite(d) ? d : std::numeric_limits<double>::infinity();
+  each([&](std::size_t, std::size_t c, double v) {
+    col[c - own.begin] += v;
+    if (!(v >= 0.0) || !std::isfinite(v)) negative = c;
+  });
+  double defect = 0.0;
+  std::size_t worst = own.begin;
+  for (std::size_t r = own.begin; r < own.end; ++r) {
+    const double d = std::fabs(col[r - own.begin] - 1.0);
+    if (!(d <= defect)) {
+      defect = std::isfinite(d) ? d : std::numeric_limits<double>::infinity();
       worst = r;
     }
   }
-  if (negative == R && op.column_defect <= kColumnTol) return;
-  if (negative != R) worst = negative;
-  std::ostringstream os;
-  os.precision(17);
-  os << "the transfer operator does not conserve mass: the column of node ";
-  write_state<M>(os, op.grid.node(worst % op.n_node));
-  os << " in mode '" << mode_name<M>(static_cast<int>(worst / op.n_node))
-     << "' sums, with its outflow and atom, to " << col[worst] << " instead of 1 (tolerance "
-     << kColumnTol << "), or has a negative entry";
-  op.failure_message = os.str();
+  op.column_defect = b.max(defect);
+  const auto none = static_cast<std::int64_t>(R);
+  const std::int64_t mine = negative == R ? none : static_cast<std::int64_t>(negative);
+  const std::int64_t first_negative = b.min(mine);
+  if (first_negative == none && op.column_defect <= kColumnTol) return;
+  const bool owner_here =
+      first_negative != none ? mine == first_negative : defect == op.column_defect;
+  const std::int64_t owner = b.min(owner_here ? std::int64_t{b.rank()} : b.ranks());
+  std::string message;
+  if (b.rank() == owner) {
+    if (negative != R) worst = negative;
+    std::ostringstream os;
+    os.precision(17);
+    os << "the transfer operator does not conserve mass: the column of node ";
+    write_state<M>(os, op.grid.node(worst % op.n_node));
+    os << " in mode '" << mode_name<M>(static_cast<int>(worst / op.n_node))
+       << "' sums, with its outflow and atom, to " << col[worst - own.begin]
+       << " instead of 1 (tolerance " << kColumnTol << "), or has a negative entry";
+    message = os.str();
+  }
+  op.failure_message = b.broadcast(message, static_cast<int>(owner));
+}
+
+/// `check_columns` of the CSR matrix `op.P` (one process).
+template <HybridModel M>
+void check_columns(TransferOperator<state_dim_v<M>>& op) {
+  check_columns<M>(op, serial_backend(), [&op](auto&& f) {
+    const int* outer = op.P.outerIndexPtr();
+    const int* inner = op.P.innerIndexPtr();
+    const double* val = op.P.valuePtr();
+    for (std::size_t r = 0; r < static_cast<std::size_t>(op.P.rows()); ++r)
+      for (int k = outer[r]; k < outer[r + 1]; ++k)
+        f(r, static_cast<std::size_t>(inner[k]), val[k]);
+  });
 }
 
 /// The operator of either scheme (see the file comment). Source cells (columns) in parallel,
@@ -436,6 +484,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   TransferOperator<N> op = empty_operator<N>(grid, M::n_mode, opt.step, opt.scheme);
   const auto R = static_cast<std::int64_t>(op.size());
   const auto nn = static_cast<std::int64_t>(op.n_node);
+  const Backend& backend = opt.backend ? *opt.backend : serial_backend();
+  op.owned = backend.block(op.size());
   op.outflow.assign(static_cast<std::size_t>(R), 0.0);
   op.atom.assign(static_cast<std::size_t>(R), 0.0);
   const int Ka = opt.samples_per_axis > 0 ? opt.samples_per_axis : default_samples_per_axis(N);
@@ -477,7 +527,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
     std::vector<char> valid(K);            // … in the support, status ok
     std::vector<char> flowed(K);           // whether the sample was in the support
 #pragma omp for schedule(dynamic, 64)
-    for (std::int64_t r = 0; r < R; ++r) {
+    for (auto r = static_cast<std::int64_t>(op.owned.begin);
+         r < static_cast<std::int64_t>(op.owned.end); ++r) {
       if (opt.progress) opt.progress->advance();
       if (r > first_fail.load(std::memory_order_relaxed)) continue;
       const auto m = static_cast<int>(r / nn);
@@ -624,6 +675,45 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       }
     }
   }
+  // The failure of the smallest state index over all ranks, then the columns' mass check.
+  agree_first_failure(backend, first_fail.load(), op.failure, R, &op.failure_message);
+  if (op.failure_message.empty())
+    check_columns<M>(op, backend, [&trip](auto&& f) {
+      for (const auto& t : trip)
+        for (const Triplet& e : t)
+          f(static_cast<std::size_t>(e.row), static_cast<std::size_t>(e.col), e.frac);
+    });
+  if (backend.ranks() > 1) {
+    // The owned columns compressed (count, prefix sum, scatter; a column's entries come from
+    // one thread, in row order), handed to the backend's distributed matrix.
+    if (!op.failure_message.empty()) return op;  // agreed on every rank: none builds one
+    OperatorColumns part;
+    part.size = op.size();
+    part.owned = op.owned;
+    part.start.assign(op.owned.size() + 1, 0);
+    std::size_t count = 0;
+    for (const auto& t : trip) {
+      count += t.size();
+      for (const Triplet& e : t) ++part.start[static_cast<std::size_t>(e.col) - op.owned.begin + 1];
+    }
+    for (std::size_t c = 0; c < op.owned.size(); ++c) part.start[c + 1] += part.start[c];
+    part.row.resize(count);
+    part.value.resize(count);
+    std::vector<std::size_t> at(part.start.begin(), part.start.end() - 1);
+    for (auto& t : trip) {
+      for (const Triplet& e : t) {
+        const std::size_t k = at[static_cast<std::size_t>(e.col) - op.owned.begin]++;
+        part.row[k] = e.row;
+        part.value[k] = e.frac;
+      }
+      std::vector<Triplet>().swap(t);
+    }
+    op.backend = &backend;
+    op.distributed = backend.matrix(std::move(part));
+    if (!op.distributed)
+      throw std::logic_error("transfer: a backend of several ranks without distributed matrices");
+    return op;
+  }
   // CSR by target rows: count, prefix sum, scatter (serial: O(nnz) moves), then sort each
   // row's columns (parallel; rows are short).
   std::vector<int> outer(static_cast<std::size_t>(R) + 1, 0);
@@ -665,7 +755,6 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       }
     }
   }
-  if (op.failure_message.empty()) check_columns<M>(op);
   return op;
 }
 
@@ -756,7 +845,9 @@ inline long steps_to(double t, double h) {
 /// renormalises. After every step the budget mass_{n+1} + outflow_n + atom_n = mass_n is
 /// checked: a defect beyond kStepBudgetTol·mass0 stops the march with `failure` naming the
 /// step, its time and the node that gained most (a numerical failure, exit 3). `progress`,
-/// if set, is advanced once per step.
+/// if set, is advanced once per step. A distributed operator is marched by every rank on
+/// its owned entries (one collective mat-vec and one sum of the three budget terms per
+/// step); the densities are gathered on rank 0, whose `solution` alone holds them.
 template <std::size_t N>
 TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
                      std::span<const double> times, Progress* progress = nullptr) {
@@ -765,6 +856,9 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   const std::size_t R = op.size();
   if (u0.size() != R) throw std::invalid_argument("transfer: initial vector has the wrong size");
   const auto t0 = std::chrono::steady_clock::now();
+  const Backend& b = op.distributed && op.backend ? *op.backend : serial_backend();
+  const Block own = op.distributed ? op.owned : Block{0, R};
+  const std::size_t L = own.size();
   std::vector<long> at(times.size());
   for (std::size_t k = 0; k < times.size(); ++k) at[k] = steps_to(times[k], op.step);
   TransferRun<N> run;
@@ -773,19 +867,22 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   sol.n_time = times.size();
   sol.n_mode = op.n_mode;
   sol.n_point = op.n_node;
-  sol.u.assign(sol.n_time * R, 0.0);
-  // x: node masses weight·u.
-  std::vector<double> x(R), y(R);
-  const double* w = op.weight.data();
+  if (b.root()) sol.u.assign(sol.n_time * R, 0.0);
+  // x: the owned node masses weight·u.
+  std::vector<double> x(L), y(L), frame(L);
+  const double* w = op.weight.data() + own.begin;
+  const double* outflow = op.outflow.data() + own.begin;
+  const double* atom = op.atom.data() + own.begin;
   double mass0 = 0.0;
-  const auto Ri = static_cast<std::int64_t>(R);
-#pragma omp parallel for schedule(static) reduction(+ : mass0) if (Ri > detail::kParallelRows)
-  for (std::int64_t r = 0; r < Ri; ++r) {
+  const auto Li = static_cast<std::int64_t>(L);
+#pragma omp parallel for schedule(static) reduction(+ : mass0) if (Li > detail::kParallelRows)
+  for (std::int64_t r = 0; r < Li; ++r) {
     const auto ru = static_cast<std::size_t>(r);
-    x[ru] = w[ru] * u0[ru];
+    x[ru] = w[ru] * u0[own.begin + ru];
     y[ru] = 0.0;
     mass0 += x[ru];
   }
+  mass0 = b.sum(mass0);
   run.step_mass.reserve(static_cast<std::size_t>(run.n_steps) + 1);
   run.step_mass.push_back(mass0);
   std::size_t k = 0;
@@ -795,11 +892,15 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   mb.mass0 = mass0;
   auto emit = [&](long n) {
     for (; k < times.size() && at[k] == n; ++k) {
-      double* dst = sol.u.data() + k * R;
-#pragma omp parallel for schedule(static) if (Ri > detail::kParallelRows)
-      for (std::int64_t r = 0; r < Ri; ++r) {
+      double* dst = op.distributed ? frame.data() : sol.u.data() + k * R;
+#pragma omp parallel for schedule(static) if (Li > detail::kParallelRows)
+      for (std::int64_t r = 0; r < Li; ++r) {
         const auto ru = static_cast<std::size_t>(r);
         dst[ru] = x[ru] / w[ru];
+      }
+      if (op.distributed) {
+        const std::vector<double> all = b.gather(frame);
+        if (b.root()) std::copy(all.begin(), all.end(), sol.u.begin() + static_cast<long>(k * R));
       }
       mb.mass.push_back(run.step_mass.back());
       mb.outflow.push_back(out_cum);
@@ -810,23 +911,42 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   const double scale = std::max(std::fabs(mass0), std::numeric_limits<double>::min());
   const double tol = kStepBudgetTol * std::max(1.0, static_cast<double>(R) / 1e6);
   for (long n = 0; n < run.n_steps; ++n) {
-    const detail::StepSums s =
-        detail::csr_step(op.P, x.data(), y.data(), op.outflow.data(), op.atom.data());
+    detail::StepSums s;
+    if (op.distributed) {
+      op.distributed->multiply(x, y);
+      double sm = 0.0, so = 0.0, sa = 0.0;
+#pragma omp parallel for schedule(static) reduction(+ : sm, so, sa) if (Li > detail::kParallelRows)
+      for (std::int64_t r = 0; r < Li; ++r) {
+        const auto ru = static_cast<std::size_t>(r);
+        sm += y[ru];
+        so += outflow[ru] * x[ru];
+        sa += atom[ru] * x[ru];
+      }
+      std::array<double, 3> sums{sm, so, sa};
+      b.sum(std::span<double>(sums));
+      s = {sums[0], sums[1], sums[2]};
+    } else {
+      s = detail::csr_step(op.P, x.data(), y.data(), outflow, atom);
+    }
     const double defect = std::fabs(s.mass + s.outflow + s.atom - run.step_mass.back()) / scale;
     run.budget_defect = std::max(run.budget_defect, std::isnan(defect) ? HUGE_VAL : defect);
     if (!(defect <= tol)) {
-      // The node whose mass grew most names the place.
+      // The node whose mass grew most names the place (over every rank's entries).
       std::size_t worst = 0;
       double gain = -HUGE_VAL;
-      for (std::size_t r = 0; r < R; ++r)
+      for (std::size_t r = 0; r < L; ++r)
         if (!(y[r] - x[r] <= gain)) gain = y[r] - x[r], worst = r;
+      const double top = b.max(gain);
+      const auto node =
+          static_cast<std::size_t>(b.min(gain == top ? static_cast<std::int64_t>(own.begin + worst)
+                                                     : static_cast<std::int64_t>(R)));
       std::ostringstream os;
       os.precision(6);
       os << "the transfer operator broke the mass budget at step " << n + 1
          << " (t = " << static_cast<double>(n + 1) * op.step
          << "): mass + outflow + atom changed by " << defect << " of the initial mass (tolerance "
-         << tol << "); the largest gain is at node " << worst % op.n_node << " of mode "
-         << worst / op.n_node;
+         << tol << "); the largest gain is at node " << node % op.n_node << " of mode "
+         << node / op.n_node;
       run.failure = os.str();
       break;
     }

@@ -1,0 +1,270 @@
+// The distributed backend (`--set backend=mpi`, `--ranks N`: runtime/src/mpi/ behind
+// runtime/include/hybgen/rt/core/backend.hpp) against the one-process runner: every method
+// on 1 and 2 ranks, on shipped models of 2, 3 and 5 dimensions, with one mode and two.
+//
+// The reference is the OpenMP runner's output. For the transfer operator and the spectrum
+// it comes from other code (Eigen's CSR and Spectra against PETSc and SLEPc), so they are
+// compared to rounding and to the eigen-solvers' tolerance. For the particles and the
+// characteristics the backend claims more, and the test holds it to that: the same bits
+// (the particles' deposit is summed in integers across ranks; a characteristic does not
+// depend on which rank traces it).
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "hybgen/rt/io/npy.hpp"
+#include "support/e2e.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hybgen::testing::e2e_dir;
+using hybgen::testing::read_json_file;
+using hybgen::testing::run_hybgen;
+
+/// MPI as root (CI), and more ranks than cores allowed (a 1-core machine still tests 2).
+const std::string kMpiEnv =
+    "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
+    "HYBGEN_MPIEXEC='mpiexec --oversubscribe' ";
+
+/// A finished run: its directory and summary.
+struct RunDir {
+  fs::path dir;
+  nlohmann::json summary;
+};
+
+/// `hybgen run MODEL SETS` into a fresh directory named `name`, on `ranks` MPI ranks (0: the
+/// OpenMP runner); the run must succeed.
+RunDir run_model(const std::string& model, const std::string& sets, const std::string& name,
+                 int ranks) {
+  const fs::path dir = e2e_dir("mpi") / name;
+  fs::remove_all(dir);
+  const std::string args = "run " + model + " " + sets + " --set outputs=npy -q --out '" +
+                           dir.string() + "'" +
+                           (ranks > 0 ? " --ranks " + std::to_string(ranks) : std::string());
+  const auto r = hybgen::testing::run_shell(
+      "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + kMpiEnv + "HYBGEN_CACHE='" +
+      (e2e_dir("mpi") / "cache").string() + "' '" + HYBGEN_EXE + "' " + args + " 2>&1");
+  EXPECT_EQ(r.code, 0) << args << "\n" << r.out;
+  return {dir, fs::exists(dir / "summary.json") ? read_json_file(dir / "summary.json")
+                                                : nlohmann::json::object()};
+}
+
+/// The frames a run wrote (summary "files", or invariant.npy).
+std::vector<std::vector<double>> frames(const RunDir& run) {
+  std::vector<std::vector<double>> out;
+  std::vector<std::string> names;
+  if (run.summary.contains("files") && !run.summary.at("files").empty())
+    names = run.summary.at("files").get<std::vector<std::string>>();
+  else
+    names = {"invariant.npy"};
+  for (const auto& n : names) out.push_back(hybgen::rt::read_npy((run.dir / n).string()).data);
+  return out;
+}
+
+/// max |a − b| over every frame, over max |a|.
+double relative_difference(const std::vector<std::vector<double>>& a,
+                           const std::vector<std::vector<double>>& b) {
+  double diff = 0.0, scale = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    for (std::size_t i = 0; i < a[k].size(); ++i) {
+      diff = std::max(diff, std::fabs(a[k][i] - b[k][i]));
+      scale = std::max(scale, std::fabs(a[k][i]));
+    }
+  }
+  return diff / std::max(scale, 1e-300);
+}
+
+/// max_k |a[key][k] − b[key][k]| for a budget series.
+double series_difference(const nlohmann::json& a, const nlohmann::json& b, const char* key) {
+  const auto x = a.at(key).get<std::vector<double>>(), y = b.at(key).get<std::vector<double>>();
+  EXPECT_EQ(x.size(), y.size()) << key;
+  double d = 0.0;
+  for (std::size_t k = 0; k < std::min(x.size(), y.size()); ++k)
+    d = std::max(d, std::fabs(x[k] - y[k]));
+  return d;
+}
+
+/// A model and the settings that keep its runs short.
+struct Case {
+  const char* name;   ///< Test label.
+  const char* model;  ///< Path from the source directory.
+  const char* sets;   ///< --set arguments.
+};
+
+/// gtest prints a case by its name.
+void PrintTo(const Case& c, std::ostream* os) {
+  *os << c.name;
+}
+
+const Case kCases[] = {
+    // 2-D, one mode, |J| = e² ≠ 1 at every impact.
+    {"ball", "models/bouncing_ball.model",
+     "--set e=0.8 --set grid=61x61 --set t_end=2 --set dt=0.5"},
+    // 2-D, two modes, switching across x y = 0.
+    {"filippov", "models/filippov.model", "--set grid=41x41 --set t_end=0.5 --set dt=0.25"},
+    // 3-D, resets with |J| = 1 − f.
+    {"sir3d", "models/sir_3d.model", "--set grid=13x13x13 --set t_end=1 --set dt=0.5"},
+    // 5-D, the reduced GL2 system.
+    {"gl2", "models/gl2.model", "--set grid=7x7x7x7x7 --set t_end=0.5 --set dt=0.5"},
+};
+
+#ifdef HYBGEN_WITH_MPI
+
+class MpiAgreement : public ::testing::TestWithParam<Case> {};
+
+TEST_P(MpiAgreement, ParticlesAreTheSameBitsOnOneAndTwoRanks) {
+  const Case& c = GetParam();
+  const std::string sets = std::string(c.sets) + " --set method=particles --set particles=30000";
+  const RunDir ref = run_model(c.model, sets, std::string(c.name) + "_particles_omp", 0);
+  for (int ranks : {1, 2}) {
+    const RunDir r = run_model(c.model, sets,
+                               std::string(c.name) + "_particles_" + std::to_string(ranks), ranks);
+    EXPECT_EQ(r.summary.at("ranks").get<int>(), ranks);
+    EXPECT_EQ(r.summary.at("backend").get<std::string>(), "mpi");
+    const auto a = frames(ref), b = frames(r);
+    ASSERT_EQ(a.size(), b.size());
+    for (std::size_t k = 0; k < a.size(); ++k) EXPECT_EQ(a[k], b[k]) << c.name << " frame " << k;
+    for (const char* key : {"mass", "outflow", "atom", "atom_error"})
+      EXPECT_EQ(ref.summary[key], r.summary[key]) << c.name << " " << key;
+    EXPECT_EQ(ref.summary.at("initial_mass"), r.summary.at("initial_mass"));
+    EXPECT_EQ(ref.summary.at("mass_error"), r.summary.at("mass_error"));
+  }
+}
+
+TEST_P(MpiAgreement, CharacteristicsAreTheSameBitsAndTheBudgetAgrees) {
+  const Case& c = GetParam();
+  const std::string sets = std::string(c.sets) + " --set method=characteristics";
+  const RunDir ref = run_model(c.model, sets, std::string(c.name) + "_char_omp", 0);
+  const double mass0 = ref.summary.at("initial_mass").get<double>();
+  for (int ranks : {1, 2}) {
+    const RunDir r =
+        run_model(c.model, sets, std::string(c.name) + "_char_" + std::to_string(ranks), ranks);
+    const auto a = frames(ref), b = frames(r);
+    ASSERT_EQ(a.size(), b.size());
+    for (std::size_t k = 0; k < a.size(); ++k) EXPECT_EQ(a[k], b[k]) << c.name << " frame " << k;
+    // The budget's cubature takes the same decisions on the same values; its sums may run
+    // over other thread counts (one per rank): rounding.
+    for (const char* key : {"mass", "outflow", "atom"})
+      EXPECT_LE(series_difference(ref.summary, r.summary, key), 1e-12 * mass0)
+          << c.name << " " << key;
+  }
+}
+
+TEST_P(MpiAgreement, TheTransferOperatorOnPetscMarchesAsTheCsrMatrix) {
+  const Case& c = GetParam();
+  const std::string sets = std::string(c.sets) + " --set method=transfer";
+  const RunDir ref = run_model(c.model, sets, std::string(c.name) + "_transfer_omp", 0);
+  const double mass0 = ref.summary.at("initial_mass").get<double>();
+  for (int ranks : {1, 2}) {
+    const RunDir r =
+        run_model(c.model, sets, std::string(c.name) + "_transfer_" + std::to_string(ranks), ranks);
+    // The same entries (the same columns, assembled by the same code), summed in another
+    // order by another mat-vec: rounding.
+    EXPECT_EQ(ref.summary.at("transfer").at("nonzeros"), r.summary.at("transfer").at("nonzeros"));
+    EXPECT_LE(relative_difference(frames(ref), frames(r)), 1e-12) << c.name;
+    for (const char* key : {"mass", "outflow", "atom"})
+      EXPECT_LE(series_difference(ref.summary, r.summary, key), 1e-12 * mass0)
+          << c.name << " " << key;
+    EXPECT_LE(r.summary.at("transfer").at("budget_defect").get<double>(), 1e-12);
+  }
+}
+
+TEST_P(MpiAgreement, SlepcFindsTheInvariantDensityThatSpectraFinds) {
+  const Case& c = GetParam();
+  const std::string sets = std::string(c.sets) + " --set method=invariant";
+  const RunDir ref = run_model(c.model, sets, std::string(c.name) + "_inv_omp", 0);
+  const auto& a = ref.summary.at("invariant");
+  for (int ranks : {1, 2}) {
+    const RunDir r =
+        run_model(c.model, sets, std::string(c.name) + "_inv_" + std::to_string(ranks), ranks);
+    const auto& b = r.summary.at("invariant");
+    if (ranks == 2) {
+      EXPECT_NE(b.at("solver").get<std::string>().find("slepc"), std::string::npos);
+    }
+    EXPECT_TRUE(b.at("converged").get<bool>()) << c.name;
+    // The Perron root is the spectral radius: both solvers must find it, to their
+    // tolerance (1e-10 on the Ritz values).
+    const double l1 = a.at("eigenvalues").at(0).at("re").get<double>();
+    EXPECT_NEAR(b.at("eigenvalues").at(0).at("re").get<double>(), l1, 1e-9) << c.name;
+    // Its eigenvector is the density only when λ₁ is simple; with a multiple λ₁ (a
+    // conservative flow has one invariant density per conserved quantity) any non-negative
+    // vector of its eigenspace is one, and the solvers may pick different ones: then each
+    // must be an eigenvector (residual) and a density (≥ 0, unit mass by construction).
+    const double gap = a.at("spectral_gap").get<double>();
+    if (gap > 1e-3) {
+      EXPECT_LE(relative_difference(frames(ref), frames(r)), 1e-7) << c.name << " gap " << gap;
+    } else {
+      EXPECT_LE(b.at("residual").get<double>(), 1e-8) << c.name;
+      const auto u = frames(r).front();
+      const double top = *std::max_element(u.begin(), u.end());
+      EXPECT_GE(b.at("min_value").get<double>(), -1e-6 * top) << c.name;
+    }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Models, MpiAgreement, ::testing::ValuesIn(kCases),
+                         [](const ::testing::TestParamInfo<Case>& p) {
+                           return std::string(p.param.name);
+                         });
+
+TEST(Mpi, AFailureIsFoundOnceWhicheverRankHitIt) {
+  // An event cap of 1 fails the ball's characteristics at many nodes, on both ranks; the
+  // run names the one of the smallest index, as the one-process runner does, exit 3, once.
+  const std::string sets = "--set method=characteristics --set max_events=1 --set t_end=4";
+  std::string messages[2];
+  for (int ranks : {0, 2}) {
+    const fs::path dir = e2e_dir("mpi") / ("fail_" + std::to_string(ranks));
+    const auto r = hybgen::testing::run_shell(
+        "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + kMpiEnv + "HYBGEN_CACHE='" +
+        (e2e_dir("mpi") / "cache").string() + "' '" + HYBGEN_EXE +
+        "' run models/bouncing_ball.model " + sets + " -q --out '" + dir.string() + "'" +
+        (ranks ? " --ranks 2" : "") + " 2>&1");
+    EXPECT_EQ(r.code, 3) << r.out;
+    const auto at = r.out.find("hybgen: numerical failure:");
+    ASSERT_NE(at, std::string::npos) << r.out;
+    EXPECT_EQ(r.out.find("hybgen: numerical failure:", at + 1), std::string::npos) << r.out;
+    messages[ranks ? 1 : 0] = r.out.substr(at, r.out.find('\n', at) - at);
+    EXPECT_FALSE(fs::exists(dir)) << "a failed run left " << dir;
+  }
+  EXPECT_EQ(messages[0], messages[1]);
+}
+
+TEST(Mpi, AMissingLauncherIsAClearError) {
+  const auto r = hybgen::testing::run_shell(
+      "cd '" + std::string(HYBGEN_SOURCE_DIR) +
+      "' && HYBGEN_MPIEXEC=no-such-mpiexec HYBGEN_CACHE='" + (e2e_dir("mpi") / "cache").string() +
+      "' '" + HYBGEN_EXE + "' run models/bouncing_ball.model --ranks 2 -q --out '" +
+      (e2e_dir("mpi") / "nolauncher").string() + "' 2>&1");
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("the MPI launcher 'no-such-mpiexec' is not on PATH"), std::string::npos)
+      << r.out;
+}
+
+#else
+
+TEST(Mpi, WithoutTheBackendRanksAreABuildErrorThatSaysWhatToInstall) {
+  const auto r = run_hybgen("run models/bouncing_ball.model --ranks 2 -q --out '" +
+                                (e2e_dir("mpi") / "none").string() + "'",
+                            e2e_dir("mpi") / "cache");
+  EXPECT_EQ(r.code, 4) << r.out;
+  EXPECT_NE(r.out.find("scripts/setup.sh --mpi"), std::string::npos) << r.out;
+}
+
+#endif
+
+TEST(Mpi, RanksWithoutTheMpiBackendAreRefused) {
+  const auto r = run_hybgen("run models/bouncing_ball.model --set ranks=2 -q --out '" +
+                                (e2e_dir("mpi") / "refused").string() + "'",
+                            e2e_dir("mpi") / "cache");
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("needs backend=mpi"), std::string::npos) << r.out;
+}
+
+}  // namespace
