@@ -575,9 +575,7 @@ struct Checker {
                                            " axes, the state has " + std::to_string(n));
         for (long c : s.grid->counts)
           if (c < 2) throw src.error(s.grid->loc, "every grid axis needs at least 2 nodes");
-        if (const std::string why = grid_size_problem(s.grid->counts); !why.empty())
-          throw src.error(s.grid->loc, why);
-        sim.grid = s.grid->counts;
+        sim.grid = s.grid->counts;  // its size is checked with the settings (density)
       } else {
         sim.grid.assign(n, 65);
       }
@@ -637,6 +635,8 @@ struct Checker {
         }
       }
       if (!sim.settings.given("dt")) sim.settings.put<"dt">(sim.settings.real<"t_end">() / 10);
+      if (const std::string why = grid_size_problem(sim.grid, marginals_only(sim)); !why.empty())
+        throw src.error(s.grid ? s.grid->loc : s.loc, why);
     }
   }
 
@@ -699,13 +699,30 @@ const std::vector<std::string>& setting_names() {
   return names;
 }
 
-std::string grid_size_problem(const std::vector<long>& counts) {
-  double nodes = 1;
+bool marginals_only(const Simulation& sim) {
+  return sim.settings.word<"density">() == "marginals";
+}
+
+std::string grid_size_problem(const std::vector<long>& counts, bool marginals) {
+  double nodes = 1, pairs = 0;
   for (long c : counts) nodes *= static_cast<double>(c);
+  for (std::size_t a = 0; a < counts.size(); ++a)
+    for (std::size_t b = a + 1; b < counts.size(); ++b)
+      pairs += static_cast<double>(counts[a]) * static_cast<double>(counts[b]);
+  char b[240];
+  if (marginals) {
+    if (pairs <= static_cast<double>(kMaxGridNodes)) return "";
+    std::snprintf(b, sizeof b,
+                  "the grid's pairs of axes have %.3g nodes in all, more than the limit of %ld "
+                  "(2^28)",
+                  pairs, kMaxGridNodes);
+    return b;
+  }
   if (nodes <= static_cast<double>(kMaxGridNodes)) return "";
-  char b[160];
-  std::snprintf(b, sizeof b, "the grid has %.3g nodes, more than the limit of %ld (2^28)", nodes,
-                kMaxGridNodes);
+  std::snprintf(b, sizeof b,
+                "the grid has %.3g nodes, more than the limit of %ld (2^28); particles can keep "
+                "the marginals of every pair of axes instead (density marginals)",
+                nodes, kMaxGridNodes);
   return b;
 }
 
@@ -811,9 +828,7 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets) {
       if (g.size() != model.state.size())
         throw UsageError("--set grid=" + value + ": the grid needs " +
                          std::to_string(model.state.size()) + " axes");
-      if (const std::string why = grid_size_problem(g); !why.empty())
-        throw UsageError("--set grid=" + value + ": " + why);
-      sim.grid = g;
+      sim.grid = g;  // its size is checked after every --set (density)
     } else if (is_simulation_setting(key)) {
       SettingValue v;
       if (value.empty()) throw UsageError("--set " + key + "= needs a value");
@@ -851,6 +866,9 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets) {
       throw UsageError("--set " + key + ": unknown key (parameters and settings: " + known + ")");
     }
   }
+  if (!sets.empty() && sim.present)
+    if (const std::string why = grid_size_problem(sim.grid, marginals_only(sim)); !why.empty())
+      throw UsageError("--set: " + why);
 }
 
 namespace detail {

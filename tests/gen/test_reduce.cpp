@@ -180,7 +180,9 @@ TEST(ReduceGl, Gl3DerivesWithinFiveSeconds) {
   std::cout << "[ gl3 parse+check+reduce+derive ] " << secs << " s\n";
   EXPECT_LT(secs, 5.0);
   check_gln(*p, 3);
-  EXPECT_FALSE(p->model.sim.present);  // 10-D: no simulation block
+  // 10-D: a simulation block that keeps the marginals (tests/e2e/test_gl3.cpp runs it).
+  EXPECT_TRUE(p->model.sim.present);
+  EXPECT_EQ(p->model.sim.settings.word<"density">(), "marginals");
 }
 
 TEST(ReduceGl, RestitutionReset) {

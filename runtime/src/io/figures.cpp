@@ -75,24 +75,51 @@ std::vector<std::pair<std::size_t, std::size_t>> axis_pairs(const RunRecord& run
   return pairs;
 }
 
+/// The deposited marginal of frame k on (a, b), a slowest: mode m, or every mode summed
+/// when m is n_mode (transposed when a > b: the run keeps each pair once, lower axis first).
+std::vector<double> pair_marginal(const Marginals& mg, const RunRecord& run, std::size_t k,
+                                  std::size_t m, std::size_t a, std::size_t b) {
+  const std::size_t lo = std::min(a, b), hi = std::max(a, b), M = run.n_mode();
+  const std::size_t p = mg.index(lo, hi);
+  const auto nl = static_cast<std::size_t>(run.axes[lo].n);
+  const auto nh = static_cast<std::size_t>(run.axes[hi].n);
+  std::vector<double> sum(nl * nh, 0.0);
+  if (p == mg.pairs.size()) return sum;
+  for (std::size_t mode = 0; mode < M; ++mode) {
+    if (m < M && mode != m) continue;
+    const std::span<const double> u = mg.pair(k, mode, M, p);
+    for (std::size_t i = 0; i < sum.size(); ++i) sum[i] += u[i];
+  }
+  if (a < b) return sum;
+  std::vector<double> t(sum.size());
+  for (std::size_t i = 0; i < nl; ++i)
+    for (std::size_t j = 0; j < nh; ++j) t[j * nl + i] = sum[i * nh + j];
+  return t;
+}
+
 /// Every heat panel of frame k (2-D and more): per mode in 2-D (the sum with one mode);
 /// per pair of axes in 3-D and more, in rows by mode when there are several.
 std::vector<HeatPanel> frame_panels(const RunRecord& run, std::size_t k) {
   const std::size_t N = run.axes.size(), M = run.n_mode();
   const std::vector<std::pair<std::size_t, std::size_t>> pairs = axis_pairs(run);
   std::vector<HeatPanel> out;
-  const std::vector<double> total = run.total_density(k);
+  const Marginals* mg = run.marginals;
+  const std::vector<double> total = mg ? std::vector<double>() : run.total_density(k);
   // Rows: the modes (several), or the sum.
   const std::size_t rows = M > 1 ? M : 1;
   for (std::size_t row = 0; row < rows; ++row) {
     const std::span<const double> u =
-        M > 1 ? run.mode_density(k, row) : std::span<const double>(total);
+        mg ? std::span<const double>()
+           : (M > 1 ? run.mode_density(k, row) : std::span<const double>(total));
     for (std::size_t c = 0; c < pairs.size(); ++c) {
       const auto [a, b] = pairs[c];
       HeatPanel p;
       p.x = {run.axis_names[a], run.axes[a]};
       p.y = {run.axis_names[b], run.axes[b]};
-      p.data = N == 2 ? std::vector<double>(u.begin(), u.end()) : marginal(u, run.axes, {a, b});
+      if (mg)
+        p.data = pair_marginal(*mg, run, k, M > 1 ? row : M, a, b);
+      else
+        p.data = N == 2 ? std::vector<double>(u.begin(), u.end()) : marginal(u, run.axes, {a, b});
       if (N == 2) p.outside = run.outside;
       p.title = M > 1 ? "mode " + run.mode_names[row] : std::string();
       if (N > 2)

@@ -117,7 +117,8 @@ std::string json_text(const nlohmann::json& j, const char* key) {
 void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   const std::size_t N = run.axes.size(), n_mode = run.n_mode(), n_node = run.n_node();
   const bool series = !run.times.empty();
-  if (run.density.size() != run.n_frame() * n_mode * n_node)
+  const Marginals* mg = run.marginals;
+  if (mg == nullptr && run.density.size() != run.n_frame() * n_mode * n_node)
     throw std::invalid_argument("write_netcdf: the density does not match the grid");
   NcFile nc(path);
   Names names(run.axis_names);
@@ -171,10 +172,56 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     return v;
   };
   const std::string what = series ? "density" : "invariant density";
-  const int density =
-      define_density(names("density"), false, n_mode > 1 ? what + ", summed over the modes" : what);
-  const int by_mode =
-      n_mode > 1 ? define_density(names("density_by_mode"), true, what + " of each mode") : -1;
+  const int density = mg ? -1
+                         : define_density(names("density"), false,
+                                          n_mode > 1 ? what + ", summed over the modes" : what);
+  const int by_mode = !mg && n_mode > 1
+                          ? define_density(names("density_by_mode"), true, what + " of each mode")
+                          : -1;
+
+  // Or the marginals: marginal_<a>_<b> (time, [mode,] a, b) per pair, and the moments.
+  std::vector<int> pair_vars, pair_mode_vars;
+  int component_dim = -1, component_var = -1, mean_var = -1, cov_var = -1;
+  if (mg) {
+    for (const auto& [a, b] : mg->pairs) {
+      const std::string pair = run.axis_names[a] + "_" + run.axis_names[b];
+      auto define = [&](bool by) {
+        std::vector<int> dims;
+        if (series) dims.push_back(time_dim);
+        if (by) dims.push_back(mode_dim);
+        dims.push_back(axis_dims[a]);
+        dims.push_back(axis_dims[b]);
+        const int v = nc.var(names("marginal_" + pair + (by ? "_by_mode" : "")), NC_DOUBLE, dims);
+        if (deflate > 0)
+          nc.check(nc_def_var_deflate(nc.id(), v, 1, 1, deflate), "compress a variable");
+        nc.text(v, "long_name",
+                "marginal density on (" + run.axis_names[a] + ", " + run.axis_names[b] + ")" +
+                    (by           ? " of each mode"
+                     : n_mode > 1 ? ", summed over the modes"
+                                  : ""));
+        nc.text(v, "units", "1");
+        nc.text(v, "description",
+                "the density integrated over the other state variables, from the particles "
+                "in the grid box (cloud-in-cell on the pair's grid nodes)");
+        return v;
+      };
+      pair_vars.push_back(define(false));
+      pair_mode_vars.push_back(n_mode > 1 ? define(true) : -1);
+    }
+    component_dim = nc.dim(names("component"), N);
+    const int component2 = nc.dim(names("component2"), N);
+    component_var = nc.var(names("component"), NC_STRING, {component_dim});
+    nc.text(component_var, "long_name", "state variable of a moment");
+    std::vector<int> mean_dims, cov_dims;
+    if (series) mean_dims.push_back(time_dim), cov_dims.push_back(time_dim);
+    mean_dims.push_back(component_dim);
+    cov_dims.push_back(component_dim);
+    cov_dims.push_back(component2);
+    mean_var = nc.var(names("mean"), NC_DOUBLE, mean_dims);
+    nc.text(mean_var, "long_name", "mean state of the mass in the grid box");
+    cov_var = nc.var(names("covariance"), NC_DOUBLE, cov_dims);
+    nc.text(cov_var, "long_name", "covariance of the state of the mass in the grid box");
+  }
 
   // The mass budget.
   struct Series {
@@ -271,7 +318,34 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   }
   if (series) nc.put(time_var, run.times);
   if (n_mode > 1) nc.put_strings(mode_var, run.mode_names);
-  for (std::size_t k = 0; k < run.n_frame(); ++k) {
+  for (std::size_t k = 0; k < run.n_frame() && mg; ++k)
+    for (std::size_t p = 0; p < mg->pairs.size(); ++p) {
+      const auto na = static_cast<std::size_t>(run.axes[mg->pairs[p][0]].n);
+      const auto nb = static_cast<std::size_t>(run.axes[mg->pairs[p][1]].n);
+      std::vector<double> total(na * nb, 0.0);
+      for (std::size_t m = 0; m < n_mode; ++m) {
+        const std::span<const double> u = mg->pair(k, m, n_mode, p);
+        for (std::size_t i = 0; i < total.size(); ++i) total[i] += u[i];
+        if (pair_mode_vars[p] >= 0) {
+          std::vector<std::size_t> s, c;
+          if (series) s.push_back(k), c.push_back(1);
+          s.insert(s.end(), {m, 0, 0});
+          c.insert(c.end(), {1, na, nb});
+          nc.put(pair_mode_vars[p], s, c, u.data());
+        }
+      }
+      std::vector<std::size_t> s, c;
+      if (series) s.push_back(k), c.push_back(1);
+      s.insert(s.end(), {0, 0});
+      c.insert(c.end(), {na, nb});
+      nc.put(pair_vars[p], s, c, total.data());
+    }
+  if (mg) {
+    nc.put_strings(component_var, run.axis_names);
+    nc.put(mean_var, mg->mean);
+    nc.put(cov_var, mg->covariance);
+  }
+  for (std::size_t k = 0; k < run.n_frame() && !mg; ++k) {
     std::vector<std::size_t> start, count;
     if (series) start.push_back(k), count.push_back(1);
     const std::vector<double> total = run.total_density(k);

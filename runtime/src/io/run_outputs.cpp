@@ -84,6 +84,8 @@ std::string resolution_warning(const RunRecord& run) {
   const MassBudget& b = run.budget;
   const std::size_t K = run.times.size();
   if (K == 0 || b.mass.size() != K || b.mass_error.size() != K || !(b.mass0 > 0)) return "";
+  // Marginals are deposited from the particles by cloud-in-cell: their sum is the mass.
+  if (run.marginals) return "";
   double worst = 0, worst_sum = 0;
   std::size_t worst_k = K;
   for (std::size_t k = 0; k < K; ++k) {
@@ -189,18 +191,21 @@ WrittenOutputs write_run_outputs(const RunRecord& run, const Settings& settings,
     }
 #pragma omp for schedule(dynamic)
     for (std::size_t k = 0; k < K; ++k) {
-      error.run([&] {
-        const std::vector<double> total = run.total_density(k);
-        const std::string& base = run.frame_names[k];
-        if (npy) {
-          write_npy((out / (base + ".npy")).string(), total, shape);
-          if (n_mode > 1)
-            for (std::size_t m = 0; m < n_mode; ++m)
-              write_npy((out / (base + "_" + run.mode_names[m] + ".npy")).string(),
-                        run.mode_density(k, m).data(), shape);
-        }
-        if (vti) write_image(run, k, total, (out / (base + ".vti")).string());
-      });
+      // Arrays of the whole grid, which marginals do not have (the runner refuses npy and
+      // vti with them).
+      if (npy || vti)
+        error.run([&] {
+          const std::vector<double> total = run.total_density(k);
+          const std::string& base = run.frame_names[k];
+          if (npy) {
+            write_npy((out / (base + ".npy")).string(), total, shape);
+            if (n_mode > 1)
+              for (std::size_t m = 0; m < n_mode; ++m)
+                write_npy((out / (base + "_" + run.mode_names[m] + ".npy")).string(),
+                          run.mode_density(k, m).data(), shape);
+          }
+          if (vti) write_image(run, k, total, (out / (base + ".vti")).string());
+        });
       progress.advance();
     }
   }

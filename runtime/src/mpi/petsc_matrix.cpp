@@ -149,6 +149,19 @@ std::size_t PetscMatrix::nonzeros() const {
   return static_cast<std::size_t>(info.nz_used);
 }
 
+std::size_t PetscMatrix::ghost_entries() const {
+  PetscBool mpiaij = PETSC_FALSE;
+  ok(PetscObjectTypeCompare(reinterpret_cast<PetscObject>(a_), MATMPIAIJ, &mpiaij),
+     "PetscObjectTypeCompare");
+  if (!mpiaij) return 0;
+  Mat diagonal = nullptr, off = nullptr;
+  const PetscInt* map = nullptr;
+  ok(MatMPIAIJGetSeqAIJ(a_, &diagonal, &off, &map), "MatMPIAIJGetSeqAIJ");
+  PetscInt rows = 0, cols = 0;
+  ok(MatGetSize(off, &rows, &cols), "MatGetSize");
+  return static_cast<std::size_t>(cols);
+}
+
 std::size_t PetscMatrix::local_bytes() const {
   // MatInfo::memory is not tracked by an optimised PETSc: count it. This rank's rows are
   // two CSR blocks (the columns it owns, and the rest, compressed to the ghost columns it
@@ -157,21 +170,9 @@ std::size_t PetscMatrix::local_bytes() const {
   MatInfo info;
   ok(MatGetInfo(a_, MAT_LOCAL, &info), "MatGetInfo");
   const auto entries = static_cast<std::size_t>(info.nz_allocated);
-  std::size_t ghosts = 0;
-  Mat diagonal = nullptr, off = nullptr;
-  const PetscInt* map = nullptr;
-  PetscBool mpiaij = PETSC_FALSE;
-  ok(PetscObjectTypeCompare(reinterpret_cast<PetscObject>(a_), MATMPIAIJ, &mpiaij),
-     "PetscObjectTypeCompare");
-  if (mpiaij) {
-    ok(MatMPIAIJGetSeqAIJ(a_, &diagonal, &off, &map), "MatMPIAIJGetSeqAIJ");
-    PetscInt rows = 0, cols = 0;
-    ok(MatGetSize(off, &rows, &cols), "MatGetSize");
-    ghosts = static_cast<std::size_t>(cols);
-  }
   return entries * (sizeof(PetscScalar) + sizeof(PetscInt)) +
          2 * (owned_.size() + 1) * sizeof(PetscInt) +
-         ghosts * (sizeof(PetscScalar) + sizeof(PetscInt));
+         ghost_entries() * (sizeof(PetscScalar) + sizeof(PetscInt));
 }
 
 EigenAnswer PetscMatrix::eigen(const EigenRequest& request) {

@@ -35,8 +35,10 @@ class PetscMatrix final : public DistributedMatrix {
   void multiply(std::span<const double> x, std::span<double> y) override;
   /// MatGetInfo, global sum of the non-zeros used.
   [[nodiscard]] std::size_t nonzeros() const override;
-  /// MatGetInfo, this rank's memory.
+  /// This rank's rows (values, column indices, row pointers) and ghost buffers.
   [[nodiscard]] std::size_t local_bytes() const override;
+  /// The columns of the off-diagonal block (MatMPIAIJGetSeqAIJ).
+  [[nodiscard]] std::size_t ghost_entries() const override;
   /// SLEPc's leading eigenpairs (collective).
   EigenAnswer eigen(const EigenRequest& request) override;
 

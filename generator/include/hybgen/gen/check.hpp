@@ -41,8 +41,12 @@ std::vector<long> parse_grid(const std::string& text);
 /// Most grid nodes a run may have (2^28: one float64 frame is then 2 GiB).
 inline constexpr long kMaxGridNodes = 1L << 28;
 
-/// Why a grid with these node counts cannot be run (too many nodes), or "".
-std::string grid_size_problem(const std::vector<long>& counts);
+/// Why a grid with these node counts cannot be run, or "": too many nodes, or with
+/// `marginals` (density=marginals: only the pairs of axes are held) too many pair nodes.
+std::string grid_size_problem(const std::vector<long>& counts, bool marginals = false);
+
+/// Whether the run keeps marginals only (the setting density=marginals).
+bool marginals_only(const Simulation& sim);
 
 /// Exact rational of a decimal literal ("0.25" -> 1/4, "1e-3" -> 1/1000).
 GiNaC::numeric exact_number(const std::string& literal);

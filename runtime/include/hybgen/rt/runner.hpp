@@ -15,6 +15,7 @@
 
 #include <omp.h>
 #include <sys/resource.h>
+#include <unistd.h>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -66,6 +67,37 @@ class ConfigError : public std::runtime_error {
   /// Construct with a message.
   explicit ConfigError(const std::string& m) : std::runtime_error(m) {}
 };
+
+/// Most nodes the pre-flight scan visits (scan_grid).
+inline constexpr double kScanNodes = 4194304.0;  // 2^22
+
+/// `grid`, or for a grid of more than kScanNodes nodes the same box with fewer nodes per axis
+/// (the same fraction on each, at least 2).
+template <std::size_t N>
+TensorGrid<N> scan_grid(const TensorGrid<N>& grid) {
+  double nodes = 1.0;
+  for (const GridAxis& a : grid.axes) nodes *= static_cast<double>(a.n);
+  if (nodes <= kScanNodes) return grid;
+  const double f = std::pow(kScanNodes / nodes, 1.0 / static_cast<double>(N));
+  TensorGrid<N> coarse = grid;
+  for (GridAxis& a : coarse.axes)
+    a.n = std::max(2, static_cast<int>(std::floor(static_cast<double>(a.n) * f)));
+  return coarse;
+}
+
+/// The bytes of the densities a run keeps on every node (frames × modes × nodes doubles).
+template <std::size_t N>
+double density_bytes(const TensorGrid<N>& grid, std::size_t frames, int modes) {
+  double nodes = 1.0;
+  for (const GridAxis& a : grid.axes) nodes *= static_cast<double>(a.n);
+  return nodes * static_cast<double>(frames) * static_cast<double>(modes) * 8.0;
+}
+
+/// This machine's memory in bytes (0 if unknown).
+inline double physical_memory_bytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), size = ::sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && size > 0 ? static_cast<double>(pages) * static_cast<double>(size) : 0.0;
+}
 
 /// The peak resident set size of this process so far, in bytes (getrusage).
 inline double peak_resident_bytes() {
@@ -159,6 +191,29 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
   ms.quiet = c.quiet;
   const CharacteristicsOptions opt = detail::trace_options(ms);
 
+  // Densities on every node that cannot fit are refused before any work, with the way out.
+  const bool marginals = c.settings.word<"density">() == "marginals";
+  if (marginals && method != "particles")
+    throw ConfigError("density=marginals is what the particles deposit; method " + method +
+                      " keeps the density on every node (use method=particles)");
+  if (const double need = density_bytes(grid, method == "invariant" ? 1 : times.size(), M::n_mode),
+      have = physical_memory_bytes();
+      !marginals && have > 0.0 && need > have) {
+    char b[400];
+    std::snprintf(b, sizeof b,
+                  "the densities on the grid need %.3g GB (%.3g nodes x %d mode(s) x %zu "
+                  "frame(s)) and this machine has %.3g GB: use a coarser grid, or method=particles "
+                  "with density=marginals (the marginal of every pair of axes)",
+                  need / 1e9, need / 8.0 / M::n_mode / static_cast<double>(times.size()), M::n_mode,
+                  method == "invariant" ? std::size_t{1} : times.size(), have / 1e9);
+    throw ConfigError(b);
+  }
+  if (marginals)
+    for (const char* o : {"npy", "vti"})
+      if (c.settings.includes<"outputs">(o))
+        throw ConfigError(std::string("outputs ") + o +
+                          " holds the density on every node, which density=marginals does not "
+                          "keep (netcdf, png, pdf, svg, gif and html show the marginals)");
   if (!c.quiet && !c.preflight_only) {
     if (method == "invariant")
       std::fprintf(stderr, "hybgen: %s: invariant density on %zu nodes x %d mode(s)...\n",
@@ -178,7 +233,13 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
     popt.newton_max_iter = opt.newton_max_iter;
     popt.newton_tol = opt.newton_tol;
     popt.backward = method == "characteristics";  // the one method that inverts Δ
-    const PreflightFailure<N> pf = preflight<M>(grid, par, popt, &seeds, &notes);
+    // A grid too large to visit (a marginals run) is scanned on a coarser grid with the same
+    // box: at most kScanNodes nodes, the ends of every axis kept.
+    const TensorGrid<N> scan = scan_grid(grid);
+    if (scan.size() < grid.size() && !c.quiet)
+      std::fprintf(stderr, "hybgen: note: the pre-flight scan visits a coarser grid of %zu nodes\n",
+                   scan.size());
+    const PreflightFailure<N> pf = preflight<M>(scan, par, popt, &seeds, &notes);
     for (const auto& note : notes)
       if (backend.root())
         std::fprintf(stderr,
@@ -240,15 +301,19 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
   rec.times = res.frame_times;
   rec.frame_names = res.frame_names;
   rec.density = std::span<const double>(sol.u.data(), sol.u.size());
-  rec.outside.assign(n_node, 0);
+  if (!res.marginals.empty()) rec.marginals = &res.marginals;
+  // Nodes outside the support, and every guard's s at the nodes (the pictures draw the
+  // surfaces s = 0): not for marginals, whose grid is never visited.
   bool any_outside = false;
-  for (std::size_t i = 0; i < n_node; ++i) {
-    const auto y = grid.node(i);
-    if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
+  if (rec.marginals == nullptr) {
+    rec.outside.assign(n_node, 0);
+    for (std::size_t i = 0; i < n_node; ++i) {
+      const auto y = grid.node(i);
+      if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
+    }
   }
   if (!any_outside) rec.outside.clear();
-  // Every guard's s at the nodes: the pictures draw the surfaces s = 0.
-  for (int g = 0; g < M::n_guard; ++g) {
+  for (int g = 0; g < M::n_guard && rec.marginals == nullptr; ++g) {
     GuardField f{M::guard_names[static_cast<std::size_t>(g)], std::vector<double>(n_node),
                  M::guards[static_cast<std::size_t>(g)].from};
     for (std::size_t i = 0; i < n_node; ++i) {
@@ -344,8 +409,8 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
       std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all)", all_seconds);
     const std::string took = took_buf;
     std::printf("%s: %s on %zu nodes, %zu frame(s): %ssolve %.3f s, budget %.3f s, output %.3f s\n",
-                c.model.c_str(), method.c_str(), n_node, sol.n_time, before.c_str(), res.solve_s,
-                res.budget_s, output_s);
+                c.model.c_str(), method.c_str(), n_node, res.frame_names.size(), before.c_str(),
+                res.solve_s, res.budget_s, output_s);
     if (res.summary.contains("invariant")) {
       const auto& inv = res.summary["invariant"];
       std::printf("leading eigenvalues of the transfer operator (step %g):\n",

@@ -92,6 +92,10 @@ inline constexpr std::array kSettings = {
     SettingSpec{"seed", SettingType::integer, 1, "", 0, kMaxExactInteger, false, "", "particles",
                 "random seed (counter-based streams: results do not depend on "
                 "the number of threads)"},
+    SettingSpec{"density", SettingType::word, 0.0, "grid", 0, 0, false, "grid|marginals",
+                "particles",
+                "grid: the density on every node; marginals: the 2-D marginal of every pair of "
+                "axes and the moments, for grids too large to hold (docs/methods.md)"},
     SettingSpec{"outputs", SettingType::words, 0.0, "netcdf+png+pdf+gif+html", 0, 0, false,
                 "netcdf|png|pdf|svg|gif|html|npy|vti", "all",
                 "files of a run, joined by '+': run.nc (netcdf), pictures (png: one per frame; "

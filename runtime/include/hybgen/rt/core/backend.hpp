@@ -106,6 +106,8 @@ class DistributedMatrix {
   [[nodiscard]] virtual std::size_t nonzeros() const = 0;
   /// Bytes this rank holds for the matrix (its rows and the communication plan).
   [[nodiscard]] virtual std::size_t local_bytes() const = 0;
+  /// Vector entries of other ranks this rank receives per mat-vec (its ghost columns).
+  [[nodiscard]] virtual std::size_t ghost_entries() const = 0;
   /// The leading eigenvalues and the Perron vector (collective).
   virtual EigenAnswer eigen(const EigenRequest& request) = 0;
 };

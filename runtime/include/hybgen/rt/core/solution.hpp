@@ -165,4 +165,38 @@ inline std::vector<double> budget_defect_error(const MassBudget& b) {
   return e;
 }
 
+/// What a run whose grid is too large to hold keeps of the density (the particles with
+/// `density=marginals`): the 2-D marginal of every pair of axes on the pair's grid nodes,
+/// and the first two moments of the mass in the box.
+///
+/// Invariants: `pairs` lists every (a, b), a < b, in the order (0,1), (0,2), …, (1,2), …;
+/// pair p's values in one (frame, mode) block start at offset[p] and hold n_a × n_b
+/// densities, a slowest; a block holds `block` values; `values` holds n_frame × n_mode
+/// blocks, frame-major. The trapezoid integral of a pair's marginal is the mass of that mode
+/// in the box. mass, mean and covariance are per frame over every mode: mean [frame][axis],
+/// covariance [frame][axis][axis] (of the state, weighted by the mass in the box).
+struct Marginals {
+  std::vector<std::array<std::size_t, 2>> pairs;  ///< The pairs of axes (a, b), a < b.
+  std::vector<std::size_t> offset;                ///< Start of each pair in a block.
+  std::size_t block = 0;                          ///< Values per (frame, mode).
+  std::vector<double> values;                     ///< The marginal densities.
+  std::vector<double> mass;                       ///< Mass in the box per frame.
+  std::vector<double> mean;                       ///< Mean state per frame.
+  std::vector<double> covariance;                 ///< Covariance per frame.
+  /// Whether there are none (a run that kept the full density).
+  [[nodiscard]] bool empty() const { return pairs.empty(); }
+  /// Pair p's n_a × n_b values in frame k, mode m (of n_mode).
+  [[nodiscard]] std::span<const double> pair(std::size_t k, std::size_t m, std::size_t n_mode,
+                                             std::size_t p) const {
+    const std::size_t size = (p + 1 < offset.size() ? offset[p + 1] : block) - offset[p];
+    return std::span<const double>(values).subspan((k * n_mode + m) * block + offset[p], size);
+  }
+  /// The index of pair (a, b), a < b, in `pairs` (pairs.size() when absent).
+  [[nodiscard]] std::size_t index(std::size_t a, std::size_t b) const {
+    for (std::size_t p = 0; p < pairs.size(); ++p)
+      if (pairs[p][0] == a && pairs[p][1] == b) return p;
+    return pairs.size();
+  }
+};
+
 }  // namespace hybgen::rt

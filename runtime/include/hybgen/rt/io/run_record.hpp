@@ -7,7 +7,7 @@
 ///
 /// Invariant: `density` holds n_frame() × n_mode() × n_node() values, frame-major, then
 /// mode, then the node in C order of the grid (last axis fastest): the layout of
-/// Solution (core/solution.hpp).
+/// Solution (core/solution.hpp); or it is empty and `marginals` holds the run's pairs.
 
 #include <cstddef>
 #include <cstdint>
@@ -73,8 +73,11 @@ struct RunRecord {
   std::vector<double> times;
   std::vector<std::string> frame_names;  ///< File stem per frame (u_0000, …, or invariant).
   std::span<const double> density;       ///< [frame][mode][node] (see the invariant above).
-  std::vector<std::uint8_t> outside;     ///< 1 at nodes outside the support (empty: none).
-  std::vector<GuardField> guards;        ///< Every guard's s at the nodes.
+  /// Instead of `density` (then empty): the marginals and moments of a run too large for its
+  /// grid (core/solution.hpp; particles with density=marginals).
+  const Marginals* marginals = nullptr;
+  std::vector<std::uint8_t> outside;  ///< 1 at nodes outside the support (empty: none).
+  std::vector<GuardField> guards;     ///< Every guard's s at the nodes.
   /// The axes whose pairs the pictures show (setting figure_axes; empty: every axis).
   std::vector<std::size_t> figure_axes;
   MassBudget budget;               ///< Per frame time (empty: no budget).

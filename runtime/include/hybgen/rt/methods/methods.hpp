@@ -13,7 +13,9 @@
 ///    (invariant.hpp); one frame, `invariant`, instead of the time series;
 ///  - particles: Monte-Carlo samples of u0 pushed forward and deposited (particles.hpp).
 ///
-/// Invariants of a successful result: solution.n_time == frame_names.size(); for the time
+/// Invariants of a successful result: solution.n_time == frame_names.size() (or, for the
+/// particles with density=marginals, an empty solution and marginals with one block per
+/// frame and mode); for the time
 /// methods frame_times == times and budget.{mass, outflow, atom} have one entry per time (none
 /// with budget=off) with mass + outflow + atom = mass0: for characteristics within the
 /// terms' estimated errors, each measured on its own (budget.hpp; a run whose budget does not
@@ -93,7 +95,9 @@ struct MethodResult {
   std::vector<std::string> frame_names;  ///< Output file stem per frame (u_0000, …).
   std::vector<double> frame_times;       ///< Time per frame (empty for `invariant`).
   MassBudget budget;                     ///< Per frame time (empty for `invariant`).
-  std::vector<double> atom_error;        ///< Estimated |error| of budget.atom (may be empty).
+  /// particles with density=marginals: the pairs and moments (then `solution` is empty).
+  Marginals marginals;
+  std::vector<double> atom_error;  ///< Estimated |error| of budget.atom (may be empty).
   nlohmann::json summary = nlohmann::json::object();  ///< Method fields for summary.json.
   std::vector<std::string> warnings;                  ///< Printed, not fatal.
   std::string failure;    ///< Non-empty: a numerical failure (exit 3), what/where/when.
@@ -164,6 +168,7 @@ nlohmann::json operator_summary(const TransferOptions& o, const TransferOperator
           {"rows", op.size()},
           {"nonzeros", op.nonzeros()},
           {"matrix_bytes_per_rank", op.matrix_bytes()},
+          {"ghost_entries", op.ghost_entries()},
           {"assembly_seconds", op.seconds}};
 }
 
@@ -380,6 +385,7 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   po.seed = static_cast<std::uint64_t>(s.settings.integer<"seed">());
   detail::set_ode_settings(s, po.forward);
   po.backend = s.backend;
+  po.marginals = s.settings.word<"density">() == "marginals";
   const auto t0 = detail::MethodClock::now();
   // Each rank advances its own block: rank 0's bar counts its own share.
   const Backend& backend = s.backend ? *s.backend : serial_backend();
@@ -393,6 +399,7 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
     return r;
   }
   r.solution = std::move(run.solution);
+  r.marginals = std::move(run.marginals);
   r.budget = std::move(run.budget);
   r.atom_error = run.atom_error;
   r.summary["particles"] = {

@@ -193,6 +193,13 @@ struct TransferOperator {
   std::size_t nonzeros() const {
     return distributed ? distributed->nonzeros() : static_cast<std::size_t>(P.nonZeros());
   }
+  /// Vector entries the ranks receive from each other per mat-vec (0 in one process;
+  /// collective when distributed).
+  std::size_t ghost_entries() const {
+    if (!distributed || !backend) return 0;
+    return static_cast<std::size_t>(
+        backend->sum(static_cast<std::int64_t>(distributed->ghost_entries())));
+  }
   /// Bytes of the matrix on the rank holding most (collective when distributed): values,
   /// indices and row pointers (and PETSc's communication plan).
   std::size_t matrix_bytes() const {
