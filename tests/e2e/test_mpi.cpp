@@ -28,6 +28,8 @@ using hybgen::testing::e2e_dir;
 using hybgen::testing::read_json_file;
 using hybgen::testing::run_hybgen;
 
+#ifdef HYBGEN_WITH_MPI
+
 /// MPI as root (CI), and more ranks than cores allowed (a 1-core machine still tests 2).
 const std::string kMpiEnv =
     "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
@@ -114,8 +116,6 @@ const Case kCases[] = {
     // 5-D, the reduced GL2 system.
     {"gl2", "models/gl2.model", "--set grid=7x7x7x7x7 --set t_end=0.5 --set dt=0.5"},
 };
-
-#ifdef HYBGEN_WITH_MPI
 
 class MpiAgreement : public ::testing::TestWithParam<Case> {};
 
