@@ -19,8 +19,9 @@ find_package(OpenSSL REQUIRED COMPONENTS Crypto)
 find_package(Eigen3 3.3 REQUIRED NO_MODULE)
 find_package(Spectra REQUIRED)
 # The distributed backend (`--set backend=mpi`, runtime/src/mpi/): MPI, PETSc and SLEPc
-# from Debian's packages (libopenmpi-dev, petsc-dev, slepc-dev; scripts/setup.sh --mpi).
-# AUTO builds it when all three are found; ON requires them; OFF leaves it out.
+# from Debian's packages (libopenmpi-dev, petsc-dev, slepc-dev; scripts/setup.sh --mpi), and
+# parallel NetCDF (libnetcdf-mpi-dev: run.nc written by every rank, runtime/src/mpi/parallel_io.cpp).
+# AUTO builds it when all four are found; ON requires them; OFF leaves it out.
 set(HYBGEN_MPI AUTO CACHE STRING "Build the MPI/PETSc/SLEPc backend: AUTO, ON or OFF")
 set_property(CACHE HYBGEN_MPI PROPERTY STRINGS AUTO ON OFF)
 set(HYBGEN_WITH_MPI OFF)
@@ -33,8 +34,17 @@ if(NOT HYBGEN_MPI STREQUAL "OFF")
   find_package(MPI COMPONENTS CXX ${_mpi_required})
   pkg_check_modules(PETSC ${_mpi_required} IMPORTED_TARGET PETSc>=3.18)
   pkg_check_modules(SLEPC ${_mpi_required} IMPORTED_TARGET SLEPc>=3.18)
-  if(MPI_CXX_FOUND AND PETSC_FOUND AND SLEPC_FOUND)
+  # Debian's netcdf-mpi.pc names the serial headers' directory; netcdf_par.h is under its
+  # prefix (/usr/lib/<arch>/netcdf/mpi/include).
+  pkg_check_modules(NETCDF_MPI ${_mpi_required} netcdf-mpi>=4.7.4)
+  if(NETCDF_MPI_FOUND)
+    pkg_get_variable(_netcdf_mpi_prefix netcdf-mpi prefix)
+    find_path(NETCDF_MPI_INCLUDE_DIR netcdf_par.h PATHS "${_netcdf_mpi_prefix}/include" NO_DEFAULT_PATH)
+  endif()
+  if(MPI_CXX_FOUND AND PETSC_FOUND AND SLEPC_FOUND AND NETCDF_MPI_FOUND AND NETCDF_MPI_INCLUDE_DIR)
     set(HYBGEN_WITH_MPI ON)
+  elseif(HYBGEN_MPI STREQUAL "ON")
+    message(FATAL_ERROR "HYBGEN_MPI=ON: netcdf_par.h of libnetcdf-mpi-dev not found")
   endif()
 endif()
 message(STATUS "hybgen: the MPI backend (backend=mpi): ${HYBGEN_WITH_MPI}")

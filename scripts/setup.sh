@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Install what is missing (Debian 12 packages only) and build into build/: hybgen and its
 # runtime library (what `hybgen run` needs), or with --tests everything (tests, benchmarks).
-# --mpi adds the distributed backend (MPI, PETSc, SLEPc: --set backend=mpi, --ranks N;
+# --mpi adds the distributed backend (MPI, PETSc, SLEPc, parallel NetCDF: --set backend=mpi, --ranks N;
 # docs/distributed.md); --tests includes it, since CI runs its agreement tests.
 # Environment: BUILD_DIR (default build), HYBGEN_WERROR (ON in CI).
 set -euo pipefail
@@ -23,9 +23,10 @@ packages=(build-essential cmake ninja-build pkg-config libginac-dev libcln-dev l
           libcairo2-dev fonts-dejavu-core  # pictures (runtime/src/io/figures.cpp)
           libpng-dev libgif-dev          # frames (figures.cpp) and animation.gif (animation.cpp)
           libjs-katex)                   # report.html's equations (runtime/src/io/report.cpp)
-# The distributed backend (--mpi, and --tests): Open MPI with its launcher, PETSc, SLEPc.
+# The distributed backend (--mpi, and --tests): Open MPI with its launcher, PETSc, SLEPc,
+# and parallel NetCDF (run.nc written by every rank).
 if [[ $mpi == ON ]]; then
-  packages+=(libopenmpi-dev openmpi-bin petsc-dev slepc-dev)
+  packages+=(libopenmpi-dev openmpi-bin petsc-dev slepc-dev libnetcdf-mpi-dev)
 fi
 # What the tests, the benchmarks and CI need besides (--tests).
 if ((${#targets[@]} == 0)); then

@@ -44,7 +44,10 @@
 #define HYBGEN_CXX_COMPILER "c++"
 #endif
 #ifndef HYBGEN_RUNNER_LIBS
-#define HYBGEN_RUNNER_LIBS "-lnetcdf -lcairo -lfontconfig -lpng -lgif"
+#define HYBGEN_RUNNER_LIBS "-lcairo -lfontconfig -lpng -lgif"
+#endif
+#ifndef HYBGEN_NETCDF_LIBS
+#define HYBGEN_NETCDF_LIBS "-lnetcdf"
 #endif
 #ifndef HYBGEN_RUNNER_INCLUDES
 #define HYBGEN_RUNNER_INCLUDES ""
@@ -347,7 +350,9 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
       (options.mpi ? shell_quote(runtime_location().mpi_library) + " " : std::string()) +
       (library ? shell_quote(runtime_location().runner_library) + " " : std::string()) +
       shell_quote(runtime_location().io_library) + " " + HYBGEN_RUNNER_LIBS +
-      (options.mpi ? std::string(" ") + HYBGEN_MPI_LIBS : std::string());
+      // NetCDF: the serial library, or in an MPI runner the parallel one (in HYBGEN_MPI_LIBS),
+      // never both: the writers' calls and parallel_io.cpp's must reach the same library.
+      (options.mpi ? std::string(" ") + HYBGEN_MPI_LIBS : std::string(" ") + HYBGEN_NETCDF_LIBS);
   const std::string root = options.cache_dir.empty() ? default_cache_dir() : options.cache_dir;
   const std::string key =
       sha256_hex(std::string(generator_version()) + '\n' + files.header + '\n' + main_src + '\n' +

@@ -13,7 +13,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <ostream>
 #include <string>
 #include <vector>
@@ -42,13 +44,13 @@ struct RunDir {
 };
 
 /// `hybgen run MODEL SETS` into a fresh directory named `name`, on `ranks` MPI ranks (0: the
-/// OpenMP runner); the run must succeed.
+/// OpenMP runner), writing `outputs`; the run must succeed.
 RunDir run_model(const std::string& model, const std::string& sets, const std::string& name,
-                 int ranks) {
+                 int ranks, const std::string& outputs = "npy") {
   const fs::path dir = e2e_dir("mpi") / name;
   fs::remove_all(dir);
-  const std::string args = "run " + model + " " + sets + " --set outputs=npy -q --out '" +
-                           dir.string() + "'" +
+  const std::string args = "run " + model + " " + sets + " --set outputs=" + outputs +
+                           " -q --out '" + dir.string() + "'" +
                            (ranks > 0 ? " --ranks " + std::to_string(ranks) : std::string());
   const auto r = hybgen::testing::run_shell(
       "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + kMpiEnv + "HYBGEN_CACHE='" +
@@ -81,6 +83,31 @@ double relative_difference(const std::vector<std::vector<double>>& a,
     }
   }
   return diff / std::max(scale, 1e-300);
+}
+
+/// x as printf's %.17g: every digit, never rounded to 0 (std::to_string prints 1e-12 as 0.000000).
+std::string repr(double x) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.17g", x);
+  return b;
+}
+
+/// What tests/e2e/compare_run_nc.py says of two run.nc files ("ok" when they hold the same
+/// run: to the bit, or to `rtol` of each variable's largest magnitude).
+std::string compare_run_nc(const fs::path& a, const fs::path& b, double rtol = 0.0) {
+  const std::string python = hybgen::testing::python_with("netCDF4, numpy");
+  if (python.empty()) return "no python3 with netCDF4 and numpy (scripts/setup.sh --tests)";
+  const auto r = hybgen::testing::run_shell(
+      python + " '" + HYBGEN_SOURCE_DIR + "/tests/e2e/compare_run_nc.py' '" + a.string() + "' '" +
+      b.string() + "'" + (rtol > 0 ? " --rtol " + repr(rtol) : std::string()) + " 2>&1");
+  return r.out;
+}
+
+/// Values per frame of the grid: modes × nodes.
+std::size_t frame_values(const nlohmann::json& summary) {
+  std::size_t n = summary.at("modes").size();
+  for (const auto& a : summary.at("grid").at("axes")) n *= a.at("n").get<std::size_t>();
+  return n;
 }
 
 /// max_k |a[key][k] − b[key][k]| for a budget series.
@@ -122,10 +149,31 @@ class MpiAgreement : public ::testing::TestWithParam<Case> {};
 TEST_P(MpiAgreement, ParticlesAreTheSameBitsOnOneAndTwoRanks) {
   const Case& c = GetParam();
   const std::string sets = std::string(c.sets) + " --set method=particles --set particles=30000";
-  const RunDir ref = run_model(c.model, sets, std::string(c.name) + "_particles_omp", 0);
+  // run.nc too: on 2 ranks every rank writes its part of each frame (parallel NetCDF), and
+  // the file must be the one-process file, to the bit.
+  const RunDir ref =
+      run_model(c.model, sets, std::string(c.name) + "_particles_omp", 0, "npy+netcdf");
   for (int ranks : {1, 2}) {
-    const RunDir r = run_model(c.model, sets,
-                               std::string(c.name) + "_particles_" + std::to_string(ranks), ranks);
+    const RunDir r =
+        run_model(c.model, sets, std::string(c.name) + "_particles_" + std::to_string(ranks), ranks,
+                  "npy+netcdf");
+    EXPECT_EQ(compare_run_nc(ref.dir / "run.nc", r.dir / "run.nc"), "ok\n") << c.name;
+    // Each mode's arrays, written in parts by the ranks that hold them.
+    if (ref.summary.contains("mode_files")) {
+      for (const auto& [mode, files] : ref.summary.at("mode_files").items()) {
+        for (const auto& f : files) {
+          EXPECT_EQ(hybgen::rt::read_npy((ref.dir / f.get<std::string>()).string()).data,
+                    hybgen::rt::read_npy((r.dir / f.get<std::string>()).string()).data)
+              << c.name << " " << f;
+        }
+      }
+    }
+    // No rank received a frame of the grid: the deposit is summed onto each rank's block.
+    if (ranks == 2) {
+      EXPECT_LT(r.summary.at("gathered_values_per_rank").get<std::size_t>(),
+                frame_values(r.summary))
+          << c.name;
+    }
     EXPECT_EQ(r.summary.at("ranks").get<int>(), ranks);
     EXPECT_EQ(r.summary.at("backend").get<std::string>(), "mpi");
     const auto a = frames(ref), b = frames(r);
@@ -160,11 +208,20 @@ TEST_P(MpiAgreement, CharacteristicsAreTheSameBitsAndTheBudgetAgrees) {
 TEST_P(MpiAgreement, TheTransferOperatorOnPetscMarchesAsTheCsrMatrix) {
   const Case& c = GetParam();
   const std::string sets = std::string(c.sets) + " --set method=transfer";
-  const RunDir ref = run_model(c.model, sets, std::string(c.name) + "_transfer_omp", 0);
+  const RunDir ref =
+      run_model(c.model, sets, std::string(c.name) + "_transfer_omp", 0, "npy+netcdf");
   const double mass0 = ref.summary.at("initial_mass").get<double>();
   for (int ranks : {1, 2}) {
     const RunDir r =
-        run_model(c.model, sets, std::string(c.name) + "_transfer_" + std::to_string(ranks), ranks);
+        run_model(c.model, sets, std::string(c.name) + "_transfer_" + std::to_string(ranks), ranks,
+                  "npy+netcdf");
+    EXPECT_EQ(compare_run_nc(ref.dir / "run.nc", r.dir / "run.nc", 1e-12), "ok\n") << c.name;
+    // The frames stay on the ranks that marched them.
+    if (ranks == 2) {
+      EXPECT_LT(r.summary.at("gathered_values_per_rank").get<std::size_t>(),
+                frame_values(r.summary))
+          << c.name;
+    }
     // The same entries (the same columns, assembled by the same code), summed in another
     // order by another mat-vec: rounding.
     EXPECT_EQ(ref.summary.at("transfer").at("nonzeros"), r.summary.at("transfer").at("nonzeros"));
@@ -234,6 +291,61 @@ TEST(Mpi, AFailureIsFoundOnceWhicheverRankHitIt) {
     EXPECT_FALSE(fs::exists(dir)) << "a failed run left " << dir;
   }
   EXPECT_EQ(messages[0], messages[1]);
+}
+
+TEST(Mpi, TwoRanksDrawThePicturesOfTheOneProcessRun) {
+  // The pictures of a distributed run come from the 2-D marginals of the figure pairs, each
+  // summed from every rank's part; the guards from every rank's nodes. The same files as
+  // one process, every frame's picture the same size, and a report that links them.
+  for (const Case& c : {kCases[1], kCases[3]}) {
+    const std::string sets = std::string(c.sets) + " --set method=particles --set particles=20000";
+    const RunDir ref =
+        run_model(c.model, sets, std::string(c.name) + "_pictures_omp", 0, "png+html");
+    const RunDir r = run_model(c.model, sets, std::string(c.name) + "_pictures_2", 2, "png+html");
+    ASSERT_EQ(ref.summary.at("outputs"), r.summary.at("outputs")) << c.name;
+    for (const auto& f : ref.summary.at("outputs").at("figures")) {
+      const fs::path a = ref.dir / f.get<std::string>(), b = r.dir / f.get<std::string>();
+      ASSERT_TRUE(fs::exists(b)) << b;
+      // Frames and the budget: a PNG of the same width and height (bytes 16-23 of IHDR).
+      std::ifstream fa(a, std::ios::binary), fb(b, std::ios::binary);
+      std::string ha(24, '\0'), hb(24, '\0');
+      fa.read(ha.data(), 24);
+      fb.read(hb.data(), 24);
+      EXPECT_EQ(ha, hb) << f;
+    }
+    EXPECT_TRUE(fs::exists(r.dir / "report.html")) << c.name;
+  }
+}
+
+TEST(Mpi, AFrameLargerThanAChunkIsWrittenInSlabsByEveryRank) {
+  // 129³ nodes = 2 146 689 > 2²¹: the density is stored in chunks of 126 slices of the first
+  // axis (hyperslab.hpp, c_order_chunk), and each rank's block ends inside a chunk, so both
+  // ranks write parts of one compressed chunk. The file must still be the one-process file.
+  const std::string sets =
+      "--set grid=129x129x129 --set t_end=0.5 --set dt=0.5 --set method=particles "
+      "--set particles=20000";
+  const RunDir ref = run_model("models/sir_3d.model", sets, "chunks_omp", 0, "netcdf");
+  const RunDir r = run_model("models/sir_3d.model", sets, "chunks_2", 2, "netcdf");
+  EXPECT_EQ(compare_run_nc(ref.dir / "run.nc", r.dir / "run.nc"), "ok\n");
+  const std::string python = hybgen::testing::python_with("netCDF4");
+  ASSERT_FALSE(python.empty()) << "no python3 with netCDF4 (scripts/setup.sh --tests)";
+  const auto chunks =
+      hybgen::testing::run_shell(python + " -c \"import netCDF4; print(netCDF4.Dataset('" +
+                                 (r.dir / "run.nc").string() + "')['density'].chunking())\" 2>&1");
+  EXPECT_EQ(chunks.out, "[1, 126, 129, 129]\n");
+}
+
+TEST(Mpi, VtiOverSeveralRanksIsRefusedWithTheWayOut) {
+  const fs::path dir = e2e_dir("mpi") / "vti";
+  const auto r = hybgen::testing::run_shell(
+      "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + kMpiEnv + "HYBGEN_CACHE='" +
+      (e2e_dir("mpi") / "cache").string() + "' '" + HYBGEN_EXE +
+      "' run models/bouncing_ball.model --set grid=21x21 --set t_end=1 --set outputs=vti "
+      "--ranks 2 -q --out '" +
+      dir.string() + "' 2>&1");
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("run.nc has the same arrays"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir));
 }
 
 TEST(Mpi, AMissingLauncherIsAClearError) {

@@ -83,16 +83,16 @@ class Figures : public ::testing::Test {
     r.times = {0, 1};
     r.frame_names = {"u_0000", "u_0001"};
     values_.assign(2 * 41 * 21, 0.0);
-    GuardField g{"wall", std::vector<double>(41 * 21), 0};
+    std::vector<double> s(41 * 21);
     for (std::size_t i = 0; i < 41; ++i)
       for (std::size_t j = 0; j < 21; ++j) {
         const double x = 0.1 * static_cast<double>(i);
         values_[i * 21 + j] = x;
         values_[41 * 21 + i * 21 + j] = x / 2;
-        g.values[i * 21 + j] = x - 3;
+        s[i * 21 + j] = x - 3;
       }
     r.density = values_;
-    r.guards.push_back(g);
+    r.guards.push_back(guard_field("wall", 0, s, r.axes, figure_pairs(2, {})));
     return r;
   }
 

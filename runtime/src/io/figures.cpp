@@ -35,44 +35,9 @@ using namespace drawing;
 
 // ------------------------------------------------------------------ a run's panels
 
-/// The guard's s on the pair plane (a, b) when it does not depend on the other axes
-/// (within 1e-9 of its range), else empty.
-std::vector<double> guard_on_pair(const std::vector<double>& s, const std::vector<GridAxis>& axes,
-                                  std::size_t a, std::size_t b) {
-  const std::size_t N = axes.size();
-  const auto na = static_cast<std::size_t>(axes[a].n), nb = static_cast<std::size_t>(axes[b].n);
-  std::vector<double> plane(na * nb, std::numeric_limits<double>::quiet_NaN());
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  for (const double v : s) lo = std::min(lo, v), hi = std::max(hi, v);
-  const double tol = 1e-9 * std::max(1.0, hi - lo);
-  std::vector<std::size_t> idx(N, 0);
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    std::size_t rem = i;
-    for (std::size_t k = N; k-- > 0;) {
-      idx[k] = rem % static_cast<std::size_t>(axes[k].n);
-      rem /= static_cast<std::size_t>(axes[k].n);
-    }
-    double& p = plane[idx[a] * nb + idx[b]];
-    if (std::isnan(p))
-      p = s[i];
-    else if (std::fabs(p - s[i]) > tol)
-      return {};
-  }
-  return plane;
-}
-
-/// The pairs of axes the panels show: every pair of the chosen axes (figure_axes, in the
-/// order given; every axis by default). 2-D: the one pair (x, y).
+/// The pairs of axes the panels show (run_record.hpp, figure_pairs).
 std::vector<std::pair<std::size_t, std::size_t>> axis_pairs(const RunRecord& run) {
-  std::vector<std::size_t> axes = run.figure_axes;
-  if (axes.size() < 2 || run.axes.size() == 2) {
-    axes.clear();
-    for (std::size_t a = 0; a < run.axes.size(); ++a) axes.push_back(a);
-  }
-  std::vector<std::pair<std::size_t, std::size_t>> pairs;
-  for (std::size_t i = 0; i < axes.size(); ++i)
-    for (std::size_t j = i + 1; j < axes.size(); ++j) pairs.emplace_back(axes[i], axes[j]);
-  return pairs;
+  return figure_pairs(run.axes.size(), run.figure_axes);
 }
 
 /// The deposited marginal of frame k on (a, b), a slowest: mode m, or every mode summed
@@ -128,10 +93,10 @@ std::vector<HeatPanel> frame_panels(const RunRecord& run, std::size_t k) {
       for (const GuardField& g : run.guards) {
         // With several modes, a guard is drawn in the panels of the mode it fires from.
         if (M > 1 && g.from >= 0 && static_cast<std::size_t>(g.from) != row) continue;
-        const std::vector<double> s = N == 2 ? g.values : guard_on_pair(g.values, run.axes, a, b);
-        if (!s.empty())
-          p.guards.emplace_back(g.name, zero_contour(s, static_cast<std::size_t>(run.axes[a].n),
-                                                     static_cast<std::size_t>(run.axes[b].n)));
+        if (c < g.planes.size() && !g.planes[c].empty())
+          p.guards.emplace_back(g.name,
+                                zero_contour(g.planes[c], static_cast<std::size_t>(run.axes[a].n),
+                                             static_cast<std::size_t>(run.axes[b].n)));
       }
       p.scale = c;
       out.push_back(std::move(p));

@@ -5,12 +5,15 @@
 #include <netcdf.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <cstdio>
 #include <ctime>
 #include <set>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "hybgen/rt/io/hyperslab.hpp"
 
 namespace hybgen::rt {
 
@@ -98,6 +101,31 @@ class Names {
   std::set<std::string> taken_;
 };
 
+/// The names of run.nc's time, mode and density variables, taken first and in this order
+/// (a state variable's name gets a trailing `_`), so that the writer of the file and the
+/// writer of a distributed run's frames (write_netcdf_frames) name them alike.
+struct DensityNames {
+  std::string time, mode, density, by_mode;  ///< Empty: not in this run's file.
+};
+
+DensityNames density_names(Names& names, const RunRecord& run) {
+  DensityNames d;
+  if (!run.times.empty()) d.time = names("time");
+  if (run.n_mode() > 1) d.mode = names("mode");
+  if (run.marginals == nullptr) {
+    d.density = names("density");
+    if (run.n_mode() > 1) d.by_mode = names("density_by_mode");
+  }
+  return d;
+}
+
+/// The grid's shape, one extent per axis.
+std::vector<std::size_t> grid_shape(const RunRecord& run) {
+  std::vector<std::size_t> shape;
+  for (const GridAxis& a : run.axes) shape.push_back(static_cast<std::size_t>(a.n));
+  return shape;
+}
+
 /// The current UTC time, ISO 8601 (the history attribute).
 std::string utc_now() {
   const std::time_t t = std::time(nullptr);
@@ -118,10 +146,11 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   const std::size_t N = run.axes.size(), n_mode = run.n_mode(), n_node = run.n_node();
   const bool series = !run.times.empty();
   const Marginals* mg = run.marginals;
-  if (mg == nullptr && run.density.size() != run.n_frame() * n_mode * n_node)
+  if (mg == nullptr && !run.distributed && run.density.size() != run.n_frame() * n_mode * n_node)
     throw std::invalid_argument("write_netcdf: the density does not match the grid");
   NcFile nc(path);
   Names names(run.axis_names);
+  const DensityNames dn = density_names(names, run);
 
   // Dimensions and coordinates.
   std::vector<int> axis_dims(N), axis_vars(N);
@@ -132,7 +161,7 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   }
   int time_dim = -1, time_var = -1;
   if (series) {
-    const std::string t = names("time");
+    const std::string& t = dn.time;
     time_dim = nc.dim(t, run.times.size());
     time_var = nc.var(t, NC_DOUBLE, {time_dim});
     nc.text(time_var, "long_name", "time");
@@ -141,13 +170,14 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   }
   int mode_dim = -1, mode_var = -1;
   if (n_mode > 1) {
-    const std::string m = names("mode");
+    const std::string& m = dn.mode;
     mode_dim = nc.dim(m, n_mode);
     mode_var = nc.var(m, NC_STRING, {mode_dim});
     nc.text(mode_var, "long_name", "mode of the hybrid system");
   }
 
-  // The density, one chunk per frame (and mode).
+  // The density, one chunk per frame (and mode), or slabs of the slowest axes for a frame of
+  // more than kChunkValues nodes.
   auto frame_dims = [&](bool by_mode) {
     std::vector<int> d;
     if (series) d.push_back(time_dim);
@@ -161,7 +191,7 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     std::vector<std::size_t> chunk;
     if (series) chunk.push_back(1);
     if (by_mode) chunk.push_back(1);
-    for (const GridAxis& a : run.axes) chunk.push_back(static_cast<std::size_t>(a.n));
+    for (const std::size_t c : c_order_chunk(grid_shape(run), kChunkValues)) chunk.push_back(c);
     nc.check(nc_def_var_chunking(nc.id(), v, NC_CHUNKED, chunk.data()), "chunk a variable");
     if (deflate > 0) nc.check(nc_def_var_deflate(nc.id(), v, 1, 1, deflate), "compress a variable");
     nc.text(v, "long_name", long_name);
@@ -172,12 +202,11 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     return v;
   };
   const std::string what = series ? "density" : "invariant density";
-  const int density = mg ? -1
-                         : define_density(names("density"), false,
-                                          n_mode > 1 ? what + ", summed over the modes" : what);
-  const int by_mode = !mg && n_mode > 1
-                          ? define_density(names("density_by_mode"), true, what + " of each mode")
-                          : -1;
+  const int density =
+      mg ? -1
+         : define_density(dn.density, false, n_mode > 1 ? what + ", summed over the modes" : what);
+  const int by_mode =
+      !mg && n_mode > 1 ? define_density(dn.by_mode, true, what + " of each mode") : -1;
 
   // Or the marginals: marginal_<a>_<b> (time, [mode,] a, b) per pair, and the moments.
   std::vector<int> pair_vars, pair_mode_vars;
@@ -345,7 +374,8 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     nc.put(mean_var, mg->mean);
     nc.put(cov_var, mg->covariance);
   }
-  for (std::size_t k = 0; k < run.n_frame() && !mg; ++k) {
+  // A distributed run's density: every rank writes its part afterwards (write_netcdf_frames).
+  for (std::size_t k = 0; k < run.n_frame() && !mg && !run.distributed; ++k) {
     std::vector<std::size_t> start, count;
     if (series) start.push_back(k), count.push_back(1);
     const std::vector<double> total = run.total_density(k);
@@ -369,6 +399,101 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     nc.put(abs_var, ab);
   }
   nc.close();
+}
+
+void write_netcdf_frames(const std::string& path, const RunRecord& run,
+                         const std::vector<std::vector<double>>& total) {
+  const ParallelIo* io = run.backend ? run.backend->parallel_io() : nullptr;
+  if (!run.distributed || io == nullptr || run.marginals != nullptr)
+    throw std::logic_error("write_netcdf_frames: not a distributed run with parallel output");
+  const Backend& b = *run.backend;
+  if (run.owned.begin != b.block(run.n_mode() * run.n_node()).begin ||
+      run.owned.end != b.block(run.n_mode() * run.n_node()).end)
+    throw std::logic_error("write_netcdf_frames: a rank's pairs are not its block");
+  // Every call is collective: a rank whose call fails keeps calling (writing nothing) so that
+  // no rank waits for it, and the ranks agree on the first failure at the end.
+  int failed = NC_NOERR;
+  const char* failed_at = "";
+  auto check = [&](int status, const char* what) {
+    if (status != NC_NOERR && failed == NC_NOERR) failed = status, failed_at = what;
+    return failed == NC_NOERR;
+  };
+  int id = -1;
+  check(io->open_netcdf(path.c_str(), &id), "open it on every rank");
+  // The open is collective; where it failed (on every rank, or on some) nothing is written.
+  if (b.any(failed != NC_NOERR)) {
+    if (failed == NC_NOERR) nc_close(id);
+    throw std::runtime_error("cannot write '" + path + "': " +
+                             (failed != NC_NOERR
+                                  ? std::string(failed_at) + ": " + nc_strerror(failed)
+                                  : std::string("another rank could not open it")));
+  }
+  Names names(run.axis_names);
+  const DensityNames dn = density_names(names, run);
+  const std::size_t n_mode = run.n_mode(), n_node = run.n_node();
+  const bool series = !run.times.empty();
+  const std::vector<std::size_t> nodes = grid_shape(run);
+  std::vector<std::size_t> pairs = nodes;
+  pairs.insert(pairs.begin(), n_mode);
+  // Every rank calls each write, as often as the rank with the most boxes (the partition
+  // is known everywhere); a rank with fewer writes nothing (count 0) in the rest.
+  auto calls = [&](const std::vector<std::size_t>& shape, std::size_t n) {
+    std::size_t most = 0;
+    for (int r = 0; r < b.ranks(); ++r) {
+      const Block blk = block_of(n, r, b.ranks());
+      most = std::max(most, c_order_hyperslabs(shape, blk.begin, blk.end).size());
+    }
+    return most;
+  };
+  auto write = [&](int var, std::size_t k, const std::vector<std::size_t>& shape, Block part,
+                   const double* values, std::size_t n_calls) {
+    const std::vector<Hyperslab> boxes = c_order_hyperslabs(shape, part.begin, part.end);
+    const std::size_t rank = shape.size() + (series ? 1 : 0);
+    for (std::size_t j = 0; j < n_calls; ++j) {
+      std::vector<std::size_t> start(rank, 0), count(rank, 0);
+      if (j < boxes.size()) {
+        const std::size_t at = series ? 1 : 0;
+        if (series) start[0] = k, count[0] = 1;
+        std::copy(boxes[j].start.begin(), boxes[j].start.end(),
+                  start.begin() + static_cast<long>(at));
+        std::copy(boxes[j].count.begin(), boxes[j].count.end(),
+                  count.begin() + static_cast<long>(at));
+      }
+      if (failed != NC_NOERR) std::fill(count.begin(), count.end(), 0);  // keep in step
+      check(nc_put_vara_double(id, var, start.data(), count.data(), values), "write a frame");
+      if (j < boxes.size()) values += boxes[j].size();
+    }
+  };
+  int density = -1, by_mode = -1;
+  const Block node_block = b.block(n_node);
+  bool shapes = total.size() == run.n_frame();
+  for (const std::vector<double>& t : total) shapes = shapes && t.size() == node_block.size();
+  if (!shapes) check(NC_EINVAL, "the summed density's blocks (one per frame, this rank's nodes)");
+  check(nc_inq_varid(id, dn.density.c_str(), &density), "find the density");
+  if (n_mode > 1) check(nc_inq_varid(id, dn.by_mode.c_str(), &by_mode), "find the density by mode");
+  // The same metadata on every rank: these fail everywhere or nowhere.
+  if (b.any(failed != NC_NOERR)) {
+    nc_close(id);
+    throw std::runtime_error("cannot write '" + path + "': " + failed_at + ": " +
+                             nc_strerror(failed != NC_NOERR ? failed : NC_EINVAL));
+  }
+  check(io->collective(id, density), "write it collectively");
+  if (by_mode >= 0) check(io->collective(id, by_mode), "write it collectively");
+  const std::size_t node_calls = calls(nodes, n_node);
+  const std::size_t pair_calls = n_mode > 1 ? calls(pairs, n_mode * n_node) : 0;
+  for (std::size_t k = 0; k < run.n_frame(); ++k) {
+    write(density, k, nodes, node_block, total[k].data(), node_calls);
+    if (by_mode >= 0) write(by_mode, k, pairs, run.owned, run.frame_part(k).data(), pair_calls);
+  }
+  check(nc_close(id), "close");  // collective: flushes every rank's chunks
+  // The first failure of any rank, said by every rank (the lowest failing rank's words).
+  const std::int64_t none = b.ranks();
+  const std::int64_t first = b.min(failed != NC_NOERR ? std::int64_t{b.rank()} : none);
+  if (first == none) return;
+  const std::string why = b.broadcast(
+      failed != NC_NOERR ? std::string(failed_at) + ": " + nc_strerror(failed) : std::string(),
+      static_cast<int>(first));
+  throw std::runtime_error("cannot write '" + path + "': " + why);
 }
 
 }  // namespace hybgen::rt

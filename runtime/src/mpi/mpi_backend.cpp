@@ -2,6 +2,7 @@
 
 #include "mpi_backend.hpp"
 
+#include <algorithm>
 #include <cstring>
 #include <limits>
 #include <stdexcept>
@@ -68,7 +69,9 @@ void MpiBackend::sum(std::span<double> v) const {
   if (size_ == 1 || v.empty()) return;
   // Rank order, the same on every rank: MPI's own reductions may associate differently on
   // different ranks, and ranks that disagree in the last bit take different branches.
+  const std::size_t most = gathered_;  // a sum's exchange is not a gather of a field
   const std::vector<double> all = all_gather(v);
+  gathered_ = most;
   for (std::size_t j = 0; j < v.size(); ++j) {
     double s = 0.0;
     for (int r = 0; r < size_; ++r) s += all[static_cast<std::size_t>(r) * v.size() + j];
@@ -82,6 +85,14 @@ void MpiBackend::sum_to_root(std::span<std::int64_t> v) const {
     void* send = rank_ == 0 ? MPI_IN_PLACE : v.data() + at;
     check(MPI_Reduce(send, v.data() + at, n, MPI_INT64_T, MPI_SUM, 0, MPI_COMM_WORLD),
           "MPI_Reduce");
+  }
+}
+
+void MpiBackend::sum_to_root(std::span<double> v) const {
+  for (std::size_t at = 0; at < v.size(); at += kPiece) {
+    const auto n = static_cast<int>(std::min(kPiece, v.size() - at));
+    void* send = rank_ == 0 ? MPI_IN_PLACE : v.data() + at;
+    check(MPI_Reduce(send, v.data() + at, n, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD), "MPI_Reduce");
   }
 }
 
@@ -114,6 +125,7 @@ std::vector<double> MpiBackend::all_gather(std::span<const double> part) const {
   std::size_t total = 0;
   const std::vector<std::size_t> at = offsets(n, total);
   std::vector<double> all(total);
+  gathered_ = std::max(gathered_, total - part.size());
   const std::vector<int> ni = as_int(n), ati = as_int(at);
   check(MPI_Allgatherv(part.data(), ni[static_cast<std::size_t>(rank_)], MPI_DOUBLE, all.data(),
                        ni.data(), ati.data(), MPI_DOUBLE, MPI_COMM_WORLD),
@@ -126,6 +138,7 @@ std::vector<double> MpiBackend::gather(std::span<const double> part) const {
   std::size_t total = 0;
   const std::vector<std::size_t> at = offsets(n, total);
   std::vector<double> all(rank_ == 0 ? total : 0);
+  if (rank_ == 0) gathered_ = std::max(gathered_, total - part.size());
   const std::vector<int> ni = as_int(n), ati = as_int(at);
   check(MPI_Gatherv(part.data(), ni[static_cast<std::size_t>(rank_)], MPI_DOUBLE, all.data(),
                     ni.data(), ati.data(), MPI_DOUBLE, 0, MPI_COMM_WORLD),
@@ -148,8 +161,64 @@ std::string MpiBackend::broadcast(const std::string& s, int from) const {
   return out;
 }
 
-std::unique_ptr<DistributedMatrix> MpiBackend::matrix(OperatorColumns part) const {
+std::unique_ptr<DistributedMatrix> MpiBackend::matrix(OperatorEntries part) const {
   return std::make_unique<PetscMatrix>(std::move(part));
+}
+
+std::vector<std::int64_t> MpiBackend::sum_to_blocks(std::span<const std::int64_t> v) const {
+  std::vector<std::size_t> n(static_cast<std::size_t>(size_));
+  for (int r = 0; r < size_; ++r)
+    n[static_cast<std::size_t>(r)] = block_of(v.size(), r, size_).size();
+  const std::vector<int> ni = as_int(n);
+  std::vector<std::int64_t> mine(n[static_cast<std::size_t>(rank_)]);
+  check(MPI_Reduce_scatter(v.data(), mine.data(), ni.data(), MPI_INT64_T, MPI_SUM, MPI_COMM_WORLD),
+        "MPI_Reduce_scatter");
+  return mine;
+}
+
+std::vector<double> MpiBackend::sum_to_blocks(std::span<const double> values, std::size_t offset,
+                                              std::size_t n) const {
+  // Every rank's range [offset, offset + size), then the pieces that fall in each block.
+  std::vector<std::uint64_t> mine{offset, values.size()},
+      ranges(2 * static_cast<std::size_t>(size_));
+  check(MPI_Allgather(mine.data(), 2, MPI_UINT64_T, ranges.data(), 2, MPI_UINT64_T, MPI_COMM_WORLD),
+        "MPI_Allgather");
+  auto overlap = [](std::size_t a0, std::size_t a1, Block b) {
+    const std::size_t lo = std::max(a0, b.begin), hi = std::min(a1, b.end);
+    return hi > lo ? Block{lo, hi} : Block{lo, lo};
+  };
+  const auto R = static_cast<std::size_t>(size_);
+  const Block own = block(n);
+  std::vector<std::size_t> send_n(R), send_at(R), recv_n(R), recv_at(R);
+  std::size_t recv_total = 0;
+  for (std::size_t r = 0; r < R; ++r) {
+    const Block s =
+        overlap(offset, offset + values.size(), block_of(n, static_cast<int>(r), size_));
+    send_n[r] = s.size();
+    send_at[r] = s.begin - std::min(s.begin, offset);
+    const Block g = overlap(ranges[2 * r], ranges[2 * r] + ranges[2 * r + 1], own);
+    recv_n[r] = g.size();
+    recv_at[r] = recv_total;
+    recv_total += g.size();
+  }
+  std::vector<double> received(recv_total);
+  const std::vector<int> sn = as_int(send_n), sa = as_int(send_at), rn = as_int(recv_n),
+                         ra = as_int(recv_at);
+  check(MPI_Alltoallv(values.data(), sn.data(), sa.data(), MPI_DOUBLE, received.data(), rn.data(),
+                      ra.data(), MPI_DOUBLE, MPI_COMM_WORLD),
+        "MPI_Alltoallv");
+  // In rank order: 0 + the first contribution, + the next, … (one contribution: exact).
+  std::vector<double> out(own.size(), 0.0);
+  for (std::size_t r = 0; r < R; ++r) {
+    const Block g = overlap(ranges[2 * r], ranges[2 * r] + ranges[2 * r + 1], own);
+    for (std::size_t i = 0; i < g.size(); ++i)
+      out[g.begin - own.begin + i] += received[recv_at[r] + i];
+  }
+  return out;
+}
+
+const ParallelIo* MpiBackend::parallel_io() const {
+  return &parallel_netcdf();
 }
 
 }  // namespace hybgen::rt::mpi

@@ -33,6 +33,8 @@ class MpiBackend final : public Backend {
   void sum(std::span<double> v) const override;
   /// MPI_Reduce, MPI_SUM over int64, into rank 0.
   void sum_to_root(std::span<std::int64_t> v) const override;
+  /// MPI_Reduce, MPI_SUM over double, into rank 0.
+  void sum_to_root(std::span<double> v) const override;
   /// MPI_Allreduce, MPI_MAX.
   void max(std::span<double> v) const override;
   /// MPI_Allreduce, MPI_MIN over int64.
@@ -46,12 +48,27 @@ class MpiBackend final : public Backend {
   /// Length, then bytes.
   [[nodiscard]] std::string broadcast(const std::string& s, int from) const override;
   /// A PETSc matrix (petsc_matrix.hpp).
-  [[nodiscard]] std::unique_ptr<DistributedMatrix> matrix(OperatorColumns part) const override;
+  [[nodiscard]] std::unique_ptr<DistributedMatrix> matrix(OperatorEntries part) const override;
+  /// MPI_Reduce_scatter, MPI_SUM over int64, by block_of.
+  [[nodiscard]] std::vector<std::int64_t> sum_to_blocks(
+      std::span<const std::int64_t> v) const override;
+  /// Every rank's ranges, then one MPI_Alltoallv of the pieces to their blocks' owners.
+  [[nodiscard]] std::vector<double> sum_to_blocks(std::span<const double> values,
+                                                  std::size_t offset, std::size_t n) const override;
+  /// The largest gather or all_gather received from the other ranks.
+  [[nodiscard]] std::size_t gathered_values() const override { return gathered_; }
+  /// NetCDF-4 over MPI-IO (parallel_io.cpp).
+  [[nodiscard]] const ParallelIo* parallel_io() const override;
 
  private:
   /// Every rank's count, on every rank.
   [[nodiscard]] std::vector<std::size_t> counts(std::size_t mine) const;
   int rank_ = 0, size_ = 1, here_ = 1;
+  mutable std::size_t gathered_ = 0;  ///< gathered_values(): the largest gather received.
 };
+
+/// The MPI implementation of ParallelIo (parallel_io.cpp): parallel NetCDF on
+/// MPI_COMM_WORLD.
+const ParallelIo& parallel_netcdf();
 
 }  // namespace hybgen::rt::mpi

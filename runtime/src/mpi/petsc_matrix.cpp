@@ -31,26 +31,46 @@ PetscInt as_index(std::size_t n) {
   return static_cast<PetscInt>(n);
 }
 
-/// One entry on its way to the rank that owns its row.
-struct Entry {
-  std::int32_t row, col;
-  double value;
+/// The owner of row r under block_of(n, ·, R): the first n mod R blocks hold one row more.
+struct RowOwner {
+  std::size_t q, rem, big;
+  RowOwner(std::size_t n, std::size_t R) : q(n / R), rem(n % R), big(n % R * (n / R + 1)) {}
+  [[nodiscard]] std::size_t operator()(std::size_t r) const {
+    return r < big ? r / (q + 1) : rem + (r - big) / q;
+  }
 };
 
-/// Every entry of `part` sent to the rank owning its row (one MPI_Alltoallv), as the CSR
-/// rows of this rank's block: row pointers (local rows), global columns sorted within each
-/// row, values. `part` is emptied on the way, the entries sent freed before the rows are
-/// built: the peak is ≈ 28 bytes per entry of this rank (its columns as sent, then its
-/// rows as received and compressed), against 12 per entry of the finished matrix.
-void exchange_rows(OperatorColumns& part, int ranks, std::vector<PetscInt>& ptr,
-                   std::vector<PetscInt>& col, std::vector<PetscScalar>& val) {
+/// Sort the entries [b, e) of a row by column (a row holds a few hundred at most).
+void sort_row(PetscInt* col, PetscScalar* val, std::size_t b, std::size_t e,
+              std::vector<std::pair<PetscInt, PetscScalar>>& row) {
+  row.clear();
+  for (std::size_t k = b; k < e; ++k) row.emplace_back(col[k], val[k]);
+  std::sort(row.begin(), row.end());
+  for (std::size_t k = b; k < e; ++k) col[k] = row[k - b].first, val[k] = row[k - b].second;
+}
+
+}  // namespace
+
+void PetscMatrix::assemble_rows(OperatorEntries& part, int ranks) {
   const std::size_t n = part.size;
   const auto R = static_cast<std::size_t>(ranks);
-  // The owner of row r under block_of: the first n mod R blocks hold one row more.
-  const std::size_t q = n / R, rem = n % R, big = rem * (q + 1);
-  auto owner = [&](std::size_t r) { return r < big ? r / (q + 1) : rem + (r - big) / q; };
+  const RowOwner owner(n, R);
+  int me = 0;
+  MPI_Comm_rank(PETSC_COMM_WORLD, &me);
+  const auto self = static_cast<std::size_t>(me);
+  // 1. In each list, this rank's rows first (in place); the others' entries, usually a thin
+  //    layer of ghost rows, are packed by destination into one buffer and sent.
+  std::vector<std::size_t> local(part.lists.size());
   std::vector<int> send_count(R, 0), recv_count(R, 0), send_at(R, 0), recv_at(R, 0);
-  for (const std::int32_t r : part.row) ++send_count[owner(static_cast<std::size_t>(r))];
+  for (std::size_t t = 0; t < part.lists.size(); ++t) {
+    auto& list = part.lists[t];
+    const auto mid = std::partition(list.begin(), list.end(), [&](const OperatorEntry& e) {
+      return owner(static_cast<std::size_t>(e.row)) == self;
+    });
+    local[t] = static_cast<std::size_t>(mid - list.begin());
+    for (auto it = mid; it != list.end(); ++it)
+      ++send_count[owner(static_cast<std::size_t>(it->row))];
+  }
   if (MPI_Alltoall(send_count.data(), 1, MPI_INT, recv_count.data(), 1, MPI_INT,
                    PETSC_COMM_WORLD) != MPI_SUCCESS)
     throw std::runtime_error("MPI: MPI_Alltoall failed");
@@ -65,65 +85,97 @@ void exchange_rows(OperatorColumns& part, int ranks, std::vector<PetscInt>& ptr,
       throw std::length_error(
           "PETSc: more than 2^31 entries to exchange on one rank (use more ranks)");
   }
-  std::vector<Entry> out(sent);
+  // This rank's rows hold its own entries and those received: PETSc's 32-bit row pointers
+  // must count them all. Agreed: no rank may leave the collectives below alone.
+  std::size_t own = received;
+  for (const std::size_t l : local) own += l;
+  int too_many = own > static_cast<std::size_t>(std::numeric_limits<PetscInt>::max()) ? 1 : 0;
+  if (MPI_Allreduce(MPI_IN_PLACE, &too_many, 1, MPI_INT, MPI_MAX, PETSC_COMM_WORLD) != MPI_SUCCESS)
+    throw std::runtime_error("MPI: MPI_Allreduce failed");
+  if (too_many)
+    throw std::length_error(
+        "PETSc: more than 2^31 entries in one rank's rows (PETSc's 32-bit indices: use more "
+        "ranks, or Debian's petsc64-dev)");
+  std::vector<OperatorEntry> in(received);
   {
+    std::vector<OperatorEntry> out(sent);
     std::vector<int> at = send_at;
-    for (std::size_t c = 0; c < part.owned.size(); ++c)
-      for (std::size_t k = part.start[c]; k < part.start[c + 1]; ++k) {
-        const auto r = static_cast<std::size_t>(part.row[k]);
-        out[static_cast<std::size_t>(at[owner(r)]++)] = {
-            part.row[k], static_cast<std::int32_t>(part.owned.begin + c), part.value[k]};
+    for (std::size_t t = 0; t < part.lists.size(); ++t)
+      for (std::size_t k = local[t]; k < part.lists[t].size(); ++k) {
+        const OperatorEntry& e = part.lists[t][k];
+        out[static_cast<std::size_t>(at[owner(static_cast<std::size_t>(e.row))]++)] = e;
       }
+    MPI_Datatype entry = MPI_DATATYPE_NULL;
+    MPI_Type_contiguous(static_cast<int>(sizeof(OperatorEntry)), MPI_BYTE, &entry);
+    MPI_Type_commit(&entry);
+    const int status =
+        MPI_Alltoallv(out.data(), send_count.data(), send_at.data(), entry, in.data(),
+                      recv_count.data(), recv_at.data(), entry, PETSC_COMM_WORLD);
+    MPI_Type_free(&entry);
+    if (status != MPI_SUCCESS) throw std::runtime_error("MPI: MPI_Alltoallv failed");
   }
-  const Block mine = part.owned;
-  part = OperatorColumns{};  // packed: free the columns
-  MPI_Datatype entry = MPI_DATATYPE_NULL;
-  MPI_Type_contiguous(static_cast<int>(sizeof(Entry)), MPI_BYTE, &entry);
-  MPI_Type_commit(&entry);
-  std::vector<Entry> in(received);
-  const int status = MPI_Alltoallv(out.data(), send_count.data(), send_at.data(), entry, in.data(),
-                                   recv_count.data(), recv_at.data(), entry, PETSC_COMM_WORLD);
-  MPI_Type_free(&entry);
-  if (status != MPI_SUCCESS) throw std::runtime_error("MPI: MPI_Alltoallv failed");
-  std::vector<Entry>().swap(out);
-  // CSR of the owned rows: count, prefix sum, scatter, then sort each row by column.
+  // 2. This rank's rows split as PETSc keeps them: the "diagonal" block (columns it owns,
+  //    local indices) and the "off-diagonal" one (global columns), each CSR with its
+  //    columns sorted. Built straight from the lists and the received entries; PETSc uses
+  //    these arrays as they are (MatCreateMPIAIJWithSplitArrays): no further copy.
+  const Block mine = owned_;
   const std::size_t rows = mine.size();
-  ptr.assign(rows + 1, 0);
-  for (const Entry& e : in) ++ptr[static_cast<std::size_t>(e.row) - mine.begin + 1];
-  for (std::size_t r = 0; r < rows; ++r) ptr[r + 1] += ptr[r];
-  col.resize(received);
-  val.resize(received);
-  std::vector<PetscInt> at(ptr.begin(), ptr.end() - 1);
-  for (const Entry& e : in) {
-    const auto k = static_cast<std::size_t>(at[static_cast<std::size_t>(e.row) - mine.begin]++);
-    col[k] = e.col;
-    val[k] = e.value;
+  di_.assign(rows + 1, 0);
+  oi_.assign(rows + 1, 0);
+  auto each = [&](auto&& f) {
+    for (std::size_t t = 0; t < part.lists.size(); ++t)
+      for (std::size_t k = 0; k < local[t]; ++k) f(part.lists[t][k]);
+    for (const OperatorEntry& e : in) f(e);
+  };
+  auto diagonal = [&](const OperatorEntry& e) {
+    const auto c = static_cast<std::size_t>(e.col);
+    return c >= mine.begin && c < mine.end;
+  };
+  each([&](const OperatorEntry& e) {
+    ++(diagonal(e) ? di_ : oi_)[static_cast<std::size_t>(e.row) - mine.begin + 1];
+  });
+  for (std::size_t r = 0; r < rows; ++r) di_[r + 1] += di_[r], oi_[r + 1] += oi_[r];
+  dj_.resize(static_cast<std::size_t>(di_[rows]));
+  da_.resize(dj_.size());
+  oj_.resize(static_cast<std::size_t>(oi_[rows]));
+  oa_.resize(oj_.size());
+  {
+    std::vector<PetscInt> d_at(di_.begin(), di_.end() - 1), o_at(oi_.begin(), oi_.end() - 1);
+    each([&](const OperatorEntry& e) {
+      const std::size_t r = static_cast<std::size_t>(e.row) - mine.begin;
+      if (diagonal(e)) {
+        const auto k = static_cast<std::size_t>(d_at[r]++);
+        dj_[k] = static_cast<PetscInt>(static_cast<std::size_t>(e.col) - mine.begin);
+        da_[k] = e.value;
+      } else {
+        const auto k = static_cast<std::size_t>(o_at[r]++);
+        oj_[k] = e.col;
+        oa_[k] = e.value;
+      }
+    });
   }
-  std::vector<Entry>().swap(in);
+  std::vector<OperatorEntry>().swap(in);
+  part = OperatorEntries{};  // the lists: freed before PETSc builds anything
   std::vector<std::pair<PetscInt, PetscScalar>> row;
   for (std::size_t r = 0; r < rows; ++r) {
-    const auto b = static_cast<std::size_t>(ptr[r]), e = static_cast<std::size_t>(ptr[r + 1]);
-    row.clear();
-    for (std::size_t k = b; k < e; ++k) row.emplace_back(col[k], val[k]);
-    std::sort(row.begin(), row.end());
-    for (std::size_t k = b; k < e; ++k) col[k] = row[k - b].first, val[k] = row[k - b].second;
+    sort_row(dj_.data(), da_.data(), static_cast<std::size_t>(di_[r]),
+             static_cast<std::size_t>(di_[r + 1]), row);
+    sort_row(oj_.data(), oa_.data(), static_cast<std::size_t>(oi_[r]),
+             static_cast<std::size_t>(oi_[r + 1]), row);
   }
 }
 
-}  // namespace
-
-PetscMatrix::PetscMatrix(OperatorColumns part) : owned_(part.owned) {
+PetscMatrix::PetscMatrix(OperatorEntries part) : owned_(part.owned) {
   const PetscInt n = as_index(part.size), local = as_index(part.owned.size());
   int ranks = 1;
   MPI_Comm_size(PETSC_COMM_WORLD, &ranks);
-  // Each row to its owner, then the matrix from the owned rows: PETSc counts the entries of
-  // every row as it copies them (exact preallocation, nothing guessed).
-  std::vector<PetscInt> ptr, col;
-  std::vector<PetscScalar> val;
-  exchange_rows(part, ranks, ptr, col, val);
-  ok(MatCreateMPIAIJWithArrays(PETSC_COMM_WORLD, local, local, n, n, ptr.data(), col.data(),
-                               val.data(), &a_),
-     "MatCreateMPIAIJWithArrays");
+  // Each row to its owner, then the matrix on the owned rows' split arrays: their counts
+  // are exact (nothing preallocated by guess, nothing inserted one by one), and PETSc keeps
+  // the arrays rather than a copy of them.
+  assemble_rows(part, ranks);
+  ok(MatCreateMPIAIJWithSplitArrays(PETSC_COMM_WORLD, local, local, n, n, di_.data(), dj_.data(),
+                                    da_.data(), oi_.data(), oj_.data(), oa_.data(), &a_),
+     "MatCreateMPIAIJWithSplitArrays");
   ok(VecCreateMPIWithArray(PETSC_COMM_WORLD, 1, local, n, nullptr, &x_), "VecCreateMPIWithArray");
   ok(VecCreateMPIWithArray(PETSC_COMM_WORLD, 1, local, n, nullptr, &y_), "VecCreateMPIWithArray");
 }

@@ -3,19 +3,23 @@
 /// A transfer operator as a PETSc matrix (MATAIJ over MPI_COMM_WORLD), its rows distributed
 /// by the blocks of core/backend.hpp, and its spectrum by SLEPc.
 ///
-/// Assembly: each rank holds the columns it assembled (OperatorColumns). Every entry goes to
-/// the rank that owns its row in one MPI_Alltoallv; each rank compresses its rows (CSR, the
-/// columns of a row sorted) and PETSc builds the matrix from them
-/// (MatCreateMPIAIJWithArrays), counting the entries of every row as it copies them: the
-/// preallocation is exact, nothing is guessed and nothing is inserted one by one. The
-/// columns are freed once packed and the packed entries once sent: the peak per rank is
-/// about 28 bytes per entry (measured as a run's peak resident size: bench/mpi_scaling.sh).
+/// Assembly: each rank holds the entries of the columns it assembled, in its threads' lists
+/// (OperatorEntries). In each list the entries of its own rows are moved to the front (in
+/// place); only the others' (the ghost rows near the block's ends) are packed and sent, in
+/// one MPI_Alltoallv. Each rank then writes its rows straight into the two CSR blocks PETSc
+/// keeps (the columns it owns, and the others), counted exactly, columns sorted, and frees
+/// the lists; PETSc takes those arrays as they are (MatCreateMPIAIJWithSplitArrays), so the
+/// matrix is never copied. Peak per rank: the entries (16 bytes each) and the split arrays
+/// (12 bytes each) at once, about 28 bytes per entry, against 12 for the finished matrix
+/// (measured as a run's peak resident size: bench/mpi_scaling.sh).
 ///
 /// Spectrum: SLEPc's EPS on the matrix, non-Hermitian, largest magnitude, start vector all
 /// ones (as Spectra's in invariant.hpp), then EPSSetFromOptions, so that -eps_type,
 /// -eps_ncv, -eps_tol, … on the command line or in $PETSC_OPTIONS override the defaults.
 
 #include <petscmat.h>
+
+#include <vector>
 
 #include "hybgen/rt/core/backend.hpp"
 
@@ -26,7 +30,7 @@ class PetscMatrix final : public DistributedMatrix {
  public:
   /// Assemble from every rank's columns (collective; throws std::runtime_error on a PETSc
   /// error and std::length_error beyond PETSc's 32-bit indices).
-  explicit PetscMatrix(OperatorColumns part);
+  explicit PetscMatrix(OperatorEntries part);
   /// Frees the matrix and its work vectors.
   ~PetscMatrix() override;
   PetscMatrix(const PetscMatrix&) = delete;             ///< One owner.
@@ -43,9 +47,16 @@ class PetscMatrix final : public DistributedMatrix {
   EigenAnswer eigen(const EigenRequest& request) override;
 
  private:
+  /// This rank's rows from every rank's entries into the split arrays below (collective).
+  void assemble_rows(OperatorEntries& part, int ranks);
   Mat a_ = nullptr;
   Vec x_ = nullptr, y_ = nullptr;  // views of the caller's arrays during multiply
   Block owned_{};
+  // The owned rows as PETSc uses them (it does not copy them): the diagonal block (row
+  // pointers, local columns, values) and the off-diagonal one (global columns). Declared
+  // before nothing that outlives them: the destructor frees the matrix first.
+  std::vector<PetscInt> di_, dj_, oi_, oj_;
+  std::vector<PetscScalar> da_, oa_;
 };
 
 }  // namespace hybgen::rt::mpi

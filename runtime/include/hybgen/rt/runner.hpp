@@ -208,6 +208,13 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
                   method == "invariant" ? std::size_t{1} : times.size(), have / 1e9);
     throw ConfigError(b);
   }
+  // A VTK image is one process's whole grid (or its first three axes): over several ranks
+  // run.nc, written by every rank, holds the same arrays (ParaView reads it).
+  if (backend.ranks() > 1 && c.settings.includes<"outputs">("vti"))
+    throw ConfigError(
+        "outputs vti holds a whole grid in one process's file, which a run over several ranks "
+        "does not gather: run.nc has the same arrays (ParaView opens it with its NetCDF CF "
+        "reader), or run with one rank");
   if (marginals)
     for (const char* o : {"npy", "vti"})
       if (c.settings.includes<"outputs">(o))
@@ -274,16 +281,17 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
   } catch (const std::invalid_argument& e) {
     throw ConfigError(e.what());  // e.g. an output time that is not a multiple of the step
   }
-  // The largest resident size of any rank (collective: before the ranks part).
+  // The largest resident size of any rank (collective: every rank calls it).
   const double peak_bytes = backend.max(peak_resident_bytes());
-  // Every rank knows whether the method failed (the failures are agreed across ranks); the
-  // result is complete on rank 0, which alone writes it.
-  if (!backend.root()) return exit_status(res.ok() ? ExitCode::Success : ExitCode::Numerical);
-  for (const auto& w : res.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
+  // Every rank knows whether the method failed (the failures are agreed across ranks). Each
+  // holds its part of the frames and writes it (io/run_outputs.hpp); rank 0 writes the rest.
   if (!res.ok()) {
-    std::fprintf(stderr, "hybgen: numerical failure: %s\n", res.failure.c_str());
+    if (backend.root())
+      std::fprintf(stderr, "hybgen: numerical failure: %s\n", res.failure.c_str());
     return exit_status(ExitCode::Numerical);
   }
+  if (backend.root())
+    for (const auto& w : res.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
 
   // Outputs: the files the setting `outputs` chooses (io/run_outputs.hpp), durable together
   // with summary.json by one sync of the staging directory.
@@ -301,32 +309,48 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
   rec.times = res.frame_times;
   rec.frame_names = res.frame_names;
   rec.density = std::span<const double>(sol.u.data(), sol.u.size());
+  rec.distributed = sol.distributed;
+  rec.owned = sol.owned;
+  rec.backend = &backend;
   if (!res.marginals.empty()) rec.marginals = &res.marginals;
-  // Nodes outside the support, and every guard's s at the nodes (the pictures draw the
-  // surfaces s = 0): not for marginals, whose grid is never visited.
-  bool any_outside = false;
-  if (rec.marginals == nullptr) {
-    rec.outside.assign(n_node, 0);
-    for (std::size_t i = 0; i < n_node; ++i) {
-      const auto y = grid.node(i);
-      if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
-    }
-  }
-  if (!any_outside) rec.outside.clear();
-  for (int g = 0; g < M::n_guard && rec.marginals == nullptr; ++g) {
-    GuardField f{M::guard_names[static_cast<std::size_t>(g)], std::vector<double>(n_node),
-                 M::guards[static_cast<std::size_t>(g)].from};
-    for (std::size_t i = 0; i < n_node; ++i) {
-      const auto y = grid.node(i);
-      f.values[i] = M::guard_surface(g, y.data(), par);
-    }
-    rec.guards.push_back(std::move(f));
-  }
   for (const std::string& name : c.settings.names<"figure_axes">()) {
     const auto it = std::find(c.axis_names.begin(), c.axis_names.end(), name);
     if (it == c.axis_names.end())
       throw ConfigError("setting 'figure_axes': '" + name + "' is not a state variable");
     rec.figure_axes.push_back(static_cast<std::size_t>(it - c.axis_names.begin()));
+  }
+  // What the pictures draw besides the density (not for marginals, whose grid is never
+  // visited): 2-D, the nodes outside the support (greyed); every guard's surface s = 0 on
+  // the planes of the figure pairs, each rank adding its block of the nodes.
+  if (rec.marginals == nullptr && N == 2 && backend.root()) {
+    rec.outside.assign(n_node, 0);
+    bool any_outside = false;
+    for (std::size_t i = 0; i < n_node; ++i) {
+      const auto y = grid.node(i);
+      if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
+    }
+    if (!any_outside) rec.outside.clear();
+  }
+  const auto pairs = figure_pairs(N, rec.figure_axes);
+  const Block nodes = backend.block(n_node);
+  for (int g = 0; g < M::n_guard && rec.marginals == nullptr; ++g) {
+    GuardPlanes planes(rec.axes, pairs);
+    std::vector<double> s(nodes.size());
+    for (std::size_t i = nodes.begin; i < nodes.end; ++i) {
+      const auto y = grid.node(i);
+      s[i - nodes.begin] = M::guard_surface(g, y.data(), par);
+    }
+    planes.add(nodes.begin, s);
+    if (backend.ranks() > 1) {
+      std::vector<double> v = planes.negated_extremes();
+      backend.max(std::span<double>(v));
+      planes.set_negated_extremes(v);
+    }
+    GuardField f{M::guard_names[static_cast<std::size_t>(g)],
+                 {},
+                 M::guards[static_cast<std::size_t>(g)].from};
+    for (std::size_t p = 0; p < pairs.size(); ++p) f.planes.push_back(planes.plane(p));
+    rec.guards.push_back(std::move(f));
   }
   rec.budget = res.budget;
   rec.atom_error = res.atom_error;
@@ -338,7 +362,28 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
   rec.summary["seconds"]["budget"] = res.budget_s;
   for (const auto& [key, value] : res.summary.items()) rec.summary[key] = value;
   const DeferredDurability durability(c.out_dir);
-  const WrittenOutputs written = write_run_outputs(rec, c.settings, c.out_dir, c.quiet);
+  // A distributed run: every rank writes its parts (the writers agree on a failure). Else
+  // (one process, or the marginals rank 0 holds): rank 0 alone, and the ranks agree after.
+  WrittenOutputs written;
+  std::string write_error;
+  try {
+    if (rec.distributed || backend.root())
+      written = write_run_outputs(rec, c.settings, c.out_dir, c.quiet);
+  } catch (const std::exception& e) {
+    if (rec.distributed || backend.ranks() == 1) throw;
+    write_error = e.what();
+  }
+  if (backend.ranks() > 1 && !rec.distributed && backend.any(!write_error.empty())) {
+    if (!write_error.empty()) throw std::runtime_error(write_error);
+    return exit_status(ExitCode::Internal);  // rank 0 says why
+  }
+  // The largest gather any rank received whole from the others (a frame gathered would show).
+  const auto gathered =
+      static_cast<std::int64_t>(backend.max(static_cast<double>(backend.gathered_values())));
+  if (!backend.root()) {
+    durability.commit();  // this rank's parts of the files (its machine's file system)
+    return exit_status(ExitCode::Success);
+  }
   for (const auto& note : written.notes) std::fprintf(stderr, "hybgen: note: %s\n", note.c_str());
   for (const auto& w : written.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
   const double output_s = std::chrono::duration<double>(Clock::now() - t2).count();
@@ -373,6 +418,7 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
   s["backend"] = std::string(backend.name());
   s["ranks"] = backend.ranks();                  // processes (threads each)
   s["peak_memory_bytes_per_rank"] = peak_bytes;  // up to the solve's end, the largest rank
+  s["gathered_values_per_rank"] = gathered;      // the largest gather a rank received
   s["initial_mass"] = mb.mass0;
   s["mass"] = mb.mass;
   s["outflow"] = mb.outflow;

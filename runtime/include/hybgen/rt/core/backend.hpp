@@ -49,16 +49,23 @@ inline Block block_of(std::size_t n, int rank, int ranks) {
   return {begin, begin + q + (r < rem ? 1 : 0)};
 }
 
+/// One entry of a transfer operator: P_row,col = value (16 bytes; int32 indices, as the CSR
+/// matrix's and PETSc's).
+struct OperatorEntry {
+  std::int32_t row = 0;  ///< Target state (row).
+  std::int32_t col = 0;  ///< Source state (column).
+  double value = 0.0;    ///< P_row,col.
+};
+
 /// One rank's share of a transfer operator P (R × R, on node masses; transfer.hpp): the
-/// columns it assembled, which are also the rows and vector entries it owns, compressed by
-/// column (every entry of a column is on the rank that owns the column; its rows are any
-/// rank's). 12 bytes per entry: int32 rows, as the indices of the CSR matrix and PETSc's.
-struct OperatorColumns {
-  std::size_t size = 0;            ///< R.
-  Block owned;                     ///< Its columns, rows and vector entries.
-  std::vector<std::size_t> start;  ///< Column c's entries: [start[c − owned.begin], … + 1).
-  std::vector<std::int32_t> row;   ///< Row of each entry.
-  std::vector<double> value;       ///< P_row,c of each entry.
+/// entries of the columns it assembled, in lists (one per assembling thread, each in any
+/// order), handed over as they were made so that no copy of them all is ever needed. Those
+/// columns' indices are also the rows and vector entries the rank owns; an entry's row may
+/// be any rank's.
+struct OperatorEntries {
+  std::size_t size = 0;                           ///< R.
+  Block owned;                                    ///< Its columns, rows, vector entries.
+  std::vector<std::vector<OperatorEntry>> lists;  ///< Every entry of its columns.
 };
 
 /// What `DistributedMatrix::eigen` computes: the leading eigenvalues by magnitude and the
@@ -95,6 +102,21 @@ inline int perron_index(std::span<const std::complex<double>> eigenvalues) {
   }
   return lead;
 }
+
+/// How the ranks of a run write one file together: NetCDF-4 through parallel HDF5 (MPI-IO).
+/// The writers (runtime/src/io/netcdf.cpp) call it through `Backend::parallel_io`; the MPI
+/// backend implements it (runtime/src/mpi/parallel_io.cpp) with Debian's parallel NetCDF,
+/// which an MPI runner links instead of the serial one (generator/src/build.cpp).
+class ParallelIo {
+ public:
+  virtual ~ParallelIo() = default;
+  /// Open the existing NetCDF-4 file `path` for writing on every rank (collective);
+  /// returns NetCDF's status, the file's id in `ncid`.
+  virtual int open_netcdf(const char* path, int* ncid) const = 0;
+  /// Make the writes of variable `var` collective (every rank calls each write, with a
+  /// count of zero when it has nothing): what parallel HDF5 needs of compressed variables.
+  virtual int collective(int ncid, int var) const = 0;
+};
 
 /// A distributed sparse matrix over block-partitioned vectors (owned by the backend).
 class DistributedMatrix {
@@ -136,6 +158,10 @@ class Backend {
   virtual void sum(std::span<double> v) const = 0;
   /// Element-wise sum over ranks into rank 0's `v` (others' `v` unspecified afterwards).
   virtual void sum_to_root(std::span<std::int64_t> v) const = 0;
+  /// Element-wise sum over ranks into rank 0's `v` (others' `v` unspecified afterwards), by
+  /// a reduction tree: the same bits for the same ranks, not necessarily `sum`'s. For what
+  /// only rank 0 shows (the pictures' marginals), where every rank's copy would not scale.
+  virtual void sum_to_root(std::span<double> v) const = 0;
   /// Element-wise maximum over ranks, in place, on every rank.
   virtual void max(std::span<double> v) const = 0;
   /// Element-wise minimum over ranks, in place, on every rank.
@@ -150,7 +176,24 @@ class Backend {
   [[nodiscard]] virtual std::string broadcast(const std::string& s, int from) const = 0;
   /// The distributed matrix of every rank's columns (collective); nullptr: this backend
   /// keeps operators in one process (the methods then build their own CSR matrix).
-  [[nodiscard]] virtual std::unique_ptr<DistributedMatrix> matrix(OperatorColumns part) const = 0;
+  [[nodiscard]] virtual std::unique_ptr<DistributedMatrix> matrix(OperatorEntries part) const = 0;
+
+  /// The element-wise sum over ranks of `v` (the same length n on every rank), as this
+  /// rank's block `block(n)` of it (exact: integers).
+  [[nodiscard]] virtual std::vector<std::int64_t> sum_to_blocks(
+      std::span<const std::int64_t> v) const = 0;
+  /// A vector of n values spread over the ranks by `block(n)`: every rank contributes its
+  /// `values` at [offset, offset + values.size()) (the ranges may overlap; the sum is
+  /// formed in rank order) and receives its own block of the sum, zero where nobody wrote.
+  [[nodiscard]] virtual std::vector<double> sum_to_blocks(std::span<const double> values,
+                                                          std::size_t offset,
+                                                          std::size_t n) const = 0;
+  /// The most values this rank received in one gather (`gather`, `all_gather`; not the sums'
+  /// own exchanges) so far: what summary.json reports (gathered_values_per_rank), so that a
+  /// test sees a frame gathered where none should be.
+  [[nodiscard]] virtual std::size_t gathered_values() const { return 0; }
+  /// Writing one file from every rank (nullptr: one process writes alone).
+  [[nodiscard]] virtual const ParallelIo* parallel_io() const { return nullptr; }
 
   /// Sum of one value over ranks.
   [[nodiscard]] double sum(double x) const {
@@ -197,6 +240,8 @@ class SerialBackend final : public Backend {
   /// Identity.
   void sum_to_root(std::span<std::int64_t>) const override {}
   /// Identity.
+  void sum_to_root(std::span<double>) const override {}
+  /// Identity.
   void max(std::span<double>) const override {}
   /// Identity.
   void min(std::span<std::int64_t>) const override {}
@@ -213,8 +258,21 @@ class SerialBackend final : public Backend {
   /// `s`.
   [[nodiscard]] std::string broadcast(const std::string& s, int) const override { return s; }
   /// nullptr: the methods keep their CSR matrix.
-  [[nodiscard]] std::unique_ptr<DistributedMatrix> matrix(OperatorColumns) const override {
+  [[nodiscard]] std::unique_ptr<DistributedMatrix> matrix(OperatorEntries) const override {
     return nullptr;
+  }
+  /// A copy of `v`.
+  [[nodiscard]] std::vector<std::int64_t> sum_to_blocks(
+      std::span<const std::int64_t> v) const override {
+    return {v.begin(), v.end()};
+  }
+  /// `values` at `offset` in n zeros.
+  [[nodiscard]] std::vector<double> sum_to_blocks(std::span<const double> values,
+                                                  std::size_t offset,
+                                                  std::size_t n) const override {
+    std::vector<double> out(n, 0.0);
+    for (std::size_t i = 0; i < values.size() && offset + i < n; ++i) out[offset + i] += values[i];
+    return out;
   }
 };
 

@@ -4,14 +4,17 @@
 /// the failure that stopped a trajectory (TraceError, TraceStatus, TraceFailure, describe),
 /// and the mass budget (MassBudget: mass in the box, outflow, atom, and their error bars).
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <iomanip>
 #include <span>
 #include <sstream>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/core/geometry.hpp"
 #include "hybgen/rt/core/names.hpp"
 #include "hybgen/rt/model.hpp"
@@ -88,25 +91,49 @@ struct TraceFailure {
 };
 
 /// Densities at points for all modes and output times: u[(k·n_mode + m)·n_point + i].
+///
+/// A run over several ranks (core/backend.hpp) keeps each frame where it was computed:
+/// then `distributed` is set and u holds, per frame, only the (mode, point) pairs of
+/// `owned` (flat indices m·n_point + i), u[k·owned.size() + (m·n_point + i − owned.begin)].
+/// No rank holds a whole frame; the writers write every rank's part (io/run_outputs.hpp).
 template <std::size_t N>
 struct Solution {
   std::size_t n_time = 0;     ///< Number of output times.
   std::size_t n_mode = 0;     ///< Number of modes.
   std::size_t n_point = 0;    ///< Number of points (grid nodes, C order).
-  std::vector<double> u;      ///< Values, layout [time][mode][point].
+  std::vector<double> u;      ///< Values, layout [time][mode][point] (or [time][owned]).
   TraceFailure<N> failure{};  ///< The failure with the smallest (mode, point) index, if any.
+  bool distributed = false;   ///< Whether u holds only the pairs of `owned`.
+  Block owned{};              ///< The (mode, point) pairs held when `distributed`.
 
   /// Whether every characteristic succeeded.
   bool ok() const { return failure.ok(); }
-  /// Flat index of (time k, mode m, point i).
+  /// Values held per frame: n_mode·n_point, or owned.size() when distributed.
+  std::size_t frame_size() const { return distributed ? owned.size() : n_mode * n_point; }
+  /// Flat index of (time k, mode m, point i), a pair this process holds.
   std::size_t index(std::size_t k, std::size_t m, std::size_t i) const {
-    return (k * n_mode + m) * n_point + i;
+    return k * frame_size() + m * n_point + i - (distributed ? owned.begin : 0);
   }
   /// u(t_k, mode m, point i).
   double at(std::size_t k, std::size_t m, std::size_t i) const { return u[index(k, m, i)]; }
-  /// All points of mode m at time k (a C-order grid-shaped array for grid solutions).
+  /// All points of mode m at time k (a C-order grid-shaped array for grid solutions); not
+  /// for a distributed solution, which holds no whole mode.
   std::span<const double> slice(std::size_t k, std::size_t m) const {
+    if (distributed) throw std::logic_error("Solution::slice of a distributed solution");
     return {u.data() + index(k, m, 0), n_point};
+  }
+  /// Keep only the pairs of `own` of a whole solution (each rank its block), frame by frame.
+  void keep_only(Block own) {
+    if (distributed) throw std::logic_error("Solution::keep_only of a distributed solution");
+    const std::size_t F = n_mode * n_point;
+    std::vector<double> part(n_time * own.size());
+    for (std::size_t k = 0; k < n_time; ++k)
+      std::copy(u.begin() + static_cast<std::ptrdiff_t>(k * F + own.begin),
+                u.begin() + static_cast<std::ptrdiff_t>(k * F + own.end),
+                part.begin() + static_cast<std::ptrdiff_t>(k * own.size()));
+    u = std::move(part);
+    owned = own;
+    distributed = true;
   }
 };
 

@@ -19,14 +19,31 @@
 /// `time` keeps its name; the time axis is then `time_`).
 /// Docs: docs/outputs.md, "run.nc".
 
+#include <cstddef>
 #include <string>
+#include <vector>
 
 #include "hybgen/rt/io/run_record.hpp"
 
 namespace hybgen::rt {
 
+/// Frames of more than this many nodes are chunked in slabs of their slowest axes (16 MiB
+/// chunks; HDF5 refuses chunks of 4 GiB and more, and a rank writing its part of a chunk
+/// sends it to the chunk's writer).
+inline constexpr std::size_t kChunkValues = std::size_t{1} << 21;
+
 /// Writes `run` to `path` as NetCDF-4 (replacing it); throws std::runtime_error naming the
-/// file and what NetCDF said. `deflate` is the zlib level of the density (0: none).
+/// file and what NetCDF said. `deflate` is the zlib level of the density (0: none). A
+/// distributed run (RunRecord::distributed): everything but the density's values, which
+/// every rank then writes with write_netcdf_frames.
 void write_netcdf(const std::string& path, const RunRecord& run, int deflate = 1);
+
+/// The density of a distributed run into the run.nc that write_netcdf made: every rank of
+/// run.backend, collectively (its ParallelIo: parallel NetCDF-4 through MPI-IO), writes
+/// `density` from `total` (per frame, this rank's block Backend::block(n_node) of the density
+/// summed over the modes) and `density_by_mode` from its pairs run.owned. No rank holds more
+/// than its own part. Throws std::runtime_error naming the file.
+void write_netcdf_frames(const std::string& path, const RunRecord& run,
+                         const std::vector<std::vector<double>>& total);
 
 }  // namespace hybgen::rt

@@ -9,6 +9,9 @@
 /// The header is padded with spaces so that 10 + header_len (the data offset) is a
 /// multiple of 64. `read_npy` accepts versions 1.0-3.0, '<f8' and '>f8', C order.
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <bit>
 #include <cerrno>
@@ -239,6 +242,54 @@ inline void write_npy(const std::string& path, const double* data,
     }
   }
   file.commit();
+}
+
+/// Creates `path` as a .npy file of `shape` (version 1.0, '<f8') whose values are written
+/// later, in pieces, by `write_npy_part`: its header, and its full size (zeros). For the ranks
+/// of a distributed run, each writing its own block (io/run_outputs.hpp). Throws
+/// std::runtime_error naming `path`.
+inline void create_npy(const std::string& path, const std::vector<std::size_t>& shape) {
+  const std::string header = detail::npy_header(shape);
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) throw std::runtime_error(detail::io_error_message(path, "create", errno));
+  const auto bytes = static_cast<off_t>(header.size() + 8 * detail::npy_element_count(shape));
+  const bool ok =
+      ::pwrite(fd, header.data(), header.size(), 0) == static_cast<ssize_t>(header.size()) &&
+      ::ftruncate(fd, bytes) == 0;
+  const int err = errno;
+  ::close(fd);
+  if (!ok) throw std::runtime_error(detail::io_error_message(path, "write", err));
+}
+
+/// Writes the values [first, first + n) (flat C order) of the .npy file `path` of `shape`
+/// that `create_npy` made; any process, in any order. Throws std::runtime_error naming it.
+inline void write_npy_part(const std::string& path, const std::vector<std::size_t>& shape,
+                           std::size_t first, const double* data, std::size_t n) {
+  if (first + n > detail::npy_element_count(shape))
+    throw std::invalid_argument("write_npy_part: past the end of " + path);
+  const std::size_t header = detail::npy_header(shape).size();
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
+  if (fd < 0) throw std::runtime_error(detail::io_error_message(path, "open", errno));
+  constexpr std::size_t chunk = std::size_t{1} << 16;
+  std::vector<char> buf(chunk * 8);
+  bool ok = true;
+  for (std::size_t i = 0; i < n && ok; i += chunk) {
+    const std::size_t m = std::min(chunk, n - i);
+    std::memcpy(buf.data(), data + i, m * 8);
+    if constexpr (std::endian::native != std::endian::little) detail::npy_swap8(buf.data(), m);
+    const auto at = static_cast<off_t>(header + 8 * (first + i));
+    std::size_t done = 0;
+    while (done < m * 8 && ok) {
+      const ssize_t w =
+          ::pwrite(fd, buf.data() + done, m * 8 - done, at + static_cast<off_t>(done));
+      if (w < 0 && errno == EINTR) continue;
+      ok = w > 0;
+      if (ok) done += static_cast<std::size_t>(w);
+    }
+  }
+  const int err = errno;
+  ::close(fd);
+  if (!ok) throw std::runtime_error(detail::io_error_message(path, "write", err));
 }
 
 /// Convenience overload: checks `data.size()` against Π `shape`.

@@ -72,7 +72,9 @@ struct InvariantOptions {
 struct InvariantResult {
   /// Leading eigenvector as node densities, layout [mode][node], sign fixed so that its
   /// discrete mass Σ w u is positive and normalised to 1 (never clipped: see min_value).
+  /// A distributed operator: this rank's entries `owned` of it.
   std::vector<double> density;
+  Block owned{};           ///< The entries of `density` (every entry in one process).
   double min_value = 0.0;  ///< Smallest entry of `density` (≥ 0 up to the solver tolerance).
   /// Eigenvalues by decreasing magnitude, eigenvalues[0] = λ₁ (real, ≥ 0).
   std::vector<std::complex<double>> eigenvalues;
@@ -115,7 +117,8 @@ inline double l1(const std::vector<double>& v) {
 /// distributed operator (transfer.hpp, `distributed`) is solved by its backend's
 /// eigen-solver (SLEPc's Krylov–Schur, runtime/src/mpi/petsc_matrix.cpp) with the same
 /// selection of the Perron root, the same power-iteration fallback and the same
-/// normalisation, on every rank's owned entries; the density is gathered on rank 0.
+/// normalisation, on every rank's owned entries; each rank keeps its own entries of the
+/// density (`owned`).
 template <std::size_t N>
 InvariantResult invariant_density(const TransferOperator<N>& op, const InvariantOptions& opt = {}) {
   const auto n = static_cast<Eigen::Index>(op.size());
@@ -249,7 +252,8 @@ InvariantResult invariant_density(const TransferOperator<N>& op, const Invariant
     low = std::min(low, u);
   }
   res.min_value = -b.max(-low);
-  res.density = op.distributed ? b.gather(density) : std::move(density);
+  res.density = std::move(density);
+  res.owned = own;
   const double ratio = lam1 > 0.0 ? lam2_abs / lam1 : std::numeric_limits<double>::quiet_NaN();
   res.gap = 1.0 - ratio;
   res.decay_rate = -std::log(ratio) / op.step;

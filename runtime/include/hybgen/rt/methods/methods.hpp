@@ -69,7 +69,8 @@ struct MethodSettings {
   /// (CharacteristicsOptions::preimage_seeds); null or empty: every reset is injective.
   const std::vector<std::vector<double>>* preimage_seeds = nullptr;
   /// The ranks sharing the work (core/backend.hpp); null: this process alone. Every rank
-  /// calls the method; the result is complete on rank 0.
+  /// calls the method; with several ranks each keeps its block of every frame
+  /// (Solution::distributed), and the budget and summary are the same on every rank.
   const Backend* backend = nullptr;
 
   /// Set a number setting; throws std::invalid_argument when the table refuses it.
@@ -350,6 +351,7 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   r.solution.n_mode = op.n_mode;
   r.solution.n_point = op.n_node;
   r.solution.u = inv.density;
+  if (op.distributed) r.solution.distributed = true, r.solution.owned = inv.owned;
   r.frame_names = {"invariant"};
   nlohmann::json eig = nlohmann::json::array();
   for (const auto& l : inv.eigenvalues)
@@ -389,7 +391,7 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   const auto t0 = detail::MethodClock::now();
   // Each rank advances its own block: rank 0's bar counts its own share.
   const Backend& backend = s.backend ? *s.backend : serial_backend();
-  Progress progress("particles", backend.block(po.particles).size(), s.quiet);
+  Progress progress("particles", particle_block(po.particles, backend).size(), s.quiet);
   po.progress = &progress;
   ParticleRun<N> run = solve_particles<M>(grid, times, par, po);
   progress.finish();
@@ -418,11 +420,24 @@ MethodResult<state_dim_v<M>> solve_method(const TensorGrid<state_dim_v<M>>& grid
                                           std::span<const double> times, double dt,
                                           const double* par, const MethodSettings& s) {
   const std::string& method = s.settings.word<"method">();
-  if (method == "characteristics") return solve_by_characteristics<M>(grid, times, par, s);
-  if (method == "transfer") return solve_by_transfer<M>(grid, times, dt, par, s);
-  if (method == "invariant") return solve_invariant<M>(grid, dt, par, s);
-  if (method == "particles") return solve_by_particles<M>(grid, times, par, s);
-  throw std::invalid_argument("unknown method '" + method + "'");
+  MethodResult<state_dim_v<M>> r;
+  if (method == "characteristics")
+    r = solve_by_characteristics<M>(grid, times, par, s);
+  else if (method == "transfer")
+    r = solve_by_transfer<M>(grid, times, dt, par, s);
+  else if (method == "invariant")
+    r = solve_invariant<M>(grid, dt, par, s);
+  else if (method == "particles")
+    r = solve_by_particles<M>(grid, times, par, s);
+  else
+    throw std::invalid_argument("unknown method '" + method + "'");
+  // Over several ranks every frame stays distributed: the characteristics hold every node
+  // (their budget's cubature reuses the nodes' values on every rank) until here.
+  const Backend& backend = s.backend ? *s.backend : serial_backend();
+  if (backend.ranks() > 1 && r.marginals.empty() && !r.solution.distributed &&
+      r.solution.n_time > 0)
+    r.solution.keep_only(backend.block(grid.size() * static_cast<std::size_t>(M::n_mode)));
+  return r;
 }
 
 }  // namespace hybgen::rt

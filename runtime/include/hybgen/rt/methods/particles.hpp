@@ -515,6 +515,13 @@ inline std::size_t particle_chunk(std::size_t n) {
   return std::max<std::size_t>(1024, (n + 1023) / 1024);
 }
 
+/// The particle indices a rank pushes: its block of whole chunks (particle_chunk) of the n.
+inline Block particle_block(std::size_t n, const Backend& backend) {
+  const std::size_t chunk = particle_chunk(n);
+  const Block chunks = backend.block((n + chunk - 1) / chunk);
+  return {std::min(chunks.begin * chunk, n), std::min(chunks.end * chunk, n)};
+}
+
 /// The particle method on `grid` (file doc): density per output time and mode at the grid
 /// nodes (or, with opt.marginals, the 2-D marginals of every pair of axes and the moments:
 /// nothing of the grid's size), the particle mass budget of the grid box, and the first
@@ -538,9 +545,10 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   const Backend& backend = opt.backend ? *opt.backend : serial_backend();
   const std::size_t chunk = particle_chunk(opt.particles);
   const std::size_t n_chunk = (opt.particles + chunk - 1) / chunk;
-  const Block chunks = backend.block(n_chunk);
-  const auto first = static_cast<long long>(std::min(chunks.begin * chunk, opt.particles));
-  const auto last = static_cast<long long>(std::min(chunks.end * chunk, opt.particles));
+  const Block chunks = backend.block(n_chunk);  // particle_block's chunks
+  const Block pushed = particle_block(opt.particles, backend);
+  const auto first = static_cast<long long>(pushed.begin);
+  const auto last = static_cast<long long>(pushed.end);
   ParticleRun<N> run;
   run.particles = opt.particles;
   MassBudget& mb = run.budget;
@@ -567,7 +575,6 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
     run.solution.n_time = K;
     run.solution.n_mode = nm;
     run.solution.n_point = nodes;
-    run.solution.u.assign(K * nm * nodes, 0.0);
   }
   const std::size_t per_frame_mode = opt.marginals ? mg.block : nodes;
 
@@ -750,10 +757,10 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
     }
   }
   // Across ranks: integer sums (exact, so the same bits for any number of ranks), the
-  // deposit onto rank 0, the chunks' moments onto rank 0 in chunk order, and the failure
-  // of the smallest index.
+  // marginals' deposit onto rank 0 (the density's: each rank its block, below), the chunks'
+  // moments onto rank 0 in chunk order, and the failure of the smallest index.
   backend.sum(std::span<std::int64_t>(sums));
-  backend.sum_to_root(std::span<std::int64_t>(acc));
+  if (opt.marginals) backend.sum_to_root(std::span<std::int64_t>(acc));
   mass0 = backend.sum(mass0);
   sampled = backend.sum(sampled);
   if (backend.any(non_finite_weight))
@@ -761,10 +768,10 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   agree_first_failure(backend, first_fail.load(), failure, n);
   run.failure = failure;
   const double inv = 1.0 / scale;
-  // The dual-cell length of node i on axis a (the trapezoid weight: h, or h/2 at the ends).
-  auto dual = [&](std::size_t a, std::size_t ia) {
-    return (ia == 0 || ia + 1 == static_cast<std::size_t>(grid.axes[a].n)) ? 0.5 * h[a] : h[a];
-  };
+  // The dual-cell length of node i on axis a: its trapezoid weight (h, or h/2 at the ends).
+  std::array<std::vector<double>, N> dual_length;
+  for (std::size_t a = 0; a < N; ++a) dual_length[a] = trapezoid_rule(grid.axes[a]).weights;
+  auto dual = [&](std::size_t a, std::size_t ia) { return dual_length[a][ia]; };
   if (opt.marginals) {
     // Pair sums over dual areas: marginal densities.
     mg.values.assign(acc.size(), 0.0);
@@ -802,17 +809,31 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
       }
     }
   } else {
-    // Densities: node sums over dual-cell volumes.
-    for (std::size_t j = 0; j < nodes; ++j) {
+    // Densities: node sums over dual-cell volumes. Over several ranks each sums its block of
+    // every frame's (mode, node) pairs from every rank's deposit and keeps it.
+    Solution<N>& sol = run.solution;
+    const std::size_t F = nm * nodes;
+    const Block own = backend.ranks() > 1 ? backend.block(F) : Block{0, F};
+    if (backend.ranks() > 1) sol.distributed = true, sol.owned = own;
+    sol.u.assign(K * own.size(), 0.0);
+    std::vector<double> dual_volume(own.size());
+    for (std::size_t j = own.begin; j < own.end; ++j) {
       double V = 1.0;
-      std::size_t r = j;
+      std::size_t r = j % nodes;
       for (std::size_t a = N; a-- > 0;) {
         const auto na = static_cast<std::size_t>(grid.axes[a].n);
         V *= dual(a, r % na);
         r /= na;
       }
-      for (std::size_t km = 0; km < K * nm; ++km)
-        run.solution.u[km * nodes + j] = static_cast<double>(acc[km * nodes + j]) * inv / V;
+      dual_volume[j - own.begin] = V;
+    }
+    for (std::size_t k = 0; k < K; ++k) {
+      const std::span<const std::int64_t> frame(acc.data() + k * F, F);
+      std::vector<std::int64_t> mine;
+      if (backend.ranks() > 1) mine = backend.sum_to_blocks(frame);
+      const std::int64_t* count = backend.ranks() > 1 ? mine.data() : frame.data();
+      for (std::size_t j = 0; j < own.size(); ++j)
+        sol.u[k * own.size() + j] = static_cast<double>(count[j]) * inv / dual_volume[j];
     }
   }
   mb.mass0 = static_cast<double>(mass0) * inv;

@@ -510,10 +510,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
     dx[a] = (grid.axes[a].max - grid.axes[a].min) / static_cast<double>(grid.axes[a].n - 1);
   const std::vector<char> in_region = node_support<M>(grid, par, true);    // per (mode, node)
   const std::vector<char> in_support = node_support<M>(grid, par, false);  // per node
-  struct Triplet {
-    int row, col;
-    double frac;
-  };
+  using Triplet = OperatorEntry;  // (target row, source column, fraction)
   int threads = 1;
 #ifdef _OPENMP
   threads = omp_get_max_threads();
@@ -677,7 +674,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         double w = 0.0;
         std::size_t e = k;
         for (; e < dest.size() && dest[e].first == dest[k].first; ++e) w += dest[e].second;
-        out.push_back(Triplet{static_cast<int>(dest[k].first), static_cast<int>(r), w * inv});
+        out.push_back(Triplet{static_cast<std::int32_t>(dest[k].first),
+                              static_cast<std::int32_t>(r), w * inv});
         k = e;
       }
     }
@@ -688,33 +686,16 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
     check_columns<M>(op, backend, [&trip](auto&& f) {
       for (const auto& t : trip)
         for (const Triplet& e : t)
-          f(static_cast<std::size_t>(e.row), static_cast<std::size_t>(e.col), e.frac);
+          f(static_cast<std::size_t>(e.row), static_cast<std::size_t>(e.col), e.value);
     });
   if (backend.ranks() > 1) {
-    // The owned columns compressed (count, prefix sum, scatter; a column's entries come from
-    // one thread, in row order), handed to the backend's distributed matrix.
+    // The owned columns' entries, each thread's list as it is (no copy), handed to the
+    // backend's distributed matrix.
     if (!op.failure_message.empty()) return op;  // agreed on every rank: none builds one
-    OperatorColumns part;
+    OperatorEntries part;
     part.size = op.size();
     part.owned = op.owned;
-    part.start.assign(op.owned.size() + 1, 0);
-    std::size_t count = 0;
-    for (const auto& t : trip) {
-      count += t.size();
-      for (const Triplet& e : t) ++part.start[static_cast<std::size_t>(e.col) - op.owned.begin + 1];
-    }
-    for (std::size_t c = 0; c < op.owned.size(); ++c) part.start[c + 1] += part.start[c];
-    part.row.resize(count);
-    part.value.resize(count);
-    std::vector<std::size_t> at(part.start.begin(), part.start.end() - 1);
-    for (auto& t : trip) {
-      for (const Triplet& e : t) {
-        const std::size_t k = at[static_cast<std::size_t>(e.col) - op.owned.begin]++;
-        part.row[k] = e.row;
-        part.value[k] = e.frac;
-      }
-      std::vector<Triplet>().swap(t);
-    }
+    part.lists = std::move(trip);
     op.backend = &backend;
     op.distributed = backend.matrix(std::move(part));
     if (!op.distributed)
@@ -743,7 +724,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
     for (const Triplet& e : t) {
       const auto dst = static_cast<std::size_t>(fill[static_cast<std::size_t>(e.row)]++);
       pi[dst] = e.col;
-      pv[dst] = e.frac;
+      pv[dst] = e.value;
     }
     std::vector<Triplet>().swap(t);  // free as we go: the triplets are ~1.5× the matrix
   }
@@ -854,7 +835,8 @@ inline long steps_to(double t, double h) {
 /// step, its time and the node that gained most (a numerical failure, exit 3). `progress`,
 /// if set, is advanced once per step. A distributed operator is marched by every rank on
 /// its owned entries (one collective mat-vec and one sum of the three budget terms per
-/// step); the densities are gathered on rank 0, whose `solution` alone holds them.
+/// step); each rank's `solution` keeps its own entries of every frame (distributed: nothing
+/// is gathered).
 template <std::size_t N>
 TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
                      std::span<const double> times, Progress* progress = nullptr) {
@@ -874,9 +856,10 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   sol.n_time = times.size();
   sol.n_mode = op.n_mode;
   sol.n_point = op.n_node;
-  if (b.root()) sol.u.assign(sol.n_time * R, 0.0);
+  if (op.distributed) sol.distributed = true, sol.owned = own;
+  sol.u.assign(sol.n_time * L, 0.0);
   // x: the owned node masses weight·u.
-  std::vector<double> x(L), y(L), frame(L);
+  std::vector<double> x(L), y(L);
   const double* w = op.weight.data() + own.begin;
   const double* outflow = op.outflow.data() + own.begin;
   const double* atom = op.atom.data() + own.begin;
@@ -899,15 +882,11 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   mb.mass0 = mass0;
   auto emit = [&](long n) {
     for (; k < times.size() && at[k] == n; ++k) {
-      double* dst = op.distributed ? frame.data() : sol.u.data() + k * R;
+      double* dst = sol.u.data() + k * L;
 #pragma omp parallel for schedule(static) if (Li > detail::kParallelRows)
       for (std::int64_t r = 0; r < Li; ++r) {
         const auto ru = static_cast<std::size_t>(r);
         dst[ru] = x[ru] / w[ru];
-      }
-      if (op.distributed) {
-        const std::vector<double> all = b.gather(frame);
-        if (b.root()) std::copy(all.begin(), all.end(), sol.u.begin() + static_cast<long>(k * R));
       }
       mb.mass.push_back(run.step_mass.back());
       mb.outflow.push_back(out_cum);
