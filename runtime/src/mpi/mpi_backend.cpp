@@ -88,6 +88,14 @@ void MpiBackend::sum_to_root(std::span<std::int64_t> v) const {
   }
 }
 
+void MpiBackend::sum_disjoint(std::span<double> v) const {
+  for (std::size_t at = 0; at < v.size(); at += kPiece) {
+    const auto n = static_cast<int>(std::min(kPiece, v.size() - at));
+    check(MPI_Allreduce(MPI_IN_PLACE, v.data() + at, n, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD),
+          "MPI_Allreduce");
+  }
+}
+
 void MpiBackend::sum_to_root(std::span<double> v) const {
   for (std::size_t at = 0; at < v.size(); at += kPiece) {
     const auto n = static_cast<int>(std::min(kPiece, v.size() - at));

@@ -33,6 +33,8 @@ class MpiBackend final : public Backend {
   void sum(std::span<double> v) const override;
   /// MPI_Reduce, MPI_SUM over int64, into rank 0.
   void sum_to_root(std::span<std::int64_t> v) const override;
+  /// MPI_Allreduce, MPI_SUM over double (exact: one non-zero per element).
+  void sum_disjoint(std::span<double> v) const override;
   /// MPI_Reduce, MPI_SUM over double, into rank 0.
   void sum_to_root(std::span<double> v) const override;
   /// MPI_Allreduce, MPI_MAX.

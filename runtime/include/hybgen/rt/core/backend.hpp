@@ -158,6 +158,10 @@ class Backend {
   virtual void sum(std::span<double> v) const = 0;
   /// Element-wise sum over ranks into rank 0's `v` (others' `v` unspecified afterwards).
   virtual void sum_to_root(std::span<std::int64_t> v) const = 0;
+  /// Element-wise sum over ranks, in place, on every rank, of values that are 0 on every
+  /// rank but at most one (each a value one rank holds): exact in any order (0 + x = x), so
+  /// a reduction tree serves, whose memory does not grow with the ranks as `sum`'s does.
+  virtual void sum_disjoint(std::span<double> v) const = 0;
   /// Element-wise sum over ranks into rank 0's `v` (others' `v` unspecified afterwards), by
   /// a reduction tree: the same bits for the same ranks, not necessarily `sum`'s. For what
   /// only rank 0 shows (the pictures' marginals), where every rank's copy would not scale.
@@ -241,6 +245,8 @@ class SerialBackend final : public Backend {
   void sum_to_root(std::span<std::int64_t>) const override {}
   /// Identity.
   void sum_to_root(std::span<double>) const override {}
+  /// Identity.
+  void sum_disjoint(std::span<double>) const override {}
   /// Identity.
   void max(std::span<double>) const override {}
   /// Identity.

@@ -977,10 +977,23 @@ void volume_checks(const TensorGrid<state_dim_v<M>>& grid, std::span<const doubl
       check_lattice(grid, max_volume_checks(aopt), lo, hi, checks);
   std::vector<double> v(flat.size() * K, 0.0);
   if (nodes != nullptr) {
-    for (std::size_t j = 0; j < flat.size(); ++j) {
+    // A distributed solution (several ranks) holds each (mode, node) on one rank: the values
+    // at the check points are summed over the ranks per mode (0 + u: exact), then over the
+    // modes in order, as here in one process: the same bits on every rank and as one process.
+    const std::size_t n_mode = nodes->n_mode;
+    std::vector<double> u(flat.size() * K * n_mode, 0.0);
+    const Block own = nodes->distributed ? nodes->owned : Block{0, n_mode * nodes->n_point};
+    for (std::size_t j = 0; j < flat.size(); ++j)
       for (std::size_t k = 0; k + off < K; ++k)
-        for (std::size_t m = 0; m < nodes->n_mode; ++m)
-          v[j * K + k + off] += nodes->at(k, m, flat[j]);
+        for (std::size_t m = 0; m < n_mode; ++m)
+          if (const std::size_t pair = m * nodes->n_point + flat[j];
+              pair >= own.begin && pair < own.end)
+            u[(j * K + k + off) * n_mode + m] = nodes->at(k, m, flat[j]);
+    if (nodes->distributed && opt.backend != nullptr)
+      opt.backend->sum_disjoint(std::span<double>(u));
+    for (std::size_t jk = 0; jk < flat.size() * K; ++jk)
+      for (std::size_t m = 0; m < n_mode; ++m) v[jk] += u[jk * n_mode + m];
+    for (std::size_t j = 0; j < flat.size(); ++j) {
       if (off == 1 && M::in_support(checks.x[j].data(), par))
         for (int m = 0; m < M::n_mode; ++m)
           v[j * K] += M::initial_density(m, checks.x[j].data(), par);

@@ -660,23 +660,26 @@ TraceStatus<state_dim_v<M>> trace(const std::array<double, state_dim_v<M>>& y, i
 namespace detail {
 
 /// Trace every (mode, point) in parallel. `point(i)` gives the coordinates, `face(i)` a
-/// `const FaceContext<N>*` (or nullptr).
+/// `const FaceContext<N>*` (or nullptr). Over several ranks each traces its block of the
+/// (mode, point) pairs; `distributed`: each keeps its block (Solution::distributed), else
+/// every rank gets every value.
 template <HybridModel M, class PointFn, class FaceFn>
 Solution<state_dim_v<M>> solve_points(std::size_t n_point, PointFn&& point, FaceFn&& face,
                                       std::span<const double> times, const double* par,
-                                      const CharacteristicsOptions& opt) {
+                                      const CharacteristicsOptions& opt, bool distributed = false) {
   constexpr std::size_t N = state_dim_v<M>;
   validate_times(times);
   Solution<N> sol;
   sol.n_time = times.size();
   sol.n_mode = static_cast<std::size_t>(M::n_mode);
   sol.n_point = n_point;
-  sol.u.assign(sol.n_time * sol.n_mode * n_point, 0.0);
-  if (sol.n_time == 0 || n_point == 0) return sol;
   const auto total = static_cast<long long>(sol.n_mode * n_point);
   const auto np = static_cast<long long>(n_point);
   const Backend& backend = opt.backend ? *opt.backend : serial_backend();
   const Block mine = backend.block(static_cast<std::size_t>(total));
+  if (distributed && backend.ranks() > 1) sol.distributed = true, sol.owned = mine;
+  sol.u.assign(sol.n_time * sol.frame_size(), 0.0);
+  if (sol.n_time == 0 || n_point == 0) return sol;
   std::atomic<long long> first_fail{total};
 #pragma omp parallel
   {
@@ -710,7 +713,7 @@ Solution<state_dim_v<M>> solve_points(std::size_t n_point, PointFn&& point, Face
     // Frame k holds the pairs in the order idx = m·n_point + i: each rank's block is one
     // contiguous piece of it, and the blocks tile it in rank order.
     const auto size = static_cast<std::size_t>(total);
-    for (std::size_t k = 0; k < sol.n_time; ++k) {
+    for (std::size_t k = 0; k < sol.n_time && !sol.distributed; ++k) {
       double* frame = sol.u.data() + k * size;
       const std::vector<double> all =
           backend.all_gather(std::span<const double>(frame + mine.begin, mine.size()));
@@ -726,6 +729,8 @@ Solution<state_dim_v<M>> solve_points(std::size_t n_point, PointFn&& point, Face
 /// The characteristics solution on every node of `grid` for every mode and output time
 /// (OpenMP over (mode, node), dynamic schedule). Nodes outside `M::in_support` are 0.
 /// On failure, `failure` names the first failing (mode, node); other values are partial.
+/// Over several ranks (opt.backend) each rank keeps its block of the (mode, node) pairs of
+/// every frame (Solution::distributed): no rank holds a whole frame.
 template <HybridModel M>
 Solution<state_dim_v<M>> solve_grid(const TensorGrid<state_dim_v<M>>& grid,
                                     std::span<const double> times, const double* par,
@@ -733,7 +738,7 @@ Solution<state_dim_v<M>> solve_grid(const TensorGrid<state_dim_v<M>>& grid,
   using Face = const FaceContext<state_dim_v<M>>*;
   return detail::solve_points<M>(
       grid.size(), [&grid](std::size_t i) { return grid.node(i); },
-      [](std::size_t) -> Face { return nullptr; }, times, par, opt);
+      [](std::size_t) -> Face { return nullptr; }, times, par, opt, true);
 }
 
 /// u at arbitrary points (all modes, all output times), same layout as `solve_grid`.

@@ -431,8 +431,8 @@ MethodResult<state_dim_v<M>> solve_method(const TensorGrid<state_dim_v<M>>& grid
     r = solve_by_particles<M>(grid, times, par, s);
   else
     throw std::invalid_argument("unknown method '" + method + "'");
-  // Over several ranks every frame stays distributed: the characteristics hold every node
-  // (their budget's cubature reuses the nodes' values on every rank) until here.
+  // Over several ranks every frame stays distributed (each method keeps its blocks; this
+  // holds the contract for any method that does not).
   const Backend& backend = s.backend ? *s.backend : serial_backend();
   if (backend.ranks() > 1 && r.marginals.empty() && !r.solution.distributed &&
       r.solution.n_time > 0)
