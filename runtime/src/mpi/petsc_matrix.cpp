@@ -140,8 +140,10 @@ void PetscMatrix::assemble_rows(OperatorEntries& part, int ranks) {
   oj_.resize(static_cast<std::size_t>(oi_[rows]));
   oa_.resize(oj_.size());
   {
+    // Each list freed once it is written: the lists and the arrays are not both whole at once
+    // (a thread's list runs through the columns, and so the rows, roughly in order).
     std::vector<PetscInt> d_at(di_.begin(), di_.end() - 1), o_at(oi_.begin(), oi_.end() - 1);
-    each([&](const OperatorEntry& e) {
+    auto put = [&](const OperatorEntry& e) {
       const std::size_t r = static_cast<std::size_t>(e.row) - mine.begin;
       if (diagonal(e)) {
         const auto k = static_cast<std::size_t>(d_at[r]++);
@@ -152,10 +154,15 @@ void PetscMatrix::assemble_rows(OperatorEntries& part, int ranks) {
         oj_[k] = e.col;
         oa_[k] = e.value;
       }
-    });
+    };
+    for (std::size_t t = 0; t < part.lists.size(); ++t) {
+      for (std::size_t k = 0; k < local[t]; ++k) put(part.lists[t][k]);
+      std::vector<OperatorEntry>().swap(part.lists[t]);
+    }
+    for (const OperatorEntry& e : in) put(e);
   }
   std::vector<OperatorEntry>().swap(in);
-  part = OperatorEntries{};  // the lists: freed before PETSc builds anything
+  part = OperatorEntries{};
   std::vector<std::pair<PetscInt, PetscScalar>> row;
   for (std::size_t r = 0; r < rows; ++r) {
     sort_row(dj_.data(), da_.data(), static_cast<std::size_t>(di_[r]),
@@ -215,15 +222,11 @@ std::size_t PetscMatrix::ghost_entries() const {
 }
 
 std::size_t PetscMatrix::local_bytes() const {
-  // MatInfo::memory is not tracked by an optimised PETSc: count it. This rank's rows are
-  // two CSR blocks (the columns it owns, and the rest, compressed to the ghost columns it
-  // reads), each with its row pointers; a mat-vec receives the ghost entries into a vector
-  // of their own, through a map of their global indices.
-  MatInfo info;
-  ok(MatGetInfo(a_, MAT_LOCAL, &info), "MatGetInfo");
-  const auto entries = static_cast<std::size_t>(info.nz_allocated);
-  return entries * (sizeof(PetscScalar) + sizeof(PetscInt)) +
-         2 * (owned_.size() + 1) * sizeof(PetscInt) +
+  // This rank's rows are the split arrays PETSc uses in place (it does not copy them): the
+  // two CSR blocks with their row pointers. A mat-vec receives the ghost entries into a
+  // vector of their own, through a map of their global indices.
+  return (dj_.size() + oj_.size()) * (sizeof(PetscScalar) + sizeof(PetscInt)) +
+         (di_.size() + oi_.size()) * sizeof(PetscInt) +
          ghost_entries() * (sizeof(PetscScalar) + sizeof(PetscInt));
 }
 

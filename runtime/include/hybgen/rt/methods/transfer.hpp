@@ -481,6 +481,9 @@ void check_columns(TransferOperator<state_dim_v<M>>& op) {
   });
 }
 
+/// Entries per chunk of an assembling thread's list (1 MiB of OperatorEntry).
+inline constexpr std::size_t kEntryChunk = std::size_t{1} << 16;
+
 /// The operator of either scheme (see the file comment). Source cells (columns) in parallel,
 /// dynamic schedule, per-thread (target, source, fraction) triplets, then CSR by rows.
 template <HybridModel M>
@@ -515,7 +518,10 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
 #ifdef _OPENMP
   threads = omp_get_max_threads();
 #endif
-  std::vector<std::vector<Triplet>> trip(static_cast<std::size_t>(threads));
+  // Per thread, its entries in chunks of kEntryChunk, each reserved once: no vector grows by
+  // copying itself (a doubling vector briefly holds 1.5 to 2 times its entries), and each
+  // chunk is freed as soon as it has been moved into the matrix.
+  std::vector<std::vector<std::vector<Triplet>>> trip(static_cast<std::size_t>(threads));
   std::atomic<std::int64_t> first_fail{R};
 #pragma omp parallel num_threads(threads)
   {
@@ -523,7 +529,14 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
 #ifdef _OPENMP
     tid = omp_get_thread_num();
 #endif
-    std::vector<Triplet>& out = trip[static_cast<std::size_t>(tid)];
+    std::vector<std::vector<Triplet>>& chunks = trip[static_cast<std::size_t>(tid)];
+    auto emit = [&chunks](const Triplet& e) {
+      if (chunks.empty() || chunks.back().size() == kEntryChunk) {
+        chunks.emplace_back();
+        chunks.back().reserve(kEntryChunk);
+      }
+      chunks.back().push_back(e);
+    };
     ForwardFlow<M> flow(par, first_step_h(opt.forward, opt.step));
     std::vector<std::pair<std::size_t, double>> dest;  // (state index, weight of one sample)
     dest.reserve(K * (std::size_t{1} << N));
@@ -674,8 +687,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         double w = 0.0;
         std::size_t e = k;
         for (; e < dest.size() && dest[e].first == dest[k].first; ++e) w += dest[e].second;
-        out.push_back(Triplet{static_cast<std::int32_t>(dest[k].first),
-                              static_cast<std::int32_t>(r), w * inv});
+        emit(Triplet{static_cast<std::int32_t>(dest[k].first), static_cast<std::int32_t>(r),
+                     w * inv});
         k = e;
       }
     }
@@ -684,18 +697,21 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   agree_first_failure(backend, first_fail.load(), op.failure, R, &op.failure_message);
   if (op.failure_message.empty())
     check_columns<M>(op, backend, [&trip](auto&& f) {
-      for (const auto& t : trip)
-        for (const Triplet& e : t)
-          f(static_cast<std::size_t>(e.row), static_cast<std::size_t>(e.col), e.value);
+      for (const auto& chunks : trip)
+        for (const auto& c : chunks)
+          for (const Triplet& e : c)
+            f(static_cast<std::size_t>(e.row), static_cast<std::size_t>(e.col), e.value);
     });
   if (backend.ranks() > 1) {
-    // The owned columns' entries, each thread's list as it is (no copy), handed to the
-    // backend's distributed matrix.
+    // The owned columns' entries, every thread's chunks as they are (moved, not copied),
+    // handed to the backend's distributed matrix.
     if (!op.failure_message.empty()) return op;  // agreed on every rank: none builds one
     OperatorEntries part;
     part.size = op.size();
     part.owned = op.owned;
-    part.lists = std::move(trip);
+    for (auto& chunks : trip)
+      for (auto& c : chunks) part.lists.push_back(std::move(c));
+    trip.clear();
     op.backend = &backend;
     op.distributed = backend.matrix(std::move(part));
     if (!op.distributed)
@@ -706,10 +722,11 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   // row's columns (parallel; rows are short).
   std::vector<int> outer(static_cast<std::size_t>(R) + 1, 0);
   std::size_t nnz = 0;
-  for (const auto& t : trip) {
-    nnz += t.size();
-    for (const Triplet& e : t) ++outer[static_cast<std::size_t>(e.row) + 1];
-  }
+  for (const auto& chunks : trip)
+    for (const auto& c : chunks) {
+      nnz += c.size();
+      for (const Triplet& e : c) ++outer[static_cast<std::size_t>(e.row) + 1];
+    }
   if (nnz > static_cast<std::size_t>(std::numeric_limits<int>::max()))
     throw std::length_error("transfer: more than 2^31 nonzeros (int32 CSR indices)");
   for (std::size_t r = 0; r < static_cast<std::size_t>(R); ++r) outer[r + 1] += outer[r];
@@ -720,14 +737,15 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   double* pv = op.P.valuePtr();
   std::copy(outer.begin(), outer.end(), po);
   std::vector<int> fill(outer.begin(), outer.end() - 1);
-  for (auto& t : trip) {
-    for (const Triplet& e : t) {
-      const auto dst = static_cast<std::size_t>(fill[static_cast<std::size_t>(e.row)]++);
-      pi[dst] = e.col;
-      pv[dst] = e.value;
+  for (auto& chunks : trip)
+    for (auto& c : chunks) {
+      for (const Triplet& e : c) {
+        const auto dst = static_cast<std::size_t>(fill[static_cast<std::size_t>(e.row)]++);
+        pi[dst] = e.col;
+        pv[dst] = e.value;
+      }
+      std::vector<Triplet>().swap(c);  // free as we go: the triplets are ~1.3× the matrix
     }
-    std::vector<Triplet>().swap(t);  // free as we go: the triplets are ~1.5× the matrix
-  }
 #pragma omp parallel
   {
     std::vector<std::pair<int, double>> row;
