@@ -8,10 +8,12 @@
 /// place); only the others' (the ghost rows near the block's ends) are packed and sent, in
 /// one MPI_Alltoallv. Each rank then writes its rows straight into the two CSR blocks PETSc
 /// keeps (the columns it owns, and the others), counted exactly, columns sorted, and frees
-/// the lists; PETSc takes those arrays as they are (MatCreateMPIAIJWithSplitArrays), so the
-/// matrix is never copied. Peak per rank: the entries (16 bytes each) and the split arrays
-/// (12 bytes each) at once, about 28 bytes per entry, against 12 for the finished matrix
-/// (measured as a run's peak resident size: bench/mpi_scaling.sh).
+/// the lists chunk by chunk; PETSc takes those arrays as they are
+/// (MatCreateMPIAIJWithSplitArrays), so the matrix is never copied. Peak per rank: the
+/// entries (16 bytes each) overlapping the split arrays (12 bytes each) as they are written,
+/// and 16 + 16 bytes more for each entry of another rank's rows (sent, and received by that
+/// rank): 37 bytes per entry measured for gl2 at 11^5 on 2 ranks, against 12-14 for the
+/// finished matrix (a run's peak resident size: bench/mpi_scaling.sh, docs/distributed.md).
 ///
 /// Spectrum: SLEPc's EPS on the matrix, non-Hermitian, largest magnitude, start vector all
 /// ones (as Spectra's in invariant.hpp), then EPSSetFromOptions, so that -eps_type,
