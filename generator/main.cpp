@@ -99,7 +99,7 @@ int cmd_build(const Request& req, const BuildOptions& build) {
 int cmd_run(const Request& req, const RunOptions& options) {
   const Frontend fe(SourceText::load(req.path), req.options());
   fe.print_warnings(std::cerr);
-  return run_model(fe, options);
+  return run_to_outputs(fe, options);
 }
 
 }  // namespace

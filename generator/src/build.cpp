@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <iostream>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -431,6 +432,27 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
   }
   r.seconds = elapsed();
   return r;
+}
+
+BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, bool quiet) {
+  // The kernels take the parameters as par[]; the header carries the file's values only as
+  // defaults (tests/e2e/test_cli.cpp, ParameterValuesReuseTheRunner).
+  Model file_model = fe.model;
+  for (std::size_t j = 0; j < file_model.params.size(); ++j)
+    file_model.params[j].value_d = fe.file_params[j];
+  HybridSystem file_sys = fe.sys;
+  file_sys.model = &file_model;
+  const GeneratedFiles files = emit(file_sys);  // stage 4: IR -> sources
+  BuildOptions opt = options;
+  opt.progress = !quiet;
+  opt.mpi = fe.model.sim.settings.word<"backend">() == "mpi";
+  BuildResult b = build_runner(files, fe.model.name, opt);  // stage 5: sources -> runner
+  if (!quiet) {
+    char took[48];
+    std::snprintf(took, sizeof took, "(built in %.1f s) ", b.seconds);
+    std::cerr << "hybgen: runner " << (b.cached ? "(cached) " : took) << b.executable << "\n";
+  }
+  return b;
 }
 
 }  // namespace hybgen::gen

@@ -21,6 +21,7 @@
 #include "hybgen/gen/hash.hpp"
 #include "hybgen/gen/limits.hpp"
 #include "hybgen/gen/tex.hpp"
+#include "hybgen/rt/setting_rules.hpp"
 
 namespace hybgen::gen {
 
@@ -789,17 +790,10 @@ std::string set_simulation_setting(Model& model, const std::string& key, const S
            "deposited on hat functions) or 'cell' (Ulam); both conserve mass";
   if (std::string why = model.sim.settings.set(key, v); !why.empty()) return why;
   // The pictures' axes are the model's states: two or more of them (the runner pairs them).
-  if (key == "figure_axes") {
-    const std::vector<std::string> names = model.sim.settings.names<"figure_axes">();
-    for (const std::string& n : names)
-      if (std::find(model.state.begin(), model.state.end(), n) == model.state.end()) {
-        std::string states;
-        for (const auto& st : model.state) states += (states.empty() ? "" : ", ") + st;
-        return "'" + n + "' is not a state variable (the states: " + states + ")";
-      }
-    if (names.size() < 2 && model.state.size() > 2)
-      return "needs two or more state variables: the pictures show their pairs";
-  }
+  // (The rule of runtime/include/hybgen/rt/setting_rules.hpp, checked here to locate it.)
+  if (key == "figure_axes")
+    if (std::string why = rt::figure_axes_rule(model.sim.settings, model.state); !why.empty())
+      return why;
   // The derivation limits are the symbolic stage's (limits.hpp), read from the table.
   const rt::Settings& s = model.sim.settings;
   model.limits.max_expr_nodes = static_cast<std::size_t>(s.integer<"max_expr_nodes">());

@@ -17,6 +17,7 @@
 
 #include "hybgen/gen/dag.hpp"
 #include "hybgen/gen/limits.hpp"
+#include "hybgen/rt/setting_rules.hpp"
 
 namespace hybgen::gen {
 
@@ -870,15 +871,14 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
   for (const auto& ms : m.modes) sys.modes.push_back(d.derive_mode(ms));
   for (const auto& gs : m.guards) sys.guards.push_back(d.derive_guard(sys, gs));
 
-  // A reset without an inverse cannot run by characteristics (check_runnable, run.cpp, refuses it
-  // there): say so at `check` too when that is the model's method.
-  if (m.sim.present && m.sim.settings.word<"method">() == "characteristics")
+  // A reset without an inverse cannot run by a method that inverts the resets (the rule of
+  // runtime/include/hybgen/rt/setting_rules.hpp, which check_runnable in run.cpp applies
+  // before a run): say so at `check` too when that is the model's method.
+  if (m.sim.present)
     for (const auto& g : sys.guards)
       if (g.inverse_on_guard_only)
-        sys.warnings.push_back("guard '" + g.name +
-                               "': its reset has no inverse, so `run` will refuse the method "
-                               "characteristics; set `method transfer`, `invariant` or "
-                               "`particles`");
+        if (const std::string why = rt::inverse_rule(m.sim.settings, g.name); !why.empty())
+          sys.warnings.push_back("`run` will refuse this method: " + why);
 
   // Numerical checks on sampled points of each guard surface (parameters at
   // their defaults, inside the simulation domain).

@@ -18,31 +18,11 @@
 #include "hybgen/gen/hash.hpp"
 #include "hybgen/gen/outputs.hpp"
 #include "hybgen/gen/process.hpp"
+#include "hybgen/rt/setting_rules.hpp"
 
 namespace hybgen::gen {
 
 namespace fs = std::filesystem;
-
-BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, bool quiet) {
-  // The kernels take the parameters as par[]; the header carries the file's values only as
-  // defaults (tests/e2e/test_cli.cpp, ParameterValuesReuseTheRunner).
-  Model file_model = fe.model;
-  for (std::size_t j = 0; j < file_model.params.size(); ++j)
-    file_model.params[j].value_d = fe.file_params[j];
-  HybridSystem file_sys = fe.sys;
-  file_sys.model = &file_model;
-  const GeneratedFiles files = emit(file_sys);  // stage 4: IR -> sources
-  BuildOptions opt = options;
-  opt.progress = !quiet;
-  opt.mpi = fe.model.sim.settings.word<"backend">() == "mpi";
-  BuildResult b = build_runner(files, fe.model.name, opt);  // stage 5: sources -> runner
-  if (!quiet) {
-    char took[48];
-    std::snprintf(took, sizeof took, "(built in %.1f s) ", b.seconds);
-    std::cerr << "hybgen: runner " << (b.cached ? "(cached) " : took) << b.executable << "\n";
-  }
-  return b;
-}
 
 std::vector<std::string> runner_command(const rt::Settings& settings, const std::string& runner,
                                         const std::string& config) {
@@ -64,23 +44,29 @@ std::vector<std::string> runner_command(const rt::Settings& settings, const std:
 
 void check_runnable(const Frontend& fe) {
   const Model& m = fe.model;
-  if (m.sim.settings.integer<"ranks">() > 1 && m.sim.settings.word<"backend">() != "mpi")
-    throw UsageError("ranks=" + std::to_string(m.sim.settings.integer<"ranks">()) +
-                     " runs that many MPI ranks, which needs backend=mpi (--ranks N sets both)");
   if (!m.sim.present)
     throw ModelError(m.path, {1, 1},
                      "the model has no simulation block, so there is nothing to run");
-  // The backward characteristics need the inverse of every reset; a reset injective on its
-  // guard only has none (derive.cpp): refuse before building, at the reset, with the methods
-  // that apply.
-  if (m.sim.settings.word<"method">() == "characteristics")
-    for (std::size_t gi = 0; gi < fe.sys.guards.size(); ++gi)
-      if (fe.sys.guards[gi].inverse_on_guard_only)
-        throw fe.src.error(m.guards[gi].reset_loc,
-                           "the reset of guard '" + m.guards[gi].name +
-                               "' has no inverse in the whole state space (it is locally "
-                               "injective on its guard only), which the characteristics method "
-                               "needs; use --set method=transfer, invariant or particles");
+  // The rules that relate the settings to each other, to the method and to the model, as the
+  // runner applies them (runtime/include/hybgen/rt/setting_rules.hpp), before anything is
+  // built; a reset the method cannot invert is located at the reset.
+  const std::vector<std::pair<std::size_t, std::string>> no_inverse = guards_without_inverse(fe);
+  rt::RunFacts facts;
+  facts.states = m.state;
+  facts.guards_without_inverse = &no_inverse;
+  for (const rt::SettingConflict& c : rt::setting_conflicts(m.sim.settings, facts)) {
+    if (c.guard >= 0)
+      throw fe.src.error(m.guards[static_cast<std::size_t>(c.guard)].reset_loc, c.message);
+    throw UsageError(c.setting == "figure_axes" ? "setting 'figure_axes': " + c.message
+                                                : c.message);
+  }
+}
+
+std::vector<std::pair<std::size_t, std::string>> guards_without_inverse(const Frontend& fe) {
+  std::vector<std::pair<std::size_t, std::string>> out;
+  for (std::size_t gi = 0; gi < fe.sys.guards.size(); ++gi)
+    if (fe.sys.guards[gi].inverse_on_guard_only) out.emplace_back(gi, fe.sys.guards[gi].name);
+  return out;
 }
 
 nlohmann::json run_config(const Model& m, const std::string& out_dir,
@@ -134,7 +120,7 @@ void stop_if_interrupted(OutputTransaction& tx) {
   die_by_signal(sig);  // so that a calling shell or script stops too
 }
 
-int run_model(const Frontend& fe, const RunOptions& options) {
+int run_to_outputs(const Frontend& fe, const RunOptions& options) {
   check_runnable(fe);
   const Model& m = fe.model;
   const std::string out = options.out.empty() ? "out/" + m.name : options.out;

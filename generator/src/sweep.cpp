@@ -18,6 +18,7 @@
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/outputs.hpp"
 #include "hybgen/gen/process.hpp"
+#include "hybgen/rt/method_table.hpp"
 
 namespace hybgen::gen {
 
@@ -230,37 +231,38 @@ std::string sweep_label(std::size_t index, std::size_t count,
 }
 
 nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
+  namespace k = rt::summary_key;
   nlohmann::ordered_json row = nlohmann::ordered_json::object();
-  if (s.contains("method")) row["method"] = s["method"];
-  put_last(row, "t", s, "times");
-  if (s.contains("mass") && s["mass"].is_array() && !s["mass"].empty())
-    put_number(row, "initial_mass", s, "initial_mass");
-  put_last(row, "mass", s, "mass");
-  put_last(row, "mass_error", s, "mass_error");  // particles: the 2-sigma estimate
-  put_last(row, "outflow", s, "outflow");
-  put_last(row, "atom", s, "atom");
-  put_last(row, "atom_error", s, "atom_error");
-  if (s.contains("budget")) {
-    put_last(row, "mass_error", s["budget"], "mass_error");
-    put_last(row, "outflow_error", s["budget"], "outflow_error");
-    put_last(row, "unaccounted", s["budget"], "defect");
-    put_last(row, "unaccounted_error", s["budget"], "defect_error");
-    if (s["budget"].contains("closes") && s["budget"]["closes"].is_boolean())
-      row["budget_closes"] = s["budget"]["closes"];
+  if (s.contains(k::method)) row["method"] = s[k::method];
+  put_last(row, "t", s, k::times);
+  if (s.contains(k::mass) && s[k::mass].is_array() && !s[k::mass].empty())
+    put_number(row, "initial_mass", s, k::initial_mass);
+  put_last(row, "mass", s, k::mass);
+  put_last(row, "mass_error", s, k::mass_error);  // particles: the 2-sigma estimate
+  put_last(row, "outflow", s, k::outflow);
+  put_last(row, "atom", s, k::atom);
+  put_last(row, "atom_error", s, k::atom_error);
+  if (s.contains(k::budget)) {
+    const auto& b = s[k::budget];
+    put_last(row, "mass_error", b, "mass_error");
+    put_last(row, "outflow_error", b, "outflow_error");
+    put_last(row, "unaccounted", b, "defect");
+    put_last(row, "unaccounted_error", b, "defect_error");
+    if (b.contains("closes") && b["closes"].is_boolean()) row["budget_closes"] = b["closes"];
   }
-  if (s.contains("transfer")) put_number(row, "unaccounted", s["transfer"], "budget_defect");
-  if (s.contains("invariant")) {
-    const auto& inv = s["invariant"];
+  if (s.contains(k::transfer)) put_number(row, "unaccounted", s[k::transfer], "budget_defect");
+  if (s.contains(k::invariant)) {
+    const auto& inv = s[k::invariant];
     put_number(row, "spectral_gap", inv, "spectral_gap");
     put_number(row, "decay_rate", inv, "decay_rate");
     put_number(row, "leak_rate", inv, "leak_rate");
     if (inv.contains("eigenvalues") && inv["eigenvalues"].is_array())
-      for (std::size_t k = 0; k < inv["eigenvalues"].size(); ++k)
-        put_number(row, "abs_lambda" + std::to_string(k + 1), inv["eigenvalues"][k], "abs");
+      for (std::size_t i = 0; i < inv["eigenvalues"].size(); ++i)
+        put_number(row, "abs_lambda" + std::to_string(i + 1), inv["eigenvalues"][i], "abs");
   }
-  if (s.contains("seconds"))
-    for (const char* k : {"derive", "build", "solve", "budget", "output"})
-      put_number(row, std::string("seconds_") + k, s["seconds"], k);
+  if (s.contains(k::seconds))
+    for (const char* key : {"derive", "build", "solve", "budget", "output"})
+      put_number(row, std::string("seconds_") + key, s[k::seconds], key);
   return row;
 }
 

@@ -26,6 +26,7 @@
 
 #include "drawing.hpp"
 #include "hybgen/rt/io/animation.hpp"
+#include "hybgen/rt/method_table.hpp"
 
 namespace hybgen::rt {
 
@@ -276,7 +277,7 @@ void draw_spectrum(cairo_t* cr, const RunRecord& run, double width, double heigh
   cairo_new_path(cr);  // no segment from the title's current point
   cairo_arc(cr, X(0), Y(0), r.w / 2.2, 0, 2 * M_PI);
   cairo_stroke(cr);
-  const nlohmann::json& ev = run.summary["invariant"]["eigenvalues"];
+  const nlohmann::json& ev = run.summary[summary_key::invariant]["eigenvalues"];
   for (std::size_t i = 0; i < ev.size(); ++i) {
     set_colour(cr, i == 0 ? kGuard : kCurve[0]);
     cairo_new_path(cr);
@@ -287,7 +288,7 @@ void draw_spectrum(cairo_t* cr, const RunRecord& run, double width, double heigh
   draw_axes(cr, r, -1.1, 1.1, -1.1, 1.1, "Re λ", "Im λ");
   set_font(cr, 12);
   set_colour(cr, kInk);
-  const auto& inv = run.summary["invariant"];
+  const auto& inv = run.summary[summary_key::invariant];
   const double x = r.x + r.w + 30;
   text(cr, x, r.y + 20, "spectral gap " + tick_label(inv.value("spectral_gap", 0.0)));
   text(cr, x, r.y + 40,
@@ -434,7 +435,8 @@ void write_figures(const RunRecord& run, FigureRequest& request, const std::stri
   }
   if (error) std::rethrow_exception(error);
   // The animation and the PDF side by side (each is one sequential stream).
-  const std::string stem = run.times.empty() ? "invariant" : "density";
+  // One frame (a stationary answer): its name; a time series: density.pdf.
+  const std::string stem = run.times.empty() ? run.frame_names.front() : "density";
 #pragma omp parallel sections
   {
 #pragma omp section
@@ -460,7 +462,7 @@ void write_figures(const RunRecord& run, FigureRequest& request, const std::stri
   if (request.pdf) request.out.push_back(stem + ".pdf");
   // The budget and the spectrum, in each format asked for.
   const bool budget = !run.times.empty() && run.budget.mass.size() == run.times.size();
-  const bool spectrum = run.summary.is_object() && run.summary.contains("invariant");
+  const bool spectrum = run.summary.is_object() && run.summary.contains(summary_key::invariant);
   for (const auto& [name, wanted] :
        {std::pair{std::string("budget"), budget}, std::pair{std::string("spectrum"), spectrum}}) {
     if (!wanted) continue;

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "hybgen/rt/io/hyperslab.hpp"
+#include "hybgen/rt/method_table.hpp"
 
 namespace hybgen::rt {
 
@@ -294,8 +295,8 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   }
 
   // The invariant density's spectrum.
-  const nlohmann::json inv = run.summary.is_object() && run.summary.contains("invariant")
-                                 ? run.summary["invariant"]
+  const nlohmann::json inv = run.summary.is_object() && run.summary.contains(summary_key::invariant)
+                                 ? run.summary[summary_key::invariant]
                                  : nlohmann::json();
   std::vector<double> re, im, ab;
   int re_var = -1, im_var = -1, abs_var = -1;
@@ -332,8 +333,8 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   nc.text(NC_GLOBAL, "method", run.method);
   for (const char* key : {"model_path", "model_sha256", "model_text", "equations"})
     if (const std::string v = json_text(pv, key); !v.empty()) nc.text(NC_GLOBAL, key, v);
-  if (run.summary.is_object() && run.summary.contains("settings"))
-    nc.text(NC_GLOBAL, "settings", run.summary["settings"].dump());
+  if (run.summary.is_object() && run.summary.contains(summary_key::settings))
+    nc.text(NC_GLOBAL, "settings", run.summary[summary_key::settings].dump());
   for (std::size_t j = 0; j < run.params.size(); ++j)
     nc.number(NC_GLOBAL, ("parameter_" + run.param_names[j]).c_str(), run.params[j]);
   nc.end_definitions();

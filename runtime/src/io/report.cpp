@@ -13,6 +13,7 @@
 
 #include "hybgen/rt/io/atomic_file.hpp"
 #include "hybgen/rt/io/run_files.hpp"
+#include "hybgen/rt/method_table.hpp"
 
 namespace hybgen::rt {
 
@@ -190,8 +191,8 @@ img { max-width: 100%; } .muted { color: #666; }
     row("unaccounted", defect[k], bar[k]);
     h << "</table>\n";
   }
-  if (run.summary.is_object() && run.summary.contains("invariant")) {
-    const nlohmann::json& inv = run.summary["invariant"];
+  if (run.summary.is_object() && run.summary.contains(summary_key::invariant)) {
+    const nlohmann::json& inv = run.summary[summary_key::invariant];
     h << "<h2>Spectrum</h2>\n";
     if (has(files, "spectrum.png")) h << "<img src=\"spectrum.png\" alt=\"the spectrum\">\n";
     h << "<p>spectral gap " << number(inv.value("spectral_gap", 0.0)) << ", decay rate "
@@ -249,9 +250,9 @@ img { max-width: 100%; } .muted { color: #666; }
   h << "</p>\n";
 
   // Timings and files.
-  if (run.summary.is_object() && run.summary.contains("seconds")) {
+  if (run.summary.is_object() && run.summary.contains(summary_key::seconds)) {
     h << "<h2>Timings</h2>\n<table>\n";
-    for (const auto& [key, value] : run.summary["seconds"].items())
+    for (const auto& [key, value] : run.summary[summary_key::seconds].items())
       if (value.is_number())
         h << "<tr><td>" << html(key) << "</td><td class=\"n\">" << number(value.get<double>())
           << " s</td></tr>\n";

@@ -19,6 +19,7 @@
 #include <string>
 
 #include "hybgen/gen/emit.hpp"
+#include "hybgen/gen/frontend.hpp"
 
 namespace hybgen::gen {
 
@@ -76,5 +77,10 @@ std::string runner_flags(bool werror);
 /// with the compiler log's path when compilation fails.
 BuildResult build_runner(const GeneratedFiles& files, const std::string& model_name,
                          const BuildOptions& options);
+
+/// Emit the runner's sources (with the file's parameter values, so that the cache key does
+/// not change with --set: the runner reads the values from its configuration) and build or
+/// reuse the runner. Says what it does on stderr unless `quiet`.
+BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, bool quiet);
 
 }  // namespace hybgen::gen

@@ -6,6 +6,7 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "hybgen/gen/build.hpp"
@@ -21,20 +22,20 @@ struct RunOptions {
   bool quiet = false;  ///< No progress output.
 };
 
-/// Emit the runner's sources (with the file's parameter values, so that the cache key does
-/// not change with --set: the runner reads the values from its configuration) and build or
-/// reuse the runner. Says what it does on stderr unless `quiet`.
-BuildResult build_model_runner(const Frontend& fe, const BuildOptions& options, bool quiet);
-
 /// The command line that runs `runner` on `config`: the runner itself, or with backend=mpi
 /// the MPI launcher ($HYBGEN_MPIEXEC, split at spaces, else `mpiexec`) with `-n ranks`
 /// first. Throws UsageError when the launcher is not found.
 std::vector<std::string> runner_command(const rt::Settings& settings, const std::string& runner,
                                         const std::string& config);
 
-/// Throw the located error that stops `fe`'s model from running at all: no simulation
-/// block, or the characteristics method with a reset that has no inverse off its guard.
+/// Throw the error that stops `fe`'s model from running at all: no simulation block, or a
+/// broken rule of runtime/include/hybgen/rt/setting_rules.hpp (a method that inverts the
+/// resets with a reset that has no inverse off its guard is located at the reset).
 void check_runnable(const Frontend& fe);
+
+/// The guards of `fe` whose reset has an inverse on its guard only (derive.cpp), by index and
+/// name: the fact setting_rules.hpp's inverse rule needs.
+std::vector<std::pair<std::size_t, std::string>> guards_without_inverse(const Frontend& fe);
 
 /// The runner's configuration for `m` (read by read_config, runtime/include/hybgen/rt/
 /// runner.hpp): the runner writes into `out_dir`; `final_out_dir` is where the outputs end
@@ -55,8 +56,9 @@ void stop_if_interrupted(OutputTransaction& tx);
 
 /// `hybgen run`: build, run into a staging directory, and swap it in on success. Returns
 /// the exit code (the runner's on failure, OUT unchanged); on an interrupt, removes the
-/// staging directory and ends hybgen by the signal.
-int run_model(const Frontend& fe, const RunOptions& options);
+/// staging directory and ends hybgen by the signal. (The runner's own chain is
+/// runtime/include/hybgen/rt/runner.hpp, `run_chain`.)
+int run_to_outputs(const Frontend& fe, const RunOptions& options);
 
 /// `hybgen check --preflight`: build the runner and run only its pre-flight scan (the checks
 /// `run` makes at t = 0, preflight.hpp) on the model's grid and method. Nothing is written

@@ -26,6 +26,7 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -34,9 +35,11 @@
 #include "hybgen/rt/exit_codes.hpp"
 #include "hybgen/rt/io/atomic_file.hpp"
 #include "hybgen/rt/io/run_outputs.hpp"
+#include "hybgen/rt/method_table.hpp"
 #include "hybgen/rt/methods/methods.hpp"
 #include "hybgen/rt/methods/preflight.hpp"
 #include "hybgen/rt/model.hpp"
+#include "hybgen/rt/setting_rules.hpp"
 #include "hybgen/rt/settings.hpp"
 
 namespace hybgen::rt {
@@ -83,14 +86,6 @@ TensorGrid<N> scan_grid(const TensorGrid<N>& grid) {
   for (GridAxis& a : coarse.axes)
     a.n = std::max(2, static_cast<int>(std::floor(static_cast<double>(a.n) * f)));
   return coarse;
-}
-
-/// The bytes of the densities a run keeps on every node (frames × modes × nodes doubles).
-template <std::size_t N>
-double density_bytes(const TensorGrid<N>& grid, std::size_t frames, int modes) {
-  double nodes = 1.0;
-  for (const GridAxis& a : grid.axes) nodes *= static_cast<double>(a.n);
-  return nodes * static_cast<double>(frames) * static_cast<double>(modes) * 8.0;
 }
 
 /// This machine's memory in bytes (0 if unknown).
@@ -163,144 +158,229 @@ RunConfig read_config(const std::string& path) {
   return c;
 }
 
-/// Solve with the configured method, write the outputs and the summary; returns the exit
-/// code.
+/// A validated run: what every stage after `validate_run` reads.
+template <std::size_t N>
+struct RunPlan {
+  RunConfig config;            ///< The configuration (quiet on every rank but 0).
+  const MethodSpec* method{};  ///< The method's row (method_table.hpp).
+  TensorGrid<N> grid;          ///< The grid.
+  double dt = 0.0;             ///< Output interval.
+  std::vector<double> times;   ///< Output times (output_times).
+  MethodSettings solve;        ///< What the method reads (seeds and backend set by the chain).
+  const Backend* backend{};    ///< The ranks of the run (core/backend.hpp).
+  /// The pre-flight's seeds for a reset's several pre-images, per guard (preflight.hpp).
+  std::vector<std::vector<double>> seeds;
+};
+
+/// Stage 1, validate: the threads, the grid, the output times and the method; then every
+/// rule that relates the settings to each other, to the model and to this run
+/// (setting_rules.hpp). Throws ConfigError (exit 2) with the first broken rule.
 template <HybridModel M>
-int run_model(const RunConfig& config, const Backend& backend = serial_backend()) {
+RunPlan<state_dim_v<M>> validate_run(const RunConfig& config, const Backend& backend) {
   constexpr std::size_t N = state_dim_v<M>;
-  using Clock = std::chrono::steady_clock;
-  // Rank 0 prints and writes; every rank solves its share (core/backend.hpp).
-  RunConfig c = config;
-  c.quiet = c.quiet || !backend.root();
-  const double* par = c.params.data();
+  RunPlan<N> p;
+  p.config = config;
+  p.config.quiet = config.quiet || !backend.root();  // rank 0 prints and writes
+  p.backend = &backend;
+  const Settings& set = p.config.settings;
   // Worker threads: the setting when given, else OpenMP's default ($OMP_NUM_THREADS, or one
   // per core, shared by the ranks on this machine). Particles are the same for any count
   // (counter-based streams); sums over threads (the budget's cubatures) may differ in the
   // last digits.
-  if (const long long threads = c.settings.integer<"threads">(); threads > 0)
+  if (const long long threads = set.integer<"threads">(); threads > 0)
     omp_set_num_threads(static_cast<int>(threads));
   else if (backend.ranks_here() > 1 && std::getenv("OMP_NUM_THREADS") == nullptr)
     omp_set_num_threads(std::max(1, omp_get_num_procs() / backend.ranks_here()));
-  TensorGrid<N> grid;
-  for (std::size_t a = 0; a < N; ++a) grid.axes[a] = c.axes[a];
-  const double dt = c.settings.real<"dt">();
-  const std::vector<double> times = output_times(c.settings.real<"t_end">(), dt);
-  const std::string& method = c.method();
-  MethodSettings ms;
-  ms.settings = c.settings;
-  ms.quiet = c.quiet;
-  const CharacteristicsOptions opt = detail::trace_options(ms);
-
-  // Densities on every node that cannot fit are refused before any work, with the way out.
-  const bool marginals = c.settings.word<"density">() == "marginals";
-  if (marginals && method != "particles")
-    throw ConfigError("density=marginals is what the particles deposit; method " + method +
-                      " keeps the density on every node (use method=particles)");
-  if (const double need = density_bytes(grid, method == "invariant" ? 1 : times.size(), M::n_mode),
-      have = physical_memory_bytes();
-      !marginals && have > 0.0 && need > have) {
-    char b[400];
-    std::snprintf(b, sizeof b,
-                  "the densities on the grid need %.3g GB (%.3g nodes x %d mode(s) x %zu "
-                  "frame(s)) and this machine has %.3g GB: use a coarser grid, or method=particles "
-                  "with density=marginals (the marginal of every pair of axes)",
-                  need / 1e9, need / 8.0 / M::n_mode / static_cast<double>(times.size()), M::n_mode,
-                  method == "invariant" ? std::size_t{1} : times.size(), have / 1e9);
-    throw ConfigError(b);
-  }
-  // A VTK image is one process's whole grid (or its first three axes): over several ranks
-  // run.nc, written by every rank, holds the same arrays (ParaView reads it).
-  if (backend.ranks() > 1 && c.settings.includes<"outputs">("vti"))
-    throw ConfigError(
-        "outputs vti holds a whole grid in one process's file, which a run over several ranks "
-        "does not gather: run.nc has the same arrays (ParaView opens it with its NetCDF CF "
-        "reader), or run with one rank");
-  if (marginals)
-    for (const char* o : {"npy", "vti"})
-      if (c.settings.includes<"outputs">(o))
-        throw ConfigError(std::string("outputs ") + o +
-                          " holds the density on every node, which density=marginals does not "
-                          "keep (netcdf, png, pdf, svg, gif and html show the marginals)");
-  if (!c.quiet && !c.preflight_only) {
-    if (method == "invariant")
-      std::fprintf(stderr, "hybgen: %s: invariant density on %zu nodes x %d mode(s)...\n",
-                   c.model.c_str(), grid.size(), M::n_mode);
-    else
-      std::fprintf(stderr, "hybgen: %s: %s on %zu nodes x %d mode(s), %zu output times...\n",
-                   c.model.c_str(), method.c_str(), grid.size(), M::n_mode, times.size());
-  }
-  // Pre-flight (t = 0): u0 ≥ 0 and finite on the grid; at every crossing point of every guard
-  // in the box, a finite reset landing in the support and the box, not on a guard that fires
-  // at once, J finite and ≠ 0, no grazing, a converging numeric inverse, and for the
-  // characteristics the seeds that enumerate a reset's several pre-images (preflight.hpp).
-  std::vector<std::vector<double>> seeds;
-  std::vector<PreflightFailure<N>> notes;
-  {
-    PreflightOptions popt;
-    popt.newton_max_iter = opt.newton_max_iter;
-    popt.newton_tol = opt.newton_tol;
-    popt.backward = method == "characteristics";  // the one method that inverts Δ
-    // A grid too large to visit (a marginals run) is scanned on a coarser grid with the same
-    // box: at most kScanNodes nodes, the ends of every axis kept.
-    const TensorGrid<N> scan = scan_grid(grid);
-    if (scan.size() < grid.size() && !c.quiet)
-      std::fprintf(stderr, "hybgen: note: the pre-flight scan visits a coarser grid of %zu nodes\n",
-                   scan.size());
-    const PreflightFailure<N> pf = preflight<M>(scan, par, popt, &seeds, &notes);
-    for (const auto& note : notes)
-      if (backend.root())
-        std::fprintf(stderr,
-                     "hybgen: warning: %s, at an isolated point only (measure zero: no mass is "
-                     "there); the scan excludes it, but a grid node exactly there has no finite "
-                     "density (choose a grid without a node at that point)\n",
-                     describe_preflight<M>(note).c_str());
-    if (!pf.ok()) {
-      if (backend.root())
-        std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
-      return exit_status(ExitCode::Numerical);
-    }
-    if (c.preflight_only && !backend.root()) return exit_status(ExitCode::Success);
-    if (c.preflight_only) {
-      std::size_t enumerated = 0;
-      for (const auto& sd : seeds) enumerated += sd.empty() ? 0 : 1;
-      std::printf("pre-flight scan (t = 0, %s, grid of %zu nodes): ok, %d guard(s)", method.c_str(),
-                  grid.size(), M::n_guard);
-      if (enumerated > 0)
-        std::printf(", %zu with several pre-images (enumerated by the characteristics)",
-                    enumerated);
-      if (!notes.empty()) std::printf(", %zu isolated re-trigger point(s)", notes.size());
-      std::printf("\n");
-      return exit_status(ExitCode::Success);
-    }
-  }
-  ms.preimage_seeds = &seeds;
-  ms.backend = &backend;
-  MethodResult<N> res;
+  for (std::size_t a = 0; a < N; ++a) p.grid.axes[a] = p.config.axes[a];
+  p.dt = set.real<"dt">();
+  p.times = output_times(set.real<"t_end">(), p.dt);
   try {
-    res = solve_method<M>(grid, times, dt, par, ms);
+    p.method = &method_named(p.config.method());
   } catch (const std::invalid_argument& e) {
-    throw ConfigError(e.what());  // e.g. an output time that is not a multiple of the step
+    throw ConfigError(e.what());
   }
-  // The largest resident size of any rank (collective: every rank calls it).
-  const double peak_bytes = backend.max(peak_resident_bytes());
-  // Every rank knows whether the method failed (the failures are agreed across ranks). Each
-  // holds its part of the frames and writes it (io/run_outputs.hpp); rank 0 writes the rest.
-  if (!res.ok()) {
+  RunFacts facts;
+  facts.states = p.config.axis_names;
+  facts.ranks = backend.ranks();
+  for (const GridAxis& a : p.config.axes) facts.grid.push_back(a.n);
+  facts.modes = M::n_mode;
+  facts.frames = p.times.size();
+  facts.memory_bytes = physical_memory_bytes();
+  if (const std::vector<SettingConflict> broken = setting_conflicts(set, facts); !broken.empty())
+    throw ConfigError(broken.front().setting == "figure_axes"
+                          ? "setting 'figure_axes': " + broken.front().message
+                          : broken.front().message);
+  p.solve.settings = set;
+  p.solve.quiet = p.config.quiet;
+  p.solve.backend = &backend;
+  return p;
+}
+
+/// The line that says what the run is about to do (stderr; not with --quiet).
+template <HybridModel M>
+void announce_run(const RunPlan<state_dim_v<M>>& p) {
+  if (p.config.quiet || p.config.preflight_only) return;
+  const char* model = p.config.model.c_str();
+  if (p.method->one_frame)
+    std::fprintf(stderr, "hybgen: %s: %s density on %zu nodes x %d mode(s)...\n", model,
+                 std::string(p.method->frame).c_str(), p.grid.size(), M::n_mode);
+  else
+    std::fprintf(stderr, "hybgen: %s: %s on %zu nodes x %d mode(s), %zu output times...\n", model,
+                 std::string(p.method->name).c_str(), p.grid.size(), M::n_mode, p.times.size());
+}
+
+/// Stage 2, pre-flight (t = 0): u0 ≥ 0 and finite on the grid; at every crossing point of
+/// every guard in the box, a finite reset landing in the support and the box, not on a guard
+/// that fires at once, J finite and ≠ 0, no grazing, a converging numeric inverse, and for a
+/// method that inverts the resets the seeds that enumerate a reset's several pre-images
+/// (preflight.hpp), kept in `p.seeds`. Returns the exit code when the run ends here (a
+/// failure, or `hybgen check --preflight`), else nothing.
+template <HybridModel M>
+std::optional<int> preflight_run(RunPlan<state_dim_v<M>>& p) {
+  constexpr std::size_t N = state_dim_v<M>;
+  const Backend& backend = *p.backend;
+  const CharacteristicsOptions trace = detail::trace_options(p.solve);
+  PreflightOptions popt;
+  popt.newton_max_iter = trace.newton_max_iter;
+  popt.newton_tol = trace.newton_tol;
+  popt.backward = p.method->inverts_resets;
+  // A grid too large to visit (a marginals run) is scanned on a coarser grid with the same
+  // box: at most kScanNodes nodes, the ends of every axis kept.
+  const TensorGrid<N> scan = scan_grid(p.grid);
+  if (scan.size() < p.grid.size() && !p.config.quiet)
+    std::fprintf(stderr, "hybgen: note: the pre-flight scan visits a coarser grid of %zu nodes\n",
+                 scan.size());
+  std::vector<PreflightFailure<N>> notes;
+  const PreflightFailure<N> pf = preflight<M>(scan, p.config.params.data(), popt, &p.seeds, &notes);
+  if (backend.root())
+    for (const auto& note : notes)
+      std::fprintf(stderr,
+                   "hybgen: warning: %s, at an isolated point only (measure zero: no mass is "
+                   "there); the scan excludes it, but a grid node exactly there has no finite "
+                   "density (choose a grid without a node at that point)\n",
+                   describe_preflight<M>(note).c_str());
+  if (!pf.ok()) {
     if (backend.root())
-      std::fprintf(stderr, "hybgen: numerical failure: %s\n", res.failure.c_str());
+      std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
     return exit_status(ExitCode::Numerical);
   }
-  if (backend.root())
-    for (const auto& w : res.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
+  if (!p.config.preflight_only) return std::nullopt;
+  if (backend.root()) {
+    std::size_t enumerated = 0;
+    for (const auto& sd : p.seeds) enumerated += sd.empty() ? 0 : 1;
+    std::printf("pre-flight scan (t = 0, %s, grid of %zu nodes): ok, %d guard(s)",
+                std::string(p.method->name).c_str(), p.grid.size(), M::n_guard);
+    if (enumerated > 0)
+      std::printf(", %zu with several pre-images (enumerated by the characteristics)", enumerated);
+    if (!notes.empty()) std::printf(", %zu isolated re-trigger point(s)", notes.size());
+    std::printf("\n");
+  }
+  return exit_status(ExitCode::Success);
+}
 
-  // Outputs: the files the setting `outputs` chooses (io/run_outputs.hpp), durable together
-  // with summary.json by one sync of the staging directory.
-  const auto t2 = Clock::now();
-  const Solution<N>& sol = res.solution;
-  const std::size_t n_node = grid.size();
+/// Stage 3, solve: the method of the plan (methods.hpp, `solve_method`). An output time that
+/// is not a multiple of the step is a ConfigError (exit 2).
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_run(RunPlan<state_dim_v<M>>& p) {
+  p.solve.preimage_seeds = &p.seeds;
+  try {
+    return solve_method<M>(p.grid, p.times, p.dt, p.config.params.data(), p.solve);
+  } catch (const std::invalid_argument& e) {
+    throw ConfigError(e.what());
+  }
+}
+
+/// The guards on the planes of the figure pairs (each rank adds its block of the nodes), and
+/// in 2-D the nodes outside the support: what the pictures draw besides the density. Not for
+/// marginals, whose grid is never visited.
+template <HybridModel M>
+void record_geometry(const RunPlan<state_dim_v<M>>& p, RunRecord& rec) {
+  constexpr std::size_t N = state_dim_v<M>;
+  const Backend& backend = *p.backend;
+  const double* par = p.config.params.data();
+  if (rec.marginals != nullptr) return;
+  if (N == 2 && backend.root()) {
+    rec.outside.assign(p.grid.size(), 0);
+    bool any_outside = false;
+    for (std::size_t i = 0; i < p.grid.size(); ++i) {
+      const auto y = p.grid.node(i);
+      if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
+    }
+    if (!any_outside) rec.outside.clear();
+  }
+  const auto pairs = figure_pairs(N, rec.figure_axes);
+  const Block nodes = backend.block(p.grid.size());
+  for (int g = 0; g < M::n_guard; ++g) {
+    GuardPlanes planes(rec.axes, pairs);
+    std::vector<double> s(nodes.size());
+    for (std::size_t i = nodes.begin; i < nodes.end; ++i)
+      s[i - nodes.begin] = M::guard_surface(g, p.grid.node(i).data(), par);
+    planes.add(nodes.begin, s);
+    if (backend.ranks() > 1) {
+      std::vector<double> v = planes.negated_extremes();
+      backend.max(std::span<double>(v));
+      planes.set_negated_extremes(v);
+    }
+    const auto gi = static_cast<std::size_t>(g);
+    GuardField f{M::guard_names[gi], {}, M::guards[gi].from};
+    for (std::size_t q = 0; q < pairs.size(); ++q) f.planes.push_back(planes.plane(q));
+    rec.guards.push_back(std::move(f));
+  }
+}
+
+/// summary.json as far as the solve knows it (docs/design.md run contract, extended with the
+/// atom, the runner's resources and the method's own block, `MethodSpec::summary_key`): built
+/// once, here; the writers read it, and `finish_summary` adds what the outputs add.
+template <HybridModel M>
+nlohmann::json run_summary(const RunPlan<state_dim_v<M>>& p,
+                           const MethodResult<state_dim_v<M>>& res, double peak_bytes) {
+  namespace k = summary_key;
+  const RunConfig& c = p.config;
+  const MassBudget& mb = res.budget;
+  nlohmann::json s;
+  s[k::model] = c.model;
+  s[k::method] = std::string(p.method->name);
+  nlohmann::json axes = nlohmann::json::array();
+  for (std::size_t a = 0; a < c.axes.size(); ++a)
+    axes.push_back({{"name", c.axis_names[a]},
+                    {"min", c.axes[a].min},
+                    {"max", c.axes[a].max},
+                    {"n", c.axes[a].n}});
+  s["grid"] = {{"axes", axes}};
+  s[k::times] = res.frame_times;
+  s[k::settings] = c.settings.to_json();
+  s["modes"] = std::vector<std::string>(M::mode_names.begin(), M::mode_names.end());
+  nlohmann::json params = nlohmann::json::object();
+  for (std::size_t j = 0; j < static_cast<std::size_t>(M::n_param); ++j)
+    params[M::param_names[j]] = c.params[j];
+  s["parameters"] = params;
+  s["threads"] = omp_get_max_threads();  // the worker threads this run had (setting `threads`)
+  s["backend"] = std::string(p.backend->name());
+  s["ranks"] = p.backend->ranks();               // processes (threads each)
+  s["peak_memory_bytes_per_rank"] = peak_bytes;  // up to the solve's end, the largest rank
+  s[k::initial_mass] = mb.mass0;
+  s[k::mass] = mb.mass;
+  s[k::outflow] = mb.outflow;
+  s[k::atom] = mb.atom;
+  s[k::atom_error] = res.atom_error;
+  for (const auto& [key, value] : res.summary.items()) s[key] = value;
+  nlohmann::json secs = c.seconds.is_object() ? c.seconds : nlohmann::json::object();
+  secs["solve"] = res.solve_s;
+  secs["budget"] = res.budget_s;
+  s[k::seconds] = secs;
+  return s;
+}
+
+/// Stage 4, record: what the writers see of the run (io/run_record.hpp), its summary among it.
+/// Collective: every rank calls it.
+template <HybridModel M>
+RunRecord record_run(const RunPlan<state_dim_v<M>>& p, const MethodResult<state_dim_v<M>>& res) {
+  const RunConfig& c = p.config;
+  // The largest resident size of any rank, up to the solve's end.
+  const double peak_bytes = p.backend->max(peak_resident_bytes());
   RunRecord rec;
   rec.model = c.model;
-  rec.method = method;
+  rec.method = std::string(p.method->name);
   rec.axis_names = c.axis_names;
   rec.axes = c.axes;
   rec.mode_names.assign(M::mode_names.begin(), M::mode_names.end());
@@ -308,75 +388,144 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
   rec.params = c.params;
   rec.times = res.frame_times;
   rec.frame_names = res.frame_names;
-  rec.density = std::span<const double>(sol.u.data(), sol.u.size());
-  rec.distributed = sol.distributed;
-  rec.owned = sol.owned;
-  rec.backend = &backend;
+  rec.density = std::span<const double>(res.solution.u.data(), res.solution.u.size());
+  rec.distributed = res.solution.distributed;
+  rec.owned = res.solution.owned;
+  rec.backend = p.backend;
   if (!res.marginals.empty()) rec.marginals = &res.marginals;
-  for (const std::string& name : c.settings.names<"figure_axes">()) {
-    const auto it = std::find(c.axis_names.begin(), c.axis_names.end(), name);
-    if (it == c.axis_names.end())
-      throw ConfigError("setting 'figure_axes': '" + name + "' is not a state variable");
-    rec.figure_axes.push_back(static_cast<std::size_t>(it - c.axis_names.begin()));
-  }
-  // What the pictures draw besides the density (not for marginals, whose grid is never
-  // visited): 2-D, the nodes outside the support (greyed); every guard's surface s = 0 on
-  // the planes of the figure pairs, each rank adding its block of the nodes.
-  if (rec.marginals == nullptr && N == 2 && backend.root()) {
-    rec.outside.assign(n_node, 0);
-    bool any_outside = false;
-    for (std::size_t i = 0; i < n_node; ++i) {
-      const auto y = grid.node(i);
-      if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
-    }
-    if (!any_outside) rec.outside.clear();
-  }
-  const auto pairs = figure_pairs(N, rec.figure_axes);
-  const Block nodes = backend.block(n_node);
-  for (int g = 0; g < M::n_guard && rec.marginals == nullptr; ++g) {
-    GuardPlanes planes(rec.axes, pairs);
-    std::vector<double> s(nodes.size());
-    for (std::size_t i = nodes.begin; i < nodes.end; ++i) {
-      const auto y = grid.node(i);
-      s[i - nodes.begin] = M::guard_surface(g, y.data(), par);
-    }
-    planes.add(nodes.begin, s);
-    if (backend.ranks() > 1) {
-      std::vector<double> v = planes.negated_extremes();
-      backend.max(std::span<double>(v));
-      planes.set_negated_extremes(v);
-    }
-    GuardField f{M::guard_names[static_cast<std::size_t>(g)],
-                 {},
-                 M::guards[static_cast<std::size_t>(g)].from};
-    for (std::size_t p = 0; p < pairs.size(); ++p) f.planes.push_back(planes.plane(p));
-    rec.guards.push_back(std::move(f));
-  }
+  // The names are states (validate_run's rules).
+  for (const std::string& name : c.settings.names<"figure_axes">())
+    rec.figure_axes.push_back(static_cast<std::size_t>(
+        std::find(c.axis_names.begin(), c.axis_names.end(), name) - c.axis_names.begin()));
+  record_geometry<M>(p, rec);
   rec.budget = res.budget;
   rec.atom_error = res.atom_error;
   rec.provenance = c.provenance;
-  rec.summary = nlohmann::json::object();
-  rec.summary["settings"] = c.settings.to_json();
-  rec.summary["seconds"] = c.seconds.is_object() ? c.seconds : nlohmann::json::object();
-  rec.summary["seconds"]["solve"] = res.solve_s;
-  rec.summary["seconds"]["budget"] = res.budget_s;
-  for (const auto& [key, value] : res.summary.items()) rec.summary[key] = value;
-  const DeferredDurability durability(c.out_dir);
-  // A distributed run: every rank writes its parts (the writers agree on a failure). Else
-  // (one process, or the marginals rank 0 holds): rank 0 alone, and the ranks agree after.
+  rec.summary = run_summary<M>(p, res, peak_bytes);
+  return rec;
+}
+
+/// Stage 5, write: the files the setting `outputs` chooses (io/run_outputs.hpp). A
+/// distributed run: every rank writes its parts (the writers agree on a failure). Else (one
+/// process, or the marginals rank 0 holds): rank 0 alone, and the ranks agree after. Throws
+/// on this rank's failure; nothing on a rank whose failure another rank reports.
+template <std::size_t N>
+std::optional<WrittenOutputs> write_run(const RunPlan<N>& p, const RunRecord& rec) {
+  const Backend& backend = *p.backend;
   WrittenOutputs written;
   std::string write_error;
   try {
     if (rec.distributed || backend.root())
-      written = write_run_outputs(rec, c.settings, c.out_dir, c.quiet);
+      written = write_run_outputs(rec, p.config.settings, p.config.out_dir, p.config.quiet);
   } catch (const std::exception& e) {
     if (rec.distributed || backend.ranks() == 1) throw;
     write_error = e.what();
   }
   if (backend.ranks() > 1 && !rec.distributed && backend.any(!write_error.empty())) {
     if (!write_error.empty()) throw std::runtime_error(write_error);
-    return exit_status(ExitCode::Internal);  // rank 0 says why
+    return std::nullopt;  // rank 0 says why
   }
+  return written;
+}
+
+/// Stage 6, summary: what the outputs add to the record's summary (the files by kind, the
+/// .npy frames, the output's warnings and time, the largest gather a rank received).
+inline nlohmann::json finish_summary(const RunRecord& rec, const WrittenOutputs& written,
+                                     double output_s, std::int64_t gathered) {
+  nlohmann::json s = rec.summary;
+  // `files` and `mode_files`: the .npy frames of a time series (outputs=…+npy), as before
+  // `outputs` listed every kind.
+  s["files"] = rec.times.empty() ? std::vector<std::string>{} : written.npy;
+  if (rec.n_mode() > 1 && !written.mode_npy.empty()) s["mode_files"] = written.mode_npy;
+  s["outputs"] = written.to_json();
+  if (!written.warnings.empty()) s["output_warnings"] = written.warnings;
+  s["gathered_values_per_rank"] = gathered;
+  s[summary_key::seconds]["output"] = output_s;
+  return s;
+}
+
+/// Stage 7, report: the terminal's account of the run (stdout; not with --quiet): the time per
+/// stage, then the spectrum of a method with one frame or the mass budget of a time series.
+inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlohmann::json& s,
+                             const WrittenOutputs& written) {
+  namespace k = summary_key;
+  const nlohmann::json& secs = s[k::seconds];
+  const auto sec = [&](const char* key) {
+    return secs.contains(key) && secs[key].is_number() ? secs[key].get<double>() : -1.0;
+  };
+  // The time hybgen spent before the runner started (derive, build: its config), then ours;
+  // the last line repeats the whole time, build included, so that it is seen last.
+  std::string before;
+  double all_seconds = sec("solve") + sec("budget") + sec("output");
+  for (const char* key : {"derive", "build"})
+    if (sec(key) >= 0) {
+      char b[48];
+      std::snprintf(b, sizeof b, "%s %.3f s, ", key, sec(key));
+      before += b, all_seconds += sec(key);
+    }
+  char took[96];
+  if (sec("build") >= 0)
+    std::snprintf(took, sizeof took, " (%.2f s in all, the build %.2f s)", all_seconds,
+                  sec("build"));
+  else
+    std::snprintf(took, sizeof took, " (%.2f s in all)", all_seconds);
+  std::printf("%s: %s on %zu nodes, %zu frame(s): %ssolve %.3f s, budget %.3f s, output %.3f s\n",
+              c.model.c_str(), rec.method.c_str(), rec.n_node(), rec.n_frame(), before.c_str(),
+              sec("solve"), sec("budget"), sec("output"));
+  if (s.contains(k::invariant)) {
+    const auto& inv = s[k::invariant];
+    std::printf("leading eigenvalues of the transfer operator (step %g):\n",
+                inv["step"].get<double>());
+    for (const auto& l : inv["eigenvalues"])
+      std::printf("  %+.10f %+.10fi   |lambda| = %.10f\n", l["re"].get<double>(),
+                  l["im"].get<double>(), l["abs"].get<double>());
+    std::printf("spectral gap %.3e, decay rate %.4g per unit time\n",
+                inv["spectral_gap"].get<double>(), inv["decay_rate"].get<double>());
+  } else if (const MassBudget& mb = rec.budget; mb.mass.empty()) {
+    std::printf("mass budget: off\n");
+  } else {
+    // The last column is what no term accounts for, mass0 − grid − outflow − atom, and the
+    // sum of the terms' estimated errors (budget.hpp).
+    const std::vector<double> defect = budget_defect(mb), bar = budget_defect_error(mb);
+    std::printf("mass budget (initial mass on the grid %.6g):\n", mb.mass0);
+    std::printf("  %10s %14s %14s %14s %10s %12s %10s\n", "t", "grid", "outflow", "atom",
+                "+/- atom", "unaccounted", "+/-");
+    const std::size_t K = mb.mass.size(), stride = std::max<std::size_t>(1, (K + 9) / 10);
+    for (std::size_t i = 0; i < K; ++i)
+      if (i % stride == 0 || i + 1 == K)
+        std::printf("  %10.4f %14.6e %14.6e %14.6e %10.2e %12.3e %10.2e\n", rec.times[i],
+                    mb.mass[i], mb.outflow[i], mb.atom[i],
+                    i < rec.atom_error.size() ? rec.atom_error[i] : 0.0, defect[i], bar[i]);
+  }
+  std::printf("outputs in %s: %s, summary.json%s\n", c.final_dir.c_str(),
+              written.describe(rec.frame_names).c_str(), took);
+}
+
+/// The run as a chain of stages: validate → pre-flight → solve → record → write → summary →
+/// report. Returns the exit code. Every rank calls it; rank 0 prints and writes what is not
+/// distributed.
+template <HybridModel M>
+int run_chain(const RunConfig& config, const Backend& backend = serial_backend()) {
+  using Clock = std::chrono::steady_clock;
+  RunPlan<state_dim_v<M>> plan = validate_run<M>(config, backend);
+  announce_run<M>(plan);
+  if (const std::optional<int> ended = preflight_run<M>(plan)) return *ended;
+  const MethodResult<state_dim_v<M>> res = solve_run<M>(plan);
+  // Every rank knows whether the method failed (the failures are agreed across ranks).
+  if (!res.ok()) {
+    if (backend.root())
+      std::fprintf(stderr, "hybgen: numerical failure: %s\n", res.failure.c_str());
+    return exit_status(ExitCode::Numerical);
+  }
+  if (backend.root())
+    for (const auto& w : res.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
+  const RunRecord rec = record_run<M>(plan, res);
+  // The files and summary.json are made durable together, by one sync of the staging
+  // directory (io/atomic_file.hpp).
+  const auto t0 = Clock::now();
+  const DeferredDurability durability(plan.config.out_dir);
+  const std::optional<WrittenOutputs> written = write_run(plan, rec);
+  if (!written) return exit_status(ExitCode::Internal);
   // The largest gather any rank received whole from the others (a frame gathered would show).
   const auto gathered =
       static_cast<std::int64_t>(backend.max(static_cast<double>(backend.gathered_values())));
@@ -384,112 +533,14 @@ int run_model(const RunConfig& config, const Backend& backend = serial_backend()
     durability.commit();  // this rank's parts of the files (its machine's file system)
     return exit_status(ExitCode::Success);
   }
-  for (const auto& note : written.notes) std::fprintf(stderr, "hybgen: note: %s\n", note.c_str());
-  for (const auto& w : written.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
-  const double output_s = std::chrono::duration<double>(Clock::now() - t2).count();
-
-  // summary.json (docs/design.md run contract, extended with the atom, per-mode files and the
-  // method's own fields).
-  const MassBudget& mb = res.budget;
-  nlohmann::json s;
-  s["model"] = c.model;
-  s["method"] = method;
-  nlohmann::json axes = nlohmann::json::array();
-  for (std::size_t a = 0; a < N; ++a)
-    axes.push_back({{"name", c.axis_names[a]},
-                    {"min", c.axes[a].min},
-                    {"max", c.axes[a].max},
-                    {"n", c.axes[a].n}});
-  s["grid"] = {{"axes", axes}};
-  s["times"] = res.frame_times;
-  // `files` and `mode_files`: the .npy frames of a time series (outputs=…+npy), as before
-  // `outputs` listed every kind.
-  s["files"] = res.frame_times.empty() ? std::vector<std::string>{} : written.npy;
-  if (M::n_mode > 1 && !written.mode_npy.empty()) s["mode_files"] = written.mode_npy;
-  s["outputs"] = written.to_json();
-  if (!written.warnings.empty()) s["output_warnings"] = written.warnings;
-  s["settings"] = rec.summary["settings"];
-  s["modes"] = std::vector<std::string>(M::mode_names.begin(), M::mode_names.end());
-  nlohmann::json params = nlohmann::json::object();
-  for (std::size_t j = 0; j < static_cast<std::size_t>(M::n_param); ++j)
-    params[M::param_names[j]] = c.params[j];
-  s["parameters"] = params;
-  s["threads"] = omp_get_max_threads();  // the worker threads this run had (setting `threads`)
-  s["backend"] = std::string(backend.name());
-  s["ranks"] = backend.ranks();                  // processes (threads each)
-  s["peak_memory_bytes_per_rank"] = peak_bytes;  // up to the solve's end, the largest rank
-  s["gathered_values_per_rank"] = gathered;      // the largest gather a rank received
-  s["initial_mass"] = mb.mass0;
-  s["mass"] = mb.mass;
-  s["outflow"] = mb.outflow;
-  s["atom"] = mb.atom;
-  s["atom_error"] = res.atom_error;
-  for (const auto& [key, value] : res.summary.items()) s[key] = value;
-  nlohmann::json secs = c.seconds.is_object() ? c.seconds : nlohmann::json::object();
-  secs["solve"] = res.solve_s;
-  secs["budget"] = res.budget_s;
-  secs["output"] = output_s;
-  s["seconds"] = secs;
-  write_file_atomic((std::filesystem::path(c.out_dir) / "summary.json").string(), s.dump(2) + "\n");
+  for (const auto& note : written->notes) std::fprintf(stderr, "hybgen: note: %s\n", note.c_str());
+  for (const auto& w : written->warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
+  const double output_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  const nlohmann::json summary = finish_summary(rec, *written, output_s, gathered);
+  write_file_atomic((std::filesystem::path(plan.config.out_dir) / "summary.json").string(),
+                    summary.dump(2) + "\n");
   durability.commit();
-
-  if (!c.quiet) {
-    // The time hybgen spent before the runner started (derive, build: its config), then ours.
-    std::string before;
-    for (const char* key : {"derive", "build"})
-      if (secs.contains(key) && secs[key].is_number()) {
-        char b[48];
-        std::snprintf(b, sizeof b, "%s %.3f s, ", key, secs[key].template get<double>());
-        before += b;
-      }
-    // The last line repeats the whole time, build included, so that it is seen last.
-    double all_seconds = res.solve_s + res.budget_s + output_s;
-    for (const char* key : {"derive", "build"})
-      if (secs.contains(key) && secs[key].is_number())
-        all_seconds += secs[key].template get<double>();
-    char took_buf[96];
-    if (secs.contains("build") && secs["build"].is_number())
-      std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all, the build %.2f s)", all_seconds,
-                    secs["build"].template get<double>());
-    else
-      std::snprintf(took_buf, sizeof took_buf, " (%.2f s in all)", all_seconds);
-    const std::string took = took_buf;
-    std::printf("%s: %s on %zu nodes, %zu frame(s): %ssolve %.3f s, budget %.3f s, output %.3f s\n",
-                c.model.c_str(), method.c_str(), n_node, res.frame_names.size(), before.c_str(),
-                res.solve_s, res.budget_s, output_s);
-    if (res.summary.contains("invariant")) {
-      const auto& inv = res.summary["invariant"];
-      std::printf("leading eigenvalues of the transfer operator (step %g):\n",
-                  inv["step"].template get<double>());
-      for (const auto& l : inv["eigenvalues"])
-        std::printf("  %+.10f %+.10fi   |lambda| = %.10f\n", l["re"].template get<double>(),
-                    l["im"].template get<double>(), l["abs"].template get<double>());
-      std::printf("spectral gap %.3e, decay rate %.4g per unit time\n",
-                  inv["spectral_gap"].template get<double>(),
-                  inv["decay_rate"].template get<double>());
-      std::printf("outputs in %s: %s, summary.json%s\n", c.final_dir.c_str(),
-                  written.describe(res.frame_names).c_str(), took.c_str());
-    } else {
-      if (mb.mass.empty()) {
-        std::printf("mass budget: off\n");
-      } else {
-        // The last column is what no term accounts for, mass0 − grid − outflow − atom, and
-        // the sum of the terms' estimated errors (budget.hpp).
-        const std::vector<double> defect = budget_defect(mb), bar = budget_defect_error(mb);
-        std::printf("mass budget (initial mass on the grid %.6g):\n", mb.mass0);
-        std::printf("  %10s %14s %14s %14s %10s %12s %10s\n", "t", "grid", "outflow", "atom",
-                    "+/- atom", "unaccounted", "+/-");
-        const std::size_t K = mb.mass.size(), stride = std::max<std::size_t>(1, (K + 9) / 10);
-        for (std::size_t k = 0; k < K; ++k)
-          if (k % stride == 0 || k + 1 == K)
-            std::printf("  %10.4f %14.6e %14.6e %14.6e %10.2e %12.3e %10.2e\n", times[k],
-                        mb.mass[k], mb.outflow[k], mb.atom[k],
-                        k < res.atom_error.size() ? res.atom_error[k] : 0.0, defect[k], bar[k]);
-      }
-      std::printf("outputs in %s: %s, summary.json%s\n", c.final_dir.c_str(),
-                  written.describe(res.frame_names).c_str(), took.c_str());
-    }
-  }
+  if (!plan.config.quiet) print_run_report(plan.config, rec, summary, *written);
   return exit_status(ExitCode::Success);
 }
 
@@ -505,7 +556,7 @@ int runner_main(int argc, char** argv, const Backend& backend = serial_backend()
   }
   try {
     const RunConfig c = read_config<M>(argv[1]);
-    return run_model<M>(c, backend);
+    return run_chain<M>(c, backend);
   } catch (const ConfigError& e) {
     // Every rank reads the same config: rank 0 says it once.
     if (backend.root()) std::fprintf(stderr, "hybgen: error: %s\n", e.what());

@@ -26,6 +26,8 @@
 #include <string_view>
 #include <vector>
 
+#include "hybgen/rt/method_table.hpp"
+
 namespace hybgen::rt {
 
 /// What a setting holds.
@@ -51,7 +53,7 @@ struct SettingSpec {
   /// The allowed words, '|'-separated (words).
   std::string_view words;
   /// Who reads it: "all", "derive" (the generator's symbolic stage, not the runner), or the
-  /// methods, space-separated.
+  /// methods (names of method_table.hpp's rows), space-separated.
   std::string_view methods;
   std::string_view help;  ///< One line of help; the meaning of 0 where 0 means "automatic".
 };
@@ -59,16 +61,13 @@ struct SettingSpec {
 /// Largest exactly representable integer setting (the seed's range).
 inline constexpr double kMaxExactInteger = 9007199254740992.0;  // 2^53
 
-/// The methods, in the order `--help` lists them (the words of setting "method").
-inline constexpr std::string_view kMethodWords = "characteristics|transfer|invariant|particles";
-
 /// The settings table.
 inline constexpr std::array kSettings = {
     SettingSpec{"t_end", SettingType::real, 1.0, "", 0.0, 1e300, true, "", "all", "final time"},
     SettingSpec{"dt", SettingType::real, 0.0, "", 0.0, 1e300, true, "", "all",
                 "output interval (default: t_end/10)"},
-    SettingSpec{"method", SettingType::word, 0.0, "characteristics", 0, 0, false, kMethodWords,
-                "all", "the solver"},
+    SettingSpec{"method", SettingType::word, 0.0, method_spec(Method::characteristics).name, 0, 0,
+                false, kMethodWords, "all", "the solver"},
     SettingSpec{"tol", SettingType::real, 1e-10, "", 0.0, 0.1, true, "", "all",
                 "relative tolerance of the ODE integrator (absolute: tol/100)"},
     SettingSpec{"max_events", SettingType::integer, 100000, "", 1, 1e9, false, "", "all",
@@ -138,6 +137,41 @@ constexpr const SettingSpec* find_setting(std::string_view name) {
   const std::size_t i = setting_index(name);
   return i < kSettings.size() ? &kSettings[i] : nullptr;
 }
+
+/// Whether `readers` (a settings row's `methods` column) names the method `name`: `all`
+/// names every method, `derive` none.
+constexpr bool setting_read_by(std::string_view readers, std::string_view name) {
+  if (readers == "all") return true;
+  std::size_t i = 0;
+  while (i < readers.size()) {
+    std::size_t j = readers.find(' ', i);
+    if (j == std::string_view::npos) j = readers.size();
+    if (readers.substr(i, j - i) == name) return true;
+    i = j + 1;
+  }
+  return false;
+}
+
+/// Whether method `m` reads setting `s` (the settings table's `methods` column).
+constexpr bool method_reads(const MethodSpec& m, const SettingSpec& s) {
+  return setting_read_by(s.methods, m.name);
+}
+
+static_assert(
+    [] {
+      for (const SettingSpec& s : kSettings) {
+        if (s.methods == "all" || s.methods == "derive") continue;
+        std::size_t i = 0;
+        while (i < s.methods.size()) {
+          std::size_t j = s.methods.find(' ', i);
+          if (j == std::string_view::npos) j = s.methods.size();
+          if (find_method(s.methods.substr(i, j - i)) == nullptr) return false;
+          i = j + 1;
+        }
+      }
+      return true;
+    }(),
+    "kSettings: every reader named in the `methods` column is a row of kMethods");
 
 /// The default number of setting `name`, at compile time (a misspelt name does not compile).
 consteval double setting_number(std::string_view name) {

@@ -3,7 +3,9 @@
 /// The solver methods of `hybgen run` behind one interface: each takes the grid, the output
 /// times and the parameters and returns a `MethodResult` — densities on the grid nodes at
 /// the output times, the mass budget, and the method's own summary fields — which the runner
-/// writes out the same way whatever the method (docs/design.md run contract).
+/// writes out the same way whatever the method (docs/design.md run contract). Each row of the
+/// methods table (method_table.hpp) has its solve function in `solvers`, with one signature;
+/// `solve_method` dispatches through it.
 ///
 ///  - characteristics: exact backward characteristics per node (characteristics.hpp); the
 ///    budget by adaptive cubature of the same characteristics (budget.hpp);
@@ -22,6 +24,7 @@
 /// close warns); counted per sample for particles and per column for the transfer operator.
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -32,6 +35,7 @@
 #include <vector>
 
 #include "hybgen/rt/io/progress.hpp"
+#include "hybgen/rt/method_table.hpp"
 #include "hybgen/rt/methods/budget.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
 #include "hybgen/rt/methods/mass_budget.hpp"
@@ -197,10 +201,10 @@ TransferOperator<state_dim_v<M>> assemble(const TensorGrid<state_dim_v<M>>& grid
 
 }  // namespace detail
 
-/// The characteristics method and its adaptive mass budget.
+/// The characteristics method and its adaptive mass budget (`dt` unused).
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim_v<M>>& grid,
-                                                      std::span<const double> times,
+                                                      std::span<const double> times, double,
                                                       const double* par, const MethodSettings& s) {
   constexpr std::size_t N = state_dim_v<M>;
   MethodResult<N> r;
@@ -224,7 +228,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   const std::string& budget_kind = s.settings.word<"budget">();
   const double budget_tol = s.settings.real<"budget_tol">();
   if (budget_kind == "off") {
-    r.summary["budget"] = {{"kind", "off"}};
+    r.summary[summary_key::budget] = {{"kind", "off"}};
     return r;
   }
   // The mass budget integrates u(t) adaptively (characteristics at the cubature nodes): a
@@ -280,19 +284,19 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
                   times[worst_k], defect[worst_k], worst_ratio, bar[worst_k], aopt.rel_tol / 10);
     r.warnings.push_back(b);
   }
-  r.summary["budget"] = {{"kind", budget_kind},
-                         {"rel_tol", aopt.rel_tol},
-                         {"volume_points", info.volume.points},
-                         {"check_points", info.volume.check_points},
-                         {"face_points", info.surface.points},
-                         {"atom_points", info.atom.points},
-                         {"converged", converged},
-                         {"defect", defect},
-                         {"defect_error", bar},
-                         {"closes", worst_ratio <= 1.0},
-                         {"mass_error", mb.mass_error},
-                         {"outflow_error", mb.outflow_error},
-                         {"seconds", r.budget_s}};
+  r.summary[summary_key::budget] = {{"kind", budget_kind},
+                                    {"rel_tol", aopt.rel_tol},
+                                    {"volume_points", info.volume.points},
+                                    {"check_points", info.volume.check_points},
+                                    {"face_points", info.surface.points},
+                                    {"atom_points", info.atom.points},
+                                    {"converged", converged},
+                                    {"defect", defect},
+                                    {"defect_error", bar},
+                                    {"closes", worst_ratio <= 1.0},
+                                    {"mass_error", mb.mass_error},
+                                    {"outflow_error", mb.outflow_error},
+                                    {"seconds", r.budget_s}};
   return r;
 }
 
@@ -329,14 +333,16 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   t["note"] =
       "outflow and atom are counted per column of the operator (where the forward flow of each "
       "cell's samples ends); mass + outflow + atom = initial mass to budget_defect";
-  r.summary["transfer"] = t;
+  r.summary[summary_key::transfer] = t;
   return r;
 }
 
-/// The invariant density (leading eigenvector of the transfer operator) and the spectrum.
+/// The invariant density (leading eigenvector of the transfer operator) and the spectrum:
+/// one frame (`times` unused; the operator's step is `step`, else `dt`).
 template <HybridModel M>
-MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& grid, double dt,
-                                             const double* par, const MethodSettings& s) {
+MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>& grid,
+                                                std::span<const double>, double dt,
+                                                const double* par, const MethodSettings& s) {
   constexpr std::size_t N = state_dim_v<M>;
   MethodResult<N> r;
   const TransferOptions o = detail::transfer_options(s, dt);
@@ -352,7 +358,7 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   r.solution.n_point = op.n_node;
   r.solution.u = inv.density;
   if (op.distributed) r.solution.distributed = true, r.solution.owned = inv.owned;
-  r.frame_names = {"invariant"};
+  r.frame_names = {std::string(method_spec(Method::invariant).frame)};
   nlohmann::json eig = nlohmann::json::array();
   for (const auto& l : inv.eigenvalues)
     eig.push_back({{"re", l.real()}, {"im", l.imag()}, {"abs", std::abs(l)}});
@@ -367,18 +373,18 @@ MethodResult<state_dim_v<M>> solve_invariant(const TensorGrid<state_dim_v<M>>& g
   j["solver"] = inv.method;
   j["iterations"] = inv.iterations;
   j["converged"] = inv.converged;
-  r.summary["invariant"] = j;
+  r.summary[summary_key::invariant] = j;
   if (!inv.converged)
     r.warnings.push_back("the eigen-solver (" + inv.method +
                          ") did not meet its tolerance; see invariant.residual in summary.json");
   return r;
 }
 
-/// The particle method.
+/// The particle method (`dt` unused).
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>& grid,
-                                                std::span<const double> times, const double* par,
-                                                const MethodSettings& s) {
+                                                std::span<const double> times, double,
+                                                const double* par, const MethodSettings& s) {
   constexpr std::size_t N = state_dim_v<M>;
   MethodResult<N> r;
   detail::set_time_frames(r, times);
@@ -404,33 +410,41 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   r.marginals = std::move(run.marginals);
   r.budget = std::move(run.budget);
   r.atom_error = run.atom_error;
-  r.summary["particles"] = {
+  r.summary[summary_key::particles] = {
       {"particles", run.particles},
       {"traced", run.traced},
       {"seed", po.seed},
       {"sampled_mass", run.sampled_mass},
       {"note", "mass_error and atom_error are 2-sigma Monte-Carlo estimates"}};
-  r.summary["mass_error"] = r.budget.mass_error;
+  r.summary[summary_key::mass_error] = r.budget.mass_error;
   return r;
 }
 
-/// Dispatch on the setting `method`; throws std::invalid_argument for an unknown method.
+/// A method's solve function: the grid, the output times, the output interval dt, the
+/// parameters and the settings to a result.
+template <HybridModel M>
+using SolveFunction = MethodResult<state_dim_v<M>> (*)(const TensorGrid<state_dim_v<M>>&,
+                                                       std::span<const double>, double,
+                                                       const double*, const MethodSettings&);
+
+/// The solve function of each row of the methods table (method_table.hpp), in its order.
+template <HybridModel M>
+inline constexpr std::array<SolveFunction<M>, kMethods.size()> solvers = {
+    &solve_by_characteristics<M>,  // Method::characteristics
+    &solve_by_transfer<M>,         // Method::transfer
+    &solve_by_invariant<M>,        // Method::invariant
+    &solve_by_particles<M>,        // Method::particles
+};
+
+/// Dispatch on the setting `method` through the methods table; throws std::invalid_argument
+/// for an unknown method.
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_method(const TensorGrid<state_dim_v<M>>& grid,
                                           std::span<const double> times, double dt,
                                           const double* par, const MethodSettings& s) {
-  const std::string& method = s.settings.word<"method">();
-  MethodResult<state_dim_v<M>> r;
-  if (method == "characteristics")
-    r = solve_by_characteristics<M>(grid, times, par, s);
-  else if (method == "transfer")
-    r = solve_by_transfer<M>(grid, times, dt, par, s);
-  else if (method == "invariant")
-    r = solve_invariant<M>(grid, dt, par, s);
-  else if (method == "particles")
-    r = solve_by_particles<M>(grid, times, par, s);
-  else
-    throw std::invalid_argument("unknown method '" + method + "'");
+  const MethodSpec& method = method_named(s.settings.word<"method">());
+  MethodResult<state_dim_v<M>> r =
+      solvers<M>[static_cast<std::size_t>(method.id)](grid, times, dt, par, s);
   // Over several ranks every frame stays distributed (each method keeps its blocks; this
   // holds the contract for any method that does not).
   const Backend& backend = s.backend ? *s.backend : serial_backend();

@@ -1,0 +1,135 @@
+#pragma once
+/// \file method_table.hpp
+/// The methods of `hybgen run`, defined once. `kMethods` is the table (name, what the
+/// method needs, what it writes, where its fields go in summary.json); everything else
+/// reads it:
+///  - the words of the setting `method` (settings.hpp, `kMethodWords`, built from the names);
+///  - the dispatcher (methods/methods.hpp, `solve_method`: one solve function per entry, in
+///    the table's order);
+///  - the rules that relate the method to other settings (setting_rules.hpp: a method that
+///    inverts the resets, one that deposits marginals);
+///  - the run's chain (runner.hpp), the writers (runtime/src/io/) and `hybgen sweep`'s table
+///    (generator/src/sweep.cpp), which read the method's block of summary.json by
+///    `summary_key`.
+/// The settings a method reads are the rows of the settings table that name it
+/// (settings.hpp, `SettingSpec::methods`); `method_reads` answers from there.
+///
+/// Adding a method: an entry here, its solve function in methods/ and its entry in
+/// `solvers` (methods/methods.hpp) — docs/design.md, "Adding a method".
+
+#include <array>
+#include <cstddef>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+
+namespace hybgen::rt {
+
+/// summary.json's members, named once: the runner writes them (runner.hpp), the writers
+/// (runtime/src/io/), `hybgen sweep` (generator/src/sweep.cpp) and the tests read them.
+namespace summary_key {
+inline constexpr const char* model = "model";                ///< The model's name.
+inline constexpr const char* method = "method";              ///< The method's name.
+inline constexpr const char* settings = "settings";          ///< Every setting of the run.
+inline constexpr const char* seconds = "seconds";            ///< Time per stage.
+inline constexpr const char* times = "times";                ///< Frame times.
+inline constexpr const char* initial_mass = "initial_mass";  ///< Mass on the grid at t = 0.
+inline constexpr const char* mass = "mass";                  ///< Mass on the grid per time.
+inline constexpr const char* mass_error = "mass_error";      ///< Its error (particles: 2 sigma).
+inline constexpr const char* outflow = "outflow";            ///< Mass out of the box per time.
+inline constexpr const char* atom = "atom";                  ///< Mass at a Zeno point per time.
+inline constexpr const char* atom_error = "atom_error";      ///< Its estimated error.
+/// The blocks of the methods' own fields (MethodSpec::summary_key).
+inline constexpr const char* budget = "budget";        ///< characteristics: the mass budget.
+inline constexpr const char* transfer = "transfer";    ///< transfer: the operator and march.
+inline constexpr const char* invariant = "invariant";  ///< invariant: density and spectrum.
+inline constexpr const char* particles = "particles";  ///< particles: the samples.
+}  // namespace summary_key
+
+/// A method, in the table's order.
+enum class Method { characteristics, transfer, invariant, particles };
+
+/// One row of the methods table.
+struct MethodSpec {
+  Method id;              ///< Its enumerator (the row's index).
+  std::string_view name;  ///< The word of the setting `method`, and summary.json's `method`.
+  /// Whether it traces backward through the resets, so that every reset needs an inverse
+  /// off its guard too (the generator refuses the method otherwise: setting_rules.hpp).
+  bool inverts_resets;
+  /// Whether it writes one frame (`frame`, the stationary answer) instead of a time series.
+  bool one_frame;
+  std::string_view frame;  ///< The one frame's name (its file stem), when `one_frame`.
+  /// Whether it can keep the 2-D marginals instead of the grid (the setting density).
+  bool deposits_marginals;
+  /// The member of summary.json that holds its own fields (summary_key).
+  const char* summary_key;
+  std::string_view help;  ///< One line for `--help` and docs/settings.md.
+};
+
+/// The methods table, in the order `--help` lists them.
+inline constexpr std::array kMethods = {
+    MethodSpec{Method::characteristics, "characteristics", true, false, "", false,
+               summary_key::budget,
+               "exact backward characteristics per node; the mass budget by adaptive cubature"},
+    MethodSpec{Method::transfer, "transfer", false, false, "", false, summary_key::transfer,
+               "a one-step transfer operator on node masses, marched by mat-vecs"},
+    MethodSpec{Method::invariant, "invariant", false, true, "invariant", false,
+               summary_key::invariant,
+               "the leading eigenvector of the transfer operator, and its next eigenvalues"},
+    MethodSpec{Method::particles, "particles", false, false, "", true, summary_key::particles,
+               "Monte-Carlo samples of the initial density pushed forward and deposited"},
+};
+
+static_assert(
+    [] {
+      for (std::size_t i = 0; i < kMethods.size(); ++i)
+        if (static_cast<std::size_t>(kMethods[i].id) != i) return false;
+      return true;
+    }(),
+    "kMethods: each row's id is its index");
+
+/// The row of method `m`.
+constexpr const MethodSpec& method_spec(Method m) {
+  return kMethods[static_cast<std::size_t>(m)];
+}
+
+/// The row named `name`, or null.
+constexpr const MethodSpec* find_method(std::string_view name) {
+  for (const MethodSpec& m : kMethods)
+    if (m.name == name) return &m;
+  return nullptr;
+}
+
+/// The row named `name`; throws std::invalid_argument "unknown method 'NAME'".
+inline const MethodSpec& method_named(std::string_view name) {
+  if (const MethodSpec* m = find_method(name)) return *m;
+  throw std::invalid_argument("unknown method '" + std::string(name) + "'");
+}
+
+namespace detail {
+
+/// The length of the method names joined by '|'.
+consteval std::size_t method_words_length() {
+  std::size_t n = 0;
+  for (const MethodSpec& m : kMethods) n += m.name.size() + 1;
+  return n - 1;
+}
+
+/// The method names joined by '|' (the words of the setting `method`).
+inline constexpr auto kMethodWordsText = [] {
+  std::array<char, method_words_length()> out{};
+  std::size_t at = 0;
+  for (const MethodSpec& m : kMethods) {
+    if (at > 0) out[at++] = '|';
+    for (const char ch : m.name) out[at++] = ch;
+  }
+  return out;
+}();
+
+}  // namespace detail
+
+/// The methods' names, '|'-separated, in the table's order (the setting `method`'s words).
+inline constexpr std::string_view kMethodWords{detail::kMethodWordsText.data(),
+                                               detail::kMethodWordsText.size()};
+
+}  // namespace hybgen::rt

@@ -1,0 +1,164 @@
+#pragma once
+/// \file setting_rules.hpp
+/// The rules that relate a setting to another setting, to the method (method_table.hpp), to
+/// the model (its states, its resets) or to the run (its ranks, the machine's memory),
+/// defined once, beside the settings table (settings.hpp) that checks each setting on its
+/// own. The generator applies them before it builds a runner (generator/src/run.cpp,
+/// `check_runnable`; generator/src/check.cpp for figure_axes, located at the setting;
+/// generator/src/derive.cpp as `check`'s warning), the runner again on its configuration
+/// (runner.hpp, `validate_run`), so that a configuration written by hand is held to the same
+/// rules. A rule knows only what `RunFacts` tells it: a fact left at its "unknown" value
+/// skips the rules that need it.
+///
+/// Adding a rule: a function here returning its message ("" when the rule holds), called from
+/// `setting_conflicts`; docs/design.md, "Adding a setting".
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdio>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "hybgen/rt/method_table.hpp"
+#include "hybgen/rt/settings.hpp"
+
+namespace hybgen::rt {
+
+/// What the rules know besides the settings. Defaults are "unknown": the rule is skipped.
+struct RunFacts {
+  std::vector<std::string> states;  ///< The model's state names (empty: unknown).
+  /// The guards whose reset has an inverse on its guard only (derive.cpp,
+  /// `inverse_on_guard_only`), by name and index; null: unknown.
+  const std::vector<std::pair<std::size_t, std::string>>* guards_without_inverse = nullptr;
+  int ranks = 0;  ///< The processes of the run (0: from the settings `backend` and `ranks`).
+  std::vector<int> grid;      ///< Nodes per axis (empty: unknown).
+  int modes = 0;              ///< Modes (0: unknown).
+  std::size_t frames = 0;     ///< Output times of a time series (0: unknown).
+  double memory_bytes = 0.0;  ///< This machine's memory (0: unknown).
+};
+
+/// A broken rule.
+struct SettingConflict {
+  std::string setting;  ///< The setting at fault (a key of settings.hpp, or "grid").
+  /// The guard whose reset the rule is about (an index of the model's guards), or -1.
+  long guard = -1;
+  std::string message;  ///< What is wrong and the way out.
+};
+
+/// The processes a run of `s` has: `facts.ranks` when known, else the setting `ranks` with
+/// backend=mpi, else 1.
+inline int run_ranks(const Settings& s, const RunFacts& facts) {
+  if (facts.ranks > 0) return facts.ranks;
+  return s.word<"backend">() == "mpi" ? static_cast<int>(s.integer<"ranks">()) : 1;
+}
+
+/// "a, b or c".
+inline std::string or_list(const std::vector<std::string_view>& words) {
+  std::string out;
+  for (std::size_t i = 0; i < words.size(); ++i)
+    out += (i == 0 ? "" : i + 1 == words.size() ? " or " : ", ") + std::string(words[i]);
+  return out;
+}
+
+/// ranks > 1 runs MPI ranks: it needs backend=mpi.
+inline std::string ranks_rule(const Settings& s) {
+  if (s.integer<"ranks">() > 1 && s.word<"backend">() != "mpi")
+    return "ranks=" + std::to_string(s.integer<"ranks">()) +
+           " runs that many MPI ranks, which needs backend=mpi (--ranks N sets both)";
+  return "";
+}
+
+/// A method that inverts the resets needs every reset's inverse off its guard too.
+inline std::string inverse_rule(const Settings& s, const std::string& guard) {
+  if (!method_named(s.word<"method">()).inverts_resets) return "";
+  std::vector<std::string_view> others;
+  for (const MethodSpec& m : kMethods)
+    if (!m.inverts_resets) others.push_back(m.name);
+  return "the reset of guard '" + guard +
+         "' has no inverse in the whole state space (it is locally injective on its guard "
+         "only), which the " +
+         s.word<"method">() + " method needs; use --set method=" + or_list(others);
+}
+
+/// density=marginals is what a method that deposits marginals keeps.
+inline std::string marginals_rule(const Settings& s) {
+  if (s.word<"density">() != "marginals") return "";
+  const std::string& method = s.word<"method">();
+  if (!method_named(method).deposits_marginals) {
+    std::vector<std::string_view> keepers;
+    for (const MethodSpec& m : kMethods)
+      if (m.deposits_marginals) keepers.push_back(m.name);
+    const std::string which = or_list(keepers);
+    return "density=marginals is what the " + which + " deposit; method " + method +
+           " keeps the density on every node (use method=" + which + ")";
+  }
+  for (const char* o : {"npy", "vti"})
+    if (s.includes<"outputs">(o))
+      return std::string("outputs ") + o +
+             " holds the density on every node, which density=marginals does not keep (netcdf, "
+             "png, pdf, svg, gif and html show the marginals)";
+  return "";
+}
+
+/// A VTK image is one process's whole grid.
+inline std::string vti_rule(const Settings& s, int ranks) {
+  if (ranks > 1 && s.includes<"outputs">("vti"))
+    return "outputs vti holds a whole grid in one process's file, which a run over several ranks "
+           "does not gather: run.nc has the same arrays (ParaView opens it with its NetCDF CF "
+           "reader), or run with one rank";
+  return "";
+}
+
+/// figure_axes names two or more of the model's states (the pictures show their pairs).
+inline std::string figure_axes_rule(const Settings& s, const std::vector<std::string>& states) {
+  const std::vector<std::string> names = s.names<"figure_axes">();
+  for (const std::string& n : names)
+    if (std::find(states.begin(), states.end(), n) == states.end()) {
+      std::string list;
+      for (const auto& st : states) list += (list.empty() ? "" : ", ") + st;
+      return "'" + n + "' is not a state variable (the states: " + list + ")";
+    }
+  if (!names.empty() && names.size() < 2 && states.size() > 2)
+    return "needs two or more state variables: the pictures show their pairs";
+  return "";
+}
+
+/// The densities a run keeps on every node must fit in memory (frames × modes × nodes
+/// doubles; one frame for a method with one frame), unless it keeps marginals.
+inline std::string memory_rule(const Settings& s, const RunFacts& f) {
+  if (f.grid.empty() || f.modes <= 0 || f.frames == 0 || !(f.memory_bytes > 0.0)) return "";
+  if (s.word<"density">() == "marginals") return "";
+  const std::size_t frames = method_named(s.word<"method">()).one_frame ? 1 : f.frames;
+  double nodes = 1.0;
+  for (const int n : f.grid) nodes *= static_cast<double>(n);
+  const double need = nodes * static_cast<double>(frames) * f.modes * 8.0;
+  if (need <= f.memory_bytes) return "";
+  char b[400];
+  std::snprintf(b, sizeof b,
+                "the densities on the grid need %.3g GB (%.3g nodes x %d mode(s) x %zu "
+                "frame(s)) and this machine has %.3g GB: use a coarser grid, or method=particles "
+                "with density=marginals (the marginal of every pair of axes)",
+                need / 1e9, nodes, f.modes, frames, f.memory_bytes / 1e9);
+  return b;
+}
+
+/// Every rule that `s` and `facts` break, in a fixed order (the first is the one to report).
+inline std::vector<SettingConflict> setting_conflicts(const Settings& s, const RunFacts& facts) {
+  std::vector<SettingConflict> out;
+  const auto add = [&](const char* setting, std::string why, long guard = -1) {
+    if (!why.empty()) out.push_back({setting, guard, std::move(why)});
+  };
+  add("ranks", ranks_rule(s));
+  if (facts.guards_without_inverse)
+    for (const auto& [g, name] : *facts.guards_without_inverse)
+      add("method", inverse_rule(s, name), static_cast<long>(g));
+  add("density", marginals_rule(s));
+  add("grid", memory_rule(s, facts));
+  add("outputs", vti_rule(s, run_ranks(s, facts)));
+  if (!facts.states.empty()) add("figure_axes", figure_axes_rule(s, facts.states));
+  return out;
+}
+
+}  // namespace hybgen::rt
