@@ -102,9 +102,9 @@ inline double peak_resident_bytes() {
 
 /// Output times 0, dt, 2 dt, ... up to t_end (t_end itself always included).
 inline std::vector<double> output_times(double t_end, double dt) {
-  std::vector<double> t;
+  std::vector<double> t{0.0};
   const auto n = static_cast<long>(std::floor(t_end / dt + 1e-9));
-  for (long k = 0; k <= n; ++k) t.push_back(static_cast<double>(k) * dt);
+  for (long k = 1; k <= n; ++k) t.push_back(static_cast<double>(k) * dt);
   if (t_end - t.back() > 1e-9 * std::max(1.0, t_end)) t.push_back(t_end);
   t.back() = std::min(t.back(), t_end);
   return t;
