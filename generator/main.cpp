@@ -45,12 +45,15 @@ int cmd_check(const Request& req, bool preflight, const BuildOptions& build, boo
   const auto count = [](std::size_t n, const char* what) {
     return std::to_string(n) + " " + what + (n == 1 ? "" : "s");
   };
+  // The rules a run applies before it builds (setting_rules.hpp), so that `check` does not say
+  // "ok" to a model `run` refuses; with --preflight, "ok" only after the scan passed.
+  if (fe.model.sim.present) check_runnable(fe);
+  if (preflight)
+    if (const int rc = run_preflight(fe, build, quiet); rc != 0) return rc;
   std::cout << fe.src.path() << ": ok: model '" << fe.model.name << "', "
             << count(fe.model.state.size(), "state") << ", " << count(fe.sys.modes.size(), "mode")
             << ", " << count(fe.sys.guards.size(), "guard") << "\n";
-  if (!preflight) return 0;
-  std::cout.flush();
-  return run_preflight(fe, build, quiet);
+  return 0;
 }
 
 /// `hybgen derive`: the derived equations as text, LaTeX or JSON.
@@ -158,7 +161,7 @@ int main(int argc, char** argv) {
   build->add_flag("-v,--verbose", bopt.verbose, "print the compiler command");
   auto* run = app.add_subcommand("run", "derive, build and run: evolve the initial density");
   add_model(run);
-  run->add_option("--out", out, "output directory (default: out/<model>)");
+  run->add_option("--out", out, "output directory (default: out/<file>, the model file's name without .model)");
   add_build(run);
   run->footer(
       "\nSettings (--set KEY=VALUE, or KEY VALUE in the model's simulation block; also\n"
@@ -178,7 +181,7 @@ int main(int argc, char** argv) {
       "KEY=A:B:N (N equally spaced values from A to B), KEY=v1,v2,... (a list), or "
       "KEY=VALUE (every point); the points are every combination (repeatable)");
   sweep->add_option("--out", out,
-                    "output directory (default: out/<model>-sweep): sweep.csv, sweep.json and "
+                    "output directory (default: out/<file>-sweep): sweep.csv, sweep.json and "
                     "one directory of run outputs per point");
   sweep->add_option("-j,--jobs", jobs, "runners at a time (default: one per core)")
       ->check(CLI::Range(std::size_t{1}, kMaxChildren));

@@ -775,6 +775,29 @@ GiNaC::numeric parse_override_exact(const std::string& key, const std::string& v
 double parse_override_number(const std::string& key, const std::string& value) {
   return parse_override_exact(key, value).to_double();
 }
+
+/// `--set domain.X=[a,b]`: exactly one '[', one ',' and one ']', in that order, two finite
+/// numbers with a < b. Anything else is refused with the form it needs.
+std::pair<double, double> parse_interval(const std::string& key, const std::string& value) {
+  const std::string form = "--set " + key + "=" + value + ": expects an interval [a,b]";
+  if (value.size() < 2 || value.front() != '[' || value.back() != ']')
+    throw UsageError(form + (value.find('[') == std::string::npos ? " (with its brackets)"
+                                                                  : " (brackets around it)"));
+  const std::string inner = value.substr(1, value.size() - 2);
+  const std::size_t comma = inner.find(',');
+  if (comma == std::string::npos || inner.find(',', comma + 1) != std::string::npos ||
+      inner.find_first_of("[]") != std::string::npos)
+    throw UsageError(form + " (two numbers separated by one comma)");
+  const auto trim = [](std::string t) {
+    t.erase(0, t.find_first_not_of(' '));
+    t.erase(t.find_last_not_of(' ') + 1);
+    return t;
+  };
+  const double lo = parse_override_number(key, trim(inner.substr(0, comma)));
+  const double hi = parse_override_number(key, trim(inner.substr(comma + 1)));
+  if (!(lo < hi)) throw UsageError("--set " + key + "=" + value + ": empty interval (needs a < b)");
+  return {lo, hi};
+}
 }  // namespace
 
 bool is_simulation_setting(const std::string& key) {
@@ -839,25 +862,20 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets) {
       auto it = std::find(model.state.begin(), model.state.end(), var);
       if (it == model.state.end())
         throw UsageError("--set " + key + ": '" + var + "' is not a state variable");
-      // VALUE: a,b or [a,b]
-      std::string v = value;
-      if (!v.empty() && v.front() == '[') v = v.substr(1);
-      if (!v.empty() && v.back() == ']') v.pop_back();
-      auto comma = v.find(',');
-      if (comma == std::string::npos)
-        throw UsageError("--set " + key + "=[a,b] expects two numbers");
-      double lo = parse_override_number(key, v.substr(0, comma));
-      double hi = parse_override_number(key, v.substr(comma + 1));
-      if (!(lo < hi)) throw UsageError("--set " + key + ": empty interval");
+      const auto [lo, hi] = parse_interval(key, value);
       auto i = static_cast<std::size_t>(it - model.state.begin());
       sim.lo[i] = lo;
       sim.hi[i] = hi;
     } else {
+      std::vector<std::string> keys;
+      for (const auto& p : model.params) keys.push_back(p.name);
+      for (const auto& s : setting_names()) keys.push_back(s);
+      keys.emplace_back("grid");
+      for (const auto& st : model.state) keys.push_back("domain." + st);
       std::string known;
-      for (const auto& p : model.params) known += p.name + ", ";
-      for (const auto& s : setting_names()) known += s + ", ";
-      known.resize(known.size() - 2);
-      throw UsageError("--set " + key + ": unknown key (parameters and settings: " + known + ")");
+      for (const auto& k : keys) known += (known.empty() ? "" : ", ") + k;
+      throw UsageError("--set " + key + ": unknown key" + suggestion(key, keys) +
+                       " (parameters and settings: " + known + ")");
     }
   }
   if (!sets.empty() && sim.present)

@@ -4,6 +4,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -137,17 +138,27 @@ OutputTransaction::OutputTransaction(const std::string& out, OutputKind kind) : 
   if (ec) throw UsageError("cannot create the output directory '" + out + "': " + ec.message());
 
   // An exclusive, non-blocking flock on OUT.lock: two runs into the same OUT cannot
-  // interleave; the second one is refused. The (empty) lock file stays, so that no other
-  // run can lock a file that is about to be unlinked.
-  const std::string lock_path = (parent_ / (name + ".lock")).string();
-  lock_fd_ = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
-  if (lock_fd_ < 0)
-    throw UsageError("cannot create the lock file '" + lock_path + "': " + std::strerror(errno));
-  if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
-    const int err = errno;
-    ::close(lock_fd_);
-    if (err == EWOULDBLOCK) throw UsageError("another hybgen run is writing to '" + out + "'");
-    throw UsageError("cannot lock '" + lock_path + "': " + std::strerror(err));
+  // interleave; the second one is refused. The holder unlinks the file before it lets go
+  // (release_lock), so no lock file outlives a run. That a lock is held on the file the path
+  // names is checked after locking (same device and inode): a run that opened the file just
+  // before its holder unlinked it would otherwise hold a lock on a file nobody else sees.
+  lock_path_ = (parent_ / (name + ".lock")).string();
+  for (int attempt = 0;; ++attempt) {
+    lock_fd_ = ::open(lock_path_.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+    if (lock_fd_ < 0)
+      throw UsageError("cannot create the lock file '" + lock_path_ + "': " + std::strerror(errno));
+    if (::flock(lock_fd_, LOCK_EX | LOCK_NB) != 0) {
+      const int err = errno;
+      ::close(lock_fd_);
+      if (err == EWOULDBLOCK) throw UsageError("another hybgen run is writing to '" + out + "'");
+      throw UsageError("cannot lock '" + lock_path_ + "': " + std::strerror(err));
+    }
+    struct stat held {}, named {};
+    if (::fstat(lock_fd_, &held) == 0 && ::stat(lock_path_.c_str(), &named) == 0 &&
+        held.st_dev == named.st_dev && held.st_ino == named.st_ino)
+      break;
+    ::close(lock_fd_);  // the holder unlinked it meanwhile: the run it protected has ended
+    if (attempt == 8) throw UsageError("cannot lock '" + lock_path_ + "': it keeps being replaced");
   }
   try {
     // OUT is replaced as a whole: refuse anything but a directory of earlier outputs.
@@ -193,14 +204,21 @@ OutputTransaction::OutputTransaction(const std::string& out, OutputKind kind) : 
       fs::remove_all(p, ec);
     }
   } catch (...) {
-    ::close(lock_fd_);
+    release_lock();
     throw;
   }
 }
 
+void OutputTransaction::release_lock() noexcept {
+  if (lock_fd_ < 0) return;
+  ::unlink(lock_path_.c_str());  // while held: see the constructor
+  ::close(lock_fd_);
+  lock_fd_ = -1;
+}
+
 OutputTransaction::~OutputTransaction() {
   if (!committed_) abort();
-  ::close(lock_fd_);
+  release_lock();
 }
 
 const fs::path& OutputTransaction::stage() {

@@ -54,6 +54,9 @@ void check_runnable(const Frontend& fe) {
   rt::RunFacts facts;
   facts.states = m.state;
   facts.guards_without_inverse = &no_inverse;
+  facts.grid = m.sim.grid;
+  facts.modes = static_cast<int>(m.modes.size());
+  facts.memory_bytes = rt::physical_memory_bytes();
   for (const rt::SettingConflict& c : rt::setting_conflicts(m.sim.settings, facts)) {
     if (c.guard >= 0)
       throw fe.src.error(m.guards[static_cast<std::size_t>(c.guard)].reset_loc, c.message);
@@ -120,10 +123,17 @@ void stop_if_interrupted(OutputTransaction& tx) {
   die_by_signal(sig);  // so that a calling shell or script stops too
 }
 
+std::string default_out_dir(const Frontend& fe, const std::string& suffix) {
+  // The file's name, not `model NAME`: two files that share a model name (a copy being
+  // edited) must not replace each other's outputs.
+  const std::string stem = fs::path(fe.src.path()).stem().string();
+  return "out/" + (stem.empty() || stem == "-" ? fe.model.name : stem) + suffix;
+}
+
 int run_to_outputs(const Frontend& fe, const RunOptions& options) {
   check_runnable(fe);
   const Model& m = fe.model;
-  const std::string out = options.out.empty() ? "out/" + m.name : options.out;
+  const std::string out = options.out.empty() ? default_out_dir(fe) : options.out;
   OutputTransaction tx(out, OutputKind::Run);
   const BuildResult b = build_model_runner(fe, options.build, options.quiet);
   // From here on an interrupt removes the staging directory instead of leaving it.

@@ -316,7 +316,8 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     }
   }
   const Model& m0 = points.front().fe->model;
-  const std::string out = options.run.out.empty() ? "out/" + m0.name + "-sweep" : options.run.out;
+  const std::string out =
+      options.run.out.empty() ? default_out_dir(*points.front().fe, "-sweep") : options.run.out;
   OutputTransaction tx(out, OutputKind::Sweep);
 
   // One runner for every point: its sources are emitted with the file's parameter values

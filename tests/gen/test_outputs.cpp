@@ -205,6 +205,25 @@ TEST(Outputs, TransactionRefusesForeignFilesAndASecondWriter) {
   }
 }
 
+TEST(Outputs, NoLockFileOutlivesATransaction) {
+  // OUT.lock is unlinked by its holder before it lets go, whether the transaction commits,
+  // aborts or is refused after locking (a foreign file in OUT); a run that meanwhile opened
+  // the unlinked file does not take a lock on it (outputs.cpp checks the inode it locked).
+  const fs::path d = fresh("lockfile");
+  {
+    OutputTransaction tx((d / "run").string(), OutputKind::Run);
+    EXPECT_TRUE(fs::exists(d / "run.lock"));
+    put(tx.stage() / "u_0000.npy", "new");
+    tx.commit();
+  }
+  EXPECT_FALSE(fs::exists(d / "run.lock"));
+  { const OutputTransaction tx((d / "aborted").string(), OutputKind::Run); }
+  EXPECT_FALSE(fs::exists(d / "aborted.lock"));
+  put(d / "foreign" / "paper.tex", "mine");
+  EXPECT_THROW(OutputTransaction((d / "foreign").string(), OutputKind::Run), UsageError);
+  EXPECT_FALSE(fs::exists(d / "foreign.lock"));
+}
+
 TEST(Outputs, TransactionRestoresTheOutputsOfARunKilledMidSwap) {
   // A run killed between the fallback's renames left OUT missing, the complete old set as
   // OUT.old-<pid> and a staging directory: the next transaction restores the first and

@@ -88,6 +88,10 @@ class OutputTransaction {
  private:
   std::string shown_;
   std::filesystem::path target_, parent_, staging_, old_;
+  /// Unlink OUT.lock and release it (idempotent).
+  void release_lock() noexcept;
+
+  std::string lock_path_;  ///< OUT.lock beside OUT.
   int lock_fd_ = -1;
   bool had_outputs_ = false;
   bool committed_ = false;

@@ -17,7 +17,7 @@ namespace hybgen::gen {
 
 /// How `hybgen run` and `hybgen sweep` build and run.
 struct RunOptions {
-  std::string out;     ///< Output directory ("": out/<model>, or out/<model>-sweep).
+  std::string out;  ///< Output directory ("": default_out_dir: out/<file>, out/<file>-sweep).
   BuildOptions build;  ///< How to build the runner.
   bool quiet = false;  ///< No progress output.
 };
@@ -53,6 +53,10 @@ nlohmann::json run_provenance(const Frontend& fe);
 /// the previous outputs are unchanged and end hybgen by the signal; else return. Asked to
 /// stop, hybgen never swaps, even after its runners succeeded.
 void stop_if_interrupted(OutputTransaction& tx);
+
+/// The output directory of a run of `fe` without --out: `out/<file><suffix>`, <file> the
+/// model file's name without its extension (the model's name when it has no file).
+std::string default_out_dir(const Frontend& fe, const std::string& suffix = "");
 
 /// `hybgen run`: build, run into a staging directory, and swap it in on success. Returns
 /// the exit code (the runner's on failure, OUT unchanged); on an interrupt, removes the

@@ -88,12 +88,6 @@ TensorGrid<N> scan_grid(const TensorGrid<N>& grid) {
   return coarse;
 }
 
-/// This machine's memory in bytes (0 if unknown).
-inline double physical_memory_bytes() {
-  const long pages = ::sysconf(_SC_PHYS_PAGES), size = ::sysconf(_SC_PAGE_SIZE);
-  return pages > 0 && size > 0 ? static_cast<double>(pages) * static_cast<double>(size) : 0.0;
-}
-
 /// The peak resident set size of this process so far, in bytes (getrusage).
 inline double peak_resident_bytes() {
   rusage u{};
@@ -191,9 +185,6 @@ RunPlan<state_dim_v<M>> validate_run(const RunConfig& config, const Backend& bac
     omp_set_num_threads(static_cast<int>(threads));
   else if (backend.ranks_here() > 1 && std::getenv("OMP_NUM_THREADS") == nullptr)
     omp_set_num_threads(std::max(1, omp_get_num_procs() / backend.ranks_here()));
-  for (std::size_t a = 0; a < N; ++a) p.grid.axes[a] = p.config.axes[a];
-  p.dt = set.real<"dt">();
-  p.times = output_times(set.real<"t_end">(), p.dt);
   try {
     p.method = &method_named(p.config.method());
   } catch (const std::invalid_argument& e) {
@@ -204,12 +195,14 @@ RunPlan<state_dim_v<M>> validate_run(const RunConfig& config, const Backend& bac
   facts.ranks = backend.ranks();
   for (const GridAxis& a : p.config.axes) facts.grid.push_back(a.n);
   facts.modes = M::n_mode;
-  facts.frames = p.times.size();
   facts.memory_bytes = physical_memory_bytes();
   if (const std::vector<SettingConflict> broken = setting_conflicts(set, facts); !broken.empty())
     throw ConfigError(broken.front().setting == "figure_axes"
                           ? "setting 'figure_axes': " + broken.front().message
                           : broken.front().message);
+  for (std::size_t a = 0; a < N; ++a) p.grid.axes[a] = p.config.axes[a];
+  p.dt = set.real<"dt">();
+  p.times = output_times(set.real<"t_end">(), p.dt);  // at most kMaxFrames (the rules)
   p.solve.settings = set;
   p.solve.quiet = p.config.quiet;
   p.solve.backend = &backend;

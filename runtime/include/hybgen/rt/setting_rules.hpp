@@ -13,7 +13,10 @@
 /// Adding a rule: a function here returning its message ("" when the rule holds), called from
 /// `setting_conflicts`; docs/design.md, "Adding a setting".
 
+#include <unistd.h>
+
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdio>
 #include <string>
@@ -33,7 +36,7 @@ struct RunFacts {
   /// `inverse_on_guard_only`), by name and index; null: unknown.
   const std::vector<std::pair<std::size_t, std::string>>* guards_without_inverse = nullptr;
   int ranks = 0;  ///< The processes of the run (0: from the settings `backend` and `ranks`).
-  std::vector<int> grid;      ///< Nodes per axis (empty: unknown).
+  std::vector<long> grid;     ///< Nodes per axis (empty: unknown).
   int modes = 0;              ///< Modes (0: unknown).
   std::size_t frames = 0;     ///< Output times of a time series (0: unknown).
   double memory_bytes = 0.0;  ///< This machine's memory (0: unknown).
@@ -60,6 +63,36 @@ inline std::string or_list(const std::vector<std::string_view>& words) {
   for (std::size_t i = 0; i < words.size(); ++i)
     out += (i == 0 ? "" : i + 1 == words.size() ? " or " : ", ") + std::string(words[i]);
   return out;
+}
+
+/// Most output times a run may have: a loud cap, before anything is allocated (t_end = 1e15
+/// with dt = 1e-9 asked for 1e24 frames).
+inline constexpr double kMaxFrames = 1e6;
+
+/// The number of output times of `t_end` and `dt` (runner.hpp's output_times: 0, dt, …, and
+/// t_end), in floating point so that it cannot overflow.
+inline double frame_count(double t_end, double dt) {
+  const double n = std::floor(t_end / dt + 1e-9);
+  return n + 1.0 + (t_end - n * dt > 1e-9 * std::max(1.0, t_end) ? 1.0 : 0.0);
+}
+
+/// This machine's memory in bytes (0 if unknown).
+inline double physical_memory_bytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), size = ::sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && size > 0 ? static_cast<double>(pages) * static_cast<double>(size) : 0.0;
+}
+
+/// t_end / dt gives at most kMaxFrames output times.
+inline std::string frames_rule(const Settings& s) {
+  const double t_end = s.real<"t_end">(), dt = s.real<"dt">();
+  const double frames = frame_count(t_end, dt);
+  if (frames <= kMaxFrames) return "";
+  char b[240];
+  std::snprintf(b, sizeof b,
+                "t_end = %g with dt = %g asks for %.3g output times, more than the %.0e a run may "
+                "have: raise dt (the output interval; the solvers' own steps do not depend on it)",
+                t_end, dt, frames, kMaxFrames);
+  return b;
 }
 
 /// ranks > 1 runs MPI ranks: it needs backend=mpi.
@@ -128,16 +161,18 @@ inline std::string figure_axes_rule(const Settings& s, const std::vector<std::st
 /// The densities a run keeps on every node must fit in memory (frames × modes × nodes
 /// doubles; one frame for a method with one frame), unless it keeps marginals.
 inline std::string memory_rule(const Settings& s, const RunFacts& f) {
-  if (f.grid.empty() || f.modes <= 0 || f.frames == 0 || !(f.memory_bytes > 0.0)) return "";
+  if (f.grid.empty() || f.modes <= 0 || !(f.memory_bytes > 0.0)) return "";
   if (s.word<"density">() == "marginals") return "";
-  const std::size_t frames = method_named(s.word<"method">()).one_frame ? 1 : f.frames;
+  const double series = f.frames > 0 ? static_cast<double>(f.frames)
+                                     : frame_count(s.real<"t_end">(), s.real<"dt">());
+  const double frames = method_named(s.word<"method">()).one_frame ? 1.0 : series;
   double nodes = 1.0;
-  for (const int n : f.grid) nodes *= static_cast<double>(n);
+  for (const long n : f.grid) nodes *= static_cast<double>(n);
   const double need = nodes * static_cast<double>(frames) * f.modes * 8.0;
   if (need <= f.memory_bytes) return "";
   char b[400];
   std::snprintf(b, sizeof b,
-                "the densities on the grid need %.3g GB (%.3g nodes x %d mode(s) x %zu "
+                "the densities on the grid need %.3g GB (%.3g nodes x %d mode(s) x %.0f "
                 "frame(s)) and this machine has %.3g GB: use a coarser grid, or method=particles "
                 "with density=marginals (the marginal of every pair of axes)",
                 need / 1e9, nodes, f.modes, frames, f.memory_bytes / 1e9);
@@ -150,6 +185,7 @@ inline std::vector<SettingConflict> setting_conflicts(const Settings& s, const R
   const auto add = [&](const char* setting, std::string why, long guard = -1) {
     if (!why.empty()) out.push_back({setting, guard, std::move(why)});
   };
+  add("dt", frames_rule(s));
   add("ranks", ranks_rule(s));
   if (facts.guards_without_inverse)
     for (const auto& [g, name] : *facts.guards_without_inverse)
