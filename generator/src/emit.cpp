@@ -60,9 +60,9 @@ std::string quoted(const std::string& s) {
 
 /// Names in generated kernels that a state variable or parameter must not take: C++
 /// keywords, the kernels' arguments and locals, the generated struct's members, and the
-/// object-like macros of <cmath> (glibc's), <cerrno> and <cstdio>. Temporaries (t0, ct0, c0,
-/// w0, …) are matched by is_temporary_name. Every name here becomes a free one by appending
-/// '_' (none ends in '_'), so the renaming loop ends.
+/// object-like macros of <cmath> (glibc's), <cerrno> and <cstdio>. The locals the emitter
+/// numbers (_t0, _c0, …) are matched by is_generated_local. Every name here becomes a free
+/// one by appending '_' (none ends in '_'), so the renaming loop ends.
 const std::set<std::string>& c_reserved_names() {
   static const std::set<std::string> r = {
       // C++20 keywords and alternative tokens.
@@ -77,9 +77,10 @@ const std::set<std::string>& c_reserved_names() {
       "static_assert", "static_cast", "struct", "switch", "template", "this", "thread_local",
       "throw", "true", "try", "typedef", "typeid", "typename", "union", "unsigned", "using",
       "virtual", "void", "volatile", "wchar_t", "while", "xor", "xor_eq",
-      // The kernels' arguments and locals (mode, state and parameter are words of the model
-      // language, so no model name can clash with them), and the namespaces they name.
-      "mode", "state", "parameter", "out", "result", "slot", "std", "hybgen", "hybgen_model",
+      // The kernels' arguments and locals (mode, guard, state and parameter are words of the
+      // model language, so no model name can clash with them), and the namespaces they name.
+      "mode", "guard", "state", "parameter", "out", "result", "slot", "std", "hybgen",
+      "hybgen_model",
       // The generated struct's members.
       "name", "n_state", "n_param", "n_mode", "n_guard", "state_names", "param_names",
       "param_defaults", "mode_names", "guard_names", "guards", "flow", "divergence",
@@ -96,16 +97,44 @@ const std::set<std::string>& c_reserved_names() {
   return r;
 }
 
-/// Whether `n` is a name emit_c_block gives a temporary: a lower-case prefix and a number.
-/// (Appending '_' makes any name not one, so HeaderBuilder's renaming ends.)
-bool is_temporary_name(const std::string& n) {
-  std::size_t i = 0;
+// Names of the locals the emitter numbers. A kernel declares three kinds of names: the
+// model's state variables and parameters, as the model writes them (`zeta1`, `theta0`);
+// its fixed arguments and locals (`mode`, `guard`, `state`, `out`, `result`, `slot`:
+// c_reserved_names); and numbered locals — emit_c_block's common subexpressions and the
+// values of `support` and `where` relations. The numbered ones are an underscore, a
+// lower-case prefix and a number, `_[a-z]+[0-9]+`:
+//   _t0, _t1, …    common subexpressions of a kernel or `case` (kTempPrefix);
+//   _c0, _c1, …    the support relations of in_support, their subexpressions _ct0, …;
+//   _w0, _w1, …    a mode's `where` relations, their subexpressions _wt0, ….
+// They live in function scope, where C++ reserves only names with a double underscore or an
+// underscore and an upper-case letter ([lex.name]); `_t0` is neither. The model language
+// accepts every identifier [A-Za-z_][A-Za-z0-9_]* (generator/src/lexer.hpp,
+// is_ident_start), so no spelling is out of its reach: a model name of the numbered form
+// (`_t0`; no shipped model has a leading underscore) is renamed to `_t0_`, which is not of
+// the form, and every other name — lower-case letters and digits included — stays as
+// written.
+
+/// Prefix of emit_c_block's temporaries in generated kernels (see above).
+constexpr const char* kTempPrefix = "_t";
+
+/// Whether `n` has the form of a numbered local of a generated kernel, `_[a-z]+[0-9]+` (see
+/// above). Appending '_' makes any name not one, so HeaderBuilder's renaming ends.
+bool is_generated_local(const std::string& n) {
+  if (n.empty() || n[0] != '_') return false;
+  std::size_t i = 1;
   while (i < n.size() && std::islower(static_cast<unsigned char>(n[i]))) ++i;
-  if (i == 0 || i == n.size()) return false;
+  if (i == 1 || i == n.size()) return false;
   for (std::size_t j = i; j < n.size(); ++j)
     if (!std::isdigit(static_cast<unsigned char>(n[j]))) return false;
   return true;
 }
+
+/// The cases of a kernel's switch: the index it switches on (`mode` or `guard`) and, per
+/// case, the comment naming it (`mode heat`, `guard off: heat -> cool`).
+struct KernelCases {
+  std::string index;                ///< Name of the index argument.
+  std::vector<std::string> labels;  ///< One per case, in index order.
+};
 
 /// The kernel-header builder: one buffer per kernel. A kernel names the state variables
 /// and parameters it reads (`const double p = state[1];`) and leaves unread arguments unnamed,
@@ -117,7 +146,7 @@ class HeaderBuilder {
     // repeats an earlier one.
     std::set<std::string> taken;
     auto c_name = [&](std::string n) {
-      while (c_reserved_names().count(n) || is_temporary_name(n) || taken.count(n)) n += '_';
+      while (c_reserved_names().count(n) || is_generated_local(n) || taken.count(n)) n += '_';
       taken.insert(n);
       return n;
     };
@@ -131,52 +160,70 @@ class HeaderBuilder {
     }
   }
 
-  /// A kernel `static void NAME(int mode, const double* state, const double* parameter, double*
-  /// out)` switching on k; `outputs(k)` gives the expressions for case k.
-  void vector_kernel(const std::string& doc, const std::string& name, std::size_t cases,
+  /// The modes as the cases of a kernel: `int mode`, `case k: {  // mode NAME`.
+  [[nodiscard]] KernelCases mode_cases() const {
+    KernelCases cases{"mode", {}};
+    for (const auto& md : sys_.modes) cases.labels.push_back("mode " + md.name);
+    return cases;
+  }
+
+  /// The guards as the cases of a kernel: `int guard`, `case k: {  // guard NAME: FROM -> TO`.
+  [[nodiscard]] KernelCases guard_cases() const {
+    KernelCases cases{"guard", {}};
+    for (const auto& g : sys_.guards)
+      cases.labels.push_back("guard " + g.name + ": " +
+                             sys_.modes[static_cast<std::size_t>(g.from)].name + " -> " +
+                             sys_.modes[static_cast<std::size_t>(g.to)].name);
+    return cases;
+  }
+
+  /// A kernel `static void NAME(int INDEX, const double* state, const double* parameter,
+  /// double* out)` switching on INDEX (`mode` or `guard`); `outputs(k)` gives the expressions
+  /// for case k.
+  void vector_kernel(const std::string& doc, const std::string& name, const KernelCases& cases,
                      std::size_t n_out,
                      const std::function<std::vector<ex>(std::size_t)>& outputs) {
     begin_kernel();
     std::ostringstream body;
-    body << "    switch (mode) {\n";
-    for (std::size_t c = 0; c < cases; ++c) {
+    body << "    switch (" << cases.index << ") {\n";
+    for (std::size_t c = 0; c < cases.labels.size(); ++c) {
       std::vector<CAssignment> as;
       const auto es = outputs(c);
       for (std::size_t i = 0; i < es.size(); ++i)
         as.push_back({"out[" + std::to_string(i) + "]", pr_.node(es[i])});
       begin_case();
-      body << "      case " << c << ": {\n"
-           << name_values(es, "        ") << emit_c_block(pr_.dag(), as, bind_, "        ")
+      body << case_line(cases, c) << name_values(es, "        ")
+           << emit_c_block(pr_.dag(), as, bind_, "        ", kTempPrefix)
            << "        break;\n      }\n";
     }
     // An invalid index yields NaN in every output, never stale memory.
     body << "      default:\n        for (int slot = 0; slot < " << n_out
          << "; ++slot) out[slot] = std::nan(\"\");\n        break;\n    }\n  }\n\n";
-    kernels_ += "  /// " + doc + "\n  static void " + name + "(int mode, " + arguments() +
-                ", double* out) {\n" + body.str();
+    kernels_ += "  /// " + doc + "\n  static void " + name + "(int " + cases.index + ", " +
+                arguments() + ", double* out) {\n" + body.str();
   }
 
-  /// A kernel `static double NAME(int mode, const double* state, const double* parameter)`.
-  void scalar_kernel(const std::string& doc, const std::string& name, std::size_t cases,
+  /// A kernel `static double NAME(int INDEX, const double* state, const double* parameter)`.
+  void scalar_kernel(const std::string& doc, const std::string& name, const KernelCases& cases,
                      const std::function<ex(std::size_t)>& value) {
     begin_kernel();
     std::ostringstream body;
-    body << "    double result = 0.0;\n    switch (mode) {\n";
-    for (std::size_t c = 0; c < cases; ++c) {
+    body << "    double result = 0.0;\n    switch (" << cases.index << ") {\n";
+    for (std::size_t c = 0; c < cases.labels.size(); ++c) {
       const ex v = value(c);
       std::vector<CAssignment> as{{"result", pr_.node(v)}};
       begin_case();
-      body << "      case " << c << ": {\n"
-           << name_values({v}, "        ") << emit_c_block(pr_.dag(), as, bind_, "        ")
+      body << case_line(cases, c) << name_values({v}, "        ")
+           << emit_c_block(pr_.dag(), as, bind_, "        ", kTempPrefix)
            << "        break;\n      }\n";
     }
     body << "      default:\n        break;\n    }\n    return result;\n  }\n\n";
-    kernels_ += "  /// " + doc + "\n  static double " + name + "(int mode, " + arguments() +
-                ") {\n" + body.str();
+    kernels_ += "  /// " + doc + "\n  static double " + name + "(int " + cases.index + ", " +
+                arguments() + ") {\n" + body.str();
   }
 
   /// Emit `conds` as a boolean test into `os`, after naming the values they read (returns
-  /// the C condition).
+  /// the C condition). The values are named `var` and a number (`_c0`, `_w0`).
   std::string conditions(std::ostringstream& os, const std::vector<Condition>& conds,
                          const std::string& indent, const std::string& var) {
     if (conds.empty()) return "true";
@@ -188,7 +235,7 @@ class HeaderBuilder {
       os << indent << "double " << var << i << " = 0.0;\n";
       as.push_back({var + std::to_string(i), pr_.node(conds[i].expr)});
     }
-    os << emit_c_block(pr_.dag(), as, bind_, indent, var + "t");
+    os << emit_c_block(pr_.dag(), as, bind_, indent, var + "t");  // _ct0, …; _wt0, …
     std::string test;
     for (std::size_t i = 0; i < conds.size(); ++i)
       test += (i ? " && " : "") + var + std::to_string(i) + " " + conds[i].op + " 0.0";
@@ -197,10 +244,11 @@ class HeaderBuilder {
 
   void density_kernels() {
     const auto& sim = m_.sim;
+    const KernelCases modes = mode_cases();
     {
       begin_kernel();
       std::ostringstream body;
-      const std::string test = conditions(body, sim.support, "    ", "c");
+      const std::string test = conditions(body, sim.support, "    ", "_c");
       kernels_ +=
           "  /// Whether x lies in the state space (the model's `support` relations).\n"
           "  static bool in_support(" +
@@ -222,8 +270,8 @@ class HeaderBuilder {
           if (cond.op == ">") cond.op = ">=";
         }
         begin_case();
-        body << "      case " << c << ": {\n";
-        const std::string region = conditions(body, closed, "        ", "w");
+        body << case_line(modes, c);
+        const std::string region = conditions(body, closed, "        ", "_w");
         body << "        return " << region << ";\n      }\n";
       }
       body << "      default:\n        return false;\n    }\n  }\n\n";
@@ -239,12 +287,12 @@ class HeaderBuilder {
     body << "    double result = 0.0;\n    switch (mode) {\n";
     for (std::size_t c = 0; c < sys_.modes.size(); ++c) {
       begin_case();
-      body << "      case " << c << ": {\n";
-      const std::string region = conditions(body, sys_.modes[c].where, "        ", "w");
+      body << case_line(modes, c);
+      const std::string region = conditions(body, sys_.modes[c].where, "        ", "_w");
       const ex u0 = c < sim.initial.size() ? sim.initial[c] : ex(0);
       if (region != "true") body << "        if (!(" << region << ")) return 0.0;\n";
       body << name_values({u0}, "        ")
-           << emit_c_block(pr_.dag(), {{"result", pr_.node(u0)}}, bind_, "        ")
+           << emit_c_block(pr_.dag(), {{"result", pr_.node(u0)}}, bind_, "        ", kTempPrefix)
            << "        break;\n      }\n";
     }
     body << "      default:\n        break;\n    }\n    return result;\n  }\n\n";
@@ -326,6 +374,11 @@ class HeaderBuilder {
   bool uses_x_ = false, uses_par_ = false;  ///< Whether the kernel reads state, parameter.
   std::set<std::string> declared_;          ///< Symbols named in the current scope.
 
+  /// `      case k: {  // LABEL`: the line opening case k of a switch over `cases`.
+  static std::string case_line(const KernelCases& cases, std::size_t k) {
+    return "      case " + std::to_string(k) + ": {  // " + cases.labels[k] + "\n";
+  }
+
   /// Start a kernel: nothing read yet.
   void begin_kernel() {
     uses_x_ = uses_par_ = false;
@@ -392,27 +445,28 @@ GeneratedFiles emit(const HybridSystem& sys) {
   const Model& m = *sys.model;
   ExprPrinter pr(m);
   HeaderBuilder hb(sys, pr);
-  const std::size_t nm = sys.modes.size(), ng = sys.guards.size();
+  const KernelCases modes = hb.mode_cases(), guards = hb.guard_cases();
+  const std::size_t ng = sys.guards.size();
   const std::size_t n = m.state.size();
-  hb.vector_kernel("Vector field X of mode k.", "flow", nm, n,
+  hb.vector_kernel("Vector field X of mode k.", "flow", modes, n,
                    [&](std::size_t k) { return sys.modes[k].flow; });
   hb.scalar_kernel("Divergence of X in mode k (Lebesgue measure in the state coordinates).",
-                   "divergence", nm, [&](std::size_t k) { return sys.modes[k].divergence; });
-  hb.scalar_kernel("Guard function s_k; the guard surface is s_k = 0.", "guard_surface", ng,
+                   "divergence", modes, [&](std::size_t k) { return sys.modes[k].divergence; });
+  hb.scalar_kernel("Guard function s_k; the guard surface is s_k = 0.", "guard_surface", guards,
                    [&](std::size_t k) { return sys.guards[k].surface; });
-  hb.vector_kernel("Gradient of s_k.", "guard_gradient", ng, n,
+  hb.vector_kernel("Gradient of s_k.", "guard_gradient", guards, n,
                    [&](std::size_t k) { return sys.guards[k].gradient; });
-  hb.vector_kernel("Reset map of guard k.", "reset", ng, n,
+  hb.vector_kernel("Reset map of guard k.", "reset", guards, n,
                    [&](std::size_t k) { return sys.guards[k].reset; });
   hb.vector_kernel("Inverse reset of guard k (closed form where guards[k].has_inverse).",
-                   "reset_inverse", ng, n, [&](std::size_t k) {
+                   "reset_inverse", guards, n, [&](std::size_t k) {
                      return sys.guards[k].has_inverse ? sys.guards[k].reset_inverse
                                                       : m.state_symbols;
                    });
-  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", ng,
+  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", guards,
                    n * n, [&](std::size_t k) { return sys.guards[k].reset_jacobian; });
-  hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian", ng,
-                   [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
+  hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian",
+                   guards, [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
   hb.density_kernels();
   GeneratedFiles files;
   files.header_name = m.name + ".hpp";
