@@ -1,5 +1,5 @@
 // hybgen's command line: the subcommands and their options, mapped onto the library
-// (frontend.hpp, emit.hpp, build.hpp, run.hpp, sweep.hpp). Every failure is a
+// (frontend.hpp, emit.hpp, render.hpp, build.hpp, run.hpp, sweep.hpp). Every failure is a
 // hybgen::gen::Error mapped to the exit codes of docs/design.md; anything else that
 // escapes is a bug (exit 70).
 
@@ -13,6 +13,7 @@
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/frontend.hpp"
 #include "hybgen/gen/process.hpp"
+#include "hybgen/gen/render.hpp"
 #include "hybgen/gen/run.hpp"
 #include "hybgen/gen/sweep.hpp"
 #include "hybgen/rt/settings.hpp"

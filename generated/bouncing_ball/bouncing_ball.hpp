@@ -39,7 +39,7 @@ struct bouncing_ball {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flight
         const double p = state[1];
         const double m = parameter[0];
         const double g = parameter[1];
@@ -57,7 +57,7 @@ struct bouncing_ball {
   static double divergence(int mode, const double*, const double*) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flight
         result = 0.0;
         break;
       }
@@ -68,10 +68,10 @@ struct bouncing_ball {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double*) {
+  static double guard_surface(int guard, const double* state, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard ground: flight -> flight
         const double x = state[0];
         result = x;
         break;
@@ -83,9 +83,9 @@ struct bouncing_ball {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard ground: flight -> flight
         out[0] = 1.0;
         out[1] = 0.0;
         break;
@@ -97,9 +97,9 @@ struct bouncing_ball {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard ground: flight -> flight
         const double x = state[0];
         const double p = state[1];
         const double e = parameter[2];
@@ -114,9 +114,9 @@ struct bouncing_ball {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard ground: flight -> flight
         const double x = state[0];
         const double p = state[1];
         const double e = parameter[2];
@@ -131,9 +131,9 @@ struct bouncing_ball {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard ground: flight -> flight
         const double e = parameter[2];
         out[0] = 1.0;
         out[1] = 0.0;
@@ -148,10 +148,10 @@ struct bouncing_ball {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double*, const double* parameter) {
+  static double hybrid_jacobian(int guard, const double*, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard ground: flight -> flight
         const double e = parameter[2];
         result = e*e;
         break;
@@ -165,9 +165,9 @@ struct bouncing_ball {
   /// Whether x lies in the state space (the model's `support` relations).
   static bool in_support(const double* state, const double*) {
     const double x = state[0];
-    double c0 = 0.0;
-    c0 = x;
-    return c0 >= 0.0;
+    double _c0 = 0.0;
+    _c0 = x;
+    return _c0 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -175,11 +175,11 @@ struct bouncing_ball {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flight
         const double x = state[0];
         const double p = state[1];
-        const double t0 = x - 1.0;
-        result = std::exp(-p*p - t0*t0);
+        const double _t0 = x - 1.0;
+        result = std::exp(-p*p - _t0*_t0);
         break;
       }
       default:

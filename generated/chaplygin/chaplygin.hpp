@@ -39,7 +39,7 @@ struct chaplygin {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         const double v = state[0];
         const double omega = state[1];
         const double m = parameter[0];
@@ -60,7 +60,7 @@ struct chaplygin {
   static double divergence(int mode, const double* state, const double* parameter) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         const double v = state[0];
         const double m = parameter[0];
         const double I = parameter[1];
@@ -75,19 +75,19 @@ struct chaplygin {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double* parameter) {
+  static double guard_surface(int guard, const double* state, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard turn_right: flow -> flow
         const double theta = state[2];
-        const double theta0_ = parameter[3];
-        result = theta - theta0_;
+        const double theta0 = parameter[3];
+        result = theta - theta0;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: flow -> flow
         const double theta = state[2];
-        const double theta0_ = parameter[3];
-        result = theta + theta0_;
+        const double theta0 = parameter[3];
+        result = theta + theta0;
         break;
       }
       default:
@@ -97,15 +97,15 @@ struct chaplygin {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard turn_right: flow -> flow
         out[0] = 0.0;
         out[1] = 0.0;
         out[2] = 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: flow -> flow
         out[0] = 0.0;
         out[1] = 0.0;
         out[2] = 1.0;
@@ -118,9 +118,9 @@ struct chaplygin {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard turn_right: flow -> flow
         const double v = state[0];
         const double omega = state[1];
         const double theta = state[2];
@@ -129,7 +129,7 @@ struct chaplygin {
         out[2] = theta;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: flow -> flow
         const double v = state[0];
         const double omega = state[1];
         const double theta = state[2];
@@ -145,9 +145,9 @@ struct chaplygin {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard turn_right: flow -> flow
         const double v = state[0];
         const double omega = state[1];
         const double theta = state[2];
@@ -156,7 +156,7 @@ struct chaplygin {
         out[2] = theta;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: flow -> flow
         const double v = state[0];
         const double omega = state[1];
         const double theta = state[2];
@@ -172,9 +172,9 @@ struct chaplygin {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard turn_right: flow -> flow
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -186,7 +186,7 @@ struct chaplygin {
         out[8] = 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: flow -> flow
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -205,14 +205,14 @@ struct chaplygin {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double*, const double*) {
+  static double hybrid_jacobian(int guard, const double*, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard turn_right: flow -> flow
         result = 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: flow -> flow
         result = 1.0;
         break;
       }
@@ -225,12 +225,12 @@ struct chaplygin {
   /// Whether x lies in the state space (the model's `support` relations).
   static bool in_support(const double* state, const double* parameter) {
     const double theta = state[2];
-    const double theta0_ = parameter[3];
-    double c0 = 0.0;
-    double c1 = 0.0;
-    c0 = theta - theta0_;
-    c1 = theta + theta0_;
-    return c0 <= 0.0 && c1 >= 0.0;
+    const double theta0 = parameter[3];
+    double _c0 = 0.0;
+    double _c1 = 0.0;
+    _c0 = theta - theta0;
+    _c1 = theta + theta0;
+    return _c0 <= 0.0 && _c1 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -238,7 +238,7 @@ struct chaplygin {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         const double v = state[0];
         const double omega = state[1];
         const double theta = state[2];

@@ -39,28 +39,28 @@ struct chaplygin_energy {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode plus
         const double v = state[0];
         const double m = parameter[0];
         const double I = parameter[1];
         const double a = parameter[2];
         const double E = parameter[3];
-        const double t0 = 2.0*E - m*(v*v);
-        const double t1 = I + a*a*m;
-        out[0] = a*t0/t1;
-        out[1] = std::sqrt(t0/t1);
+        const double _t0 = 2.0*E - m*(v*v);
+        const double _t1 = I + a*a*m;
+        out[0] = a*_t0/_t1;
+        out[1] = std::sqrt(_t0/_t1);
         break;
       }
-      case 1: {
+      case 1: {  // mode minus
         const double v = state[0];
         const double m = parameter[0];
         const double I = parameter[1];
         const double a = parameter[2];
         const double E = parameter[3];
-        const double t0 = 2.0*E - m*(v*v);
-        const double t1 = I + a*a*m;
-        out[0] = a*t0/t1;
-        out[1] = -std::sqrt(t0/t1);
+        const double _t0 = 2.0*E - m*(v*v);
+        const double _t1 = I + a*a*m;
+        out[0] = a*_t0/_t1;
+        out[1] = -std::sqrt(_t0/_t1);
         break;
       }
       default:
@@ -73,7 +73,7 @@ struct chaplygin_energy {
   static double divergence(int mode, const double* state, const double* parameter) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode plus
         const double v = state[0];
         const double m = parameter[0];
         const double I = parameter[1];
@@ -81,7 +81,7 @@ struct chaplygin_energy {
         result = -2.0*a*m*v/(I + a*a*m);
         break;
       }
-      case 1: {
+      case 1: {  // mode minus
         const double v = state[0];
         const double m = parameter[0];
         const double I = parameter[1];
@@ -96,19 +96,19 @@ struct chaplygin_energy {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double* parameter) {
+  static double guard_surface(int guard, const double* state, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard turn_right: plus -> minus
         const double theta = state[1];
-        const double theta0_ = parameter[4];
-        result = theta - theta0_;
+        const double theta0 = parameter[4];
+        result = theta - theta0;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: minus -> plus
         const double theta = state[1];
-        const double theta0_ = parameter[4];
-        result = theta + theta0_;
+        const double theta0 = parameter[4];
+        result = theta + theta0;
         break;
       }
       default:
@@ -118,14 +118,14 @@ struct chaplygin_energy {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard turn_right: plus -> minus
         out[0] = 0.0;
         out[1] = 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: minus -> plus
         out[0] = 0.0;
         out[1] = 1.0;
         break;
@@ -137,16 +137,16 @@ struct chaplygin_energy {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard turn_right: plus -> minus
         const double v = state[0];
         const double theta = state[1];
         out[0] = v;
         out[1] = theta;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: minus -> plus
         const double v = state[0];
         const double theta = state[1];
         out[0] = v;
@@ -160,16 +160,16 @@ struct chaplygin_energy {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard turn_right: plus -> minus
         const double v = state[0];
         const double theta = state[1];
         out[0] = v;
         out[1] = theta;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: minus -> plus
         const double v = state[0];
         const double theta = state[1];
         out[0] = v;
@@ -183,16 +183,16 @@ struct chaplygin_energy {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard turn_right: plus -> minus
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
         out[3] = 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: minus -> plus
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -206,14 +206,14 @@ struct chaplygin_energy {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double*, const double*) {
+  static double hybrid_jacobian(int guard, const double*, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard turn_right: plus -> minus
         result = -1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard turn_left: minus -> plus
         result = -1.0;
         break;
       }
@@ -226,12 +226,12 @@ struct chaplygin_energy {
   /// Whether x lies in the state space (the model's `support` relations).
   static bool in_support(const double* state, const double* parameter) {
     const double theta = state[1];
-    const double theta0_ = parameter[4];
-    double c0 = 0.0;
-    double c1 = 0.0;
-    c0 = theta - theta0_;
-    c1 = theta + theta0_;
-    return c0 <= 0.0 && c1 >= 0.0;
+    const double theta0 = parameter[4];
+    double _c0 = 0.0;
+    double _c1 = 0.0;
+    _c0 = theta - theta0;
+    _c1 = theta + theta0;
+    return _c0 <= 0.0 && _c1 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -239,13 +239,13 @@ struct chaplygin_energy {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode plus
         const double v = state[0];
         const double theta = state[1];
         result = (1.0/2.0)*std::exp(-theta*theta - v*v);
         break;
       }
-      case 1: {
+      case 1: {  // mode minus
         const double v = state[0];
         const double theta = state[1];
         result = (1.0/2.0)*std::exp(-theta*theta - v*v);

@@ -39,7 +39,7 @@ struct filippov {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode A
         const double x = state[0];
         const double y = state[1];
         const double alpha = parameter[0];
@@ -47,7 +47,7 @@ struct filippov {
         out[1] = -y - alpha*x;
         break;
       }
-      case 1: {
+      case 1: {  // mode B
         const double x = state[0];
         const double y = state[1];
         const double alpha = parameter[0];
@@ -65,11 +65,11 @@ struct filippov {
   static double divergence(int mode, const double*, const double*) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode A
         result = -2.0;
         break;
       }
-      case 1: {
+      case 1: {  // mode B
         result = -2.0;
         break;
       }
@@ -80,16 +80,16 @@ struct filippov {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double*) {
+  static double guard_surface(int guard, const double* state, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard A_to_B: A -> B
         const double x = state[0];
         const double y = state[1];
         result = x*y;
         break;
       }
-      case 1: {
+      case 1: {  // guard B_to_A: B -> A
         const double x = state[0];
         const double y = state[1];
         result = x*y;
@@ -102,16 +102,16 @@ struct filippov {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard A_to_B: A -> B
         const double x = state[0];
         const double y = state[1];
         out[0] = y;
         out[1] = x;
         break;
       }
-      case 1: {
+      case 1: {  // guard B_to_A: B -> A
         const double x = state[0];
         const double y = state[1];
         out[0] = y;
@@ -125,16 +125,16 @@ struct filippov {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard A_to_B: A -> B
         const double x = state[0];
         const double y = state[1];
         out[0] = x;
         out[1] = y;
         break;
       }
-      case 1: {
+      case 1: {  // guard B_to_A: B -> A
         const double x = state[0];
         const double y = state[1];
         out[0] = x;
@@ -148,16 +148,16 @@ struct filippov {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard A_to_B: A -> B
         const double x = state[0];
         const double y = state[1];
         out[0] = x;
         out[1] = y;
         break;
       }
-      case 1: {
+      case 1: {  // guard B_to_A: B -> A
         const double x = state[0];
         const double y = state[1];
         out[0] = x;
@@ -171,16 +171,16 @@ struct filippov {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard A_to_B: A -> B
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
         out[3] = 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard B_to_A: B -> A
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -194,17 +194,17 @@ struct filippov {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double* state, const double* parameter) {
+  static double hybrid_jacobian(int guard, const double* state, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard A_to_B: A -> B
         const double x = state[0];
         const double y = state[1];
         const double alpha = parameter[0];
         result = (x*(y + x/alpha) + y*(x - alpha*y))/(alpha*(x*x) + 2.0*x*y - y*y/alpha);
         break;
       }
-      case 1: {
+      case 1: {  // guard B_to_A: B -> A
         const double x = state[0];
         const double y = state[1];
         const double alpha = parameter[0];
@@ -226,19 +226,19 @@ struct filippov {
   /// and > as >=).
   static bool in_region(int mode, const double* state, const double*) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode A
         const double x = state[0];
         const double y = state[1];
-        double w0 = 0.0;
-        w0 = x*y;
-        return w0 >= 0.0;
+        double _w0 = 0.0;
+        _w0 = x*y;
+        return _w0 >= 0.0;
       }
-      case 1: {
+      case 1: {  // mode B
         const double x = state[0];
         const double y = state[1];
-        double w0 = 0.0;
-        w0 = x*y;
-        return w0 <= 0.0;
+        double _w0 = 0.0;
+        _w0 = x*y;
+        return _w0 <= 0.0;
       }
       default:
         return false;
@@ -250,26 +250,26 @@ struct filippov {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode A
         const double x = state[0];
         const double y = state[1];
-        double w0 = 0.0;
-        w0 = x*y;
-        if (!(w0 > 0.0)) return 0.0;
-        const double t0 = x - 1.0;
-        const double t1 = y - 1.0;
-        result = std::exp(-4.0*(t0*t0) - 4.0*(t1*t1));
+        double _w0 = 0.0;
+        _w0 = x*y;
+        if (!(_w0 > 0.0)) return 0.0;
+        const double _t0 = x - 1.0;
+        const double _t1 = y - 1.0;
+        result = std::exp(-4.0*(_t0*_t0) - 4.0*(_t1*_t1));
         break;
       }
-      case 1: {
+      case 1: {  // mode B
         const double x = state[0];
         const double y = state[1];
-        double w0 = 0.0;
-        w0 = x*y;
-        if (!(w0 < 0.0)) return 0.0;
-        const double t0 = x - 1.0;
-        const double t1 = y - 1.0;
-        result = std::exp(-4.0*(t0*t0) - 4.0*(t1*t1));
+        double _w0 = 0.0;
+        _w0 = x*y;
+        if (!(_w0 < 0.0)) return 0.0;
+        const double _t0 = x - 1.0;
+        const double _t1 = y - 1.0;
+        result = std::exp(-4.0*(_t0*_t0) - 4.0*(_t1*_t1));
         break;
       }
       default:

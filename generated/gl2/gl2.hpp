@@ -39,20 +39,20 @@ struct gl2 {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double*, double* out) {
     switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta2_ = state[1];
-        const double zeta3_ = state[2];
-        const double zeta4_ = state[3];
+      case 0: {  // mode flow
+        const double zeta1 = state[0];
+        const double zeta2 = state[1];
+        const double zeta3 = state[2];
+        const double zeta4 = state[3];
         const double q = state[4];
-        const double t0 = zeta3_*zeta3_;
-        const double t1 = zeta2_*zeta2_;
-        const double t2 = zeta1_*zeta2_ - zeta1_*zeta3_ - zeta2_*zeta4_ + zeta3_*zeta4_;
-        out[0] = t0 - t1;
-        out[1] = t2;
-        out[2] = t2;
-        out[3] = t1 - t0;
-        out[4] = (q + 1.0)*(zeta1_ + zeta4_);
+        const double _t0 = zeta3*zeta3;
+        const double _t1 = zeta2*zeta2;
+        const double _t2 = zeta1*zeta2 - zeta1*zeta3 - zeta2*zeta4 + zeta3*zeta4;
+        out[0] = _t0 - _t1;
+        out[1] = _t2;
+        out[2] = _t2;
+        out[3] = _t1 - _t0;
+        out[4] = (q + 1.0)*(zeta1 + zeta4);
         break;
       }
       default:
@@ -65,10 +65,10 @@ struct gl2 {
   static double divergence(int mode, const double* state, const double*) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta4_ = state[3];
-        result = zeta1_ + zeta4_;
+      case 0: {  // mode flow
+        const double zeta1 = state[0];
+        const double zeta4 = state[3];
+        result = zeta1 + zeta4;
         break;
       }
       default:
@@ -78,10 +78,10 @@ struct gl2 {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double*) {
+  static double guard_surface(int guard, const double* state, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double q = state[4];
         result = q;
         break;
@@ -93,9 +93,9 @@ struct gl2 {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         out[0] = 0.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -110,23 +110,23 @@ struct gl2 {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta2_ = state[1];
-        const double zeta3_ = state[2];
-        const double zeta4_ = state[3];
+  static void reset(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
+        const double zeta1 = state[0];
+        const double zeta2 = state[1];
+        const double zeta3 = state[2];
+        const double zeta4 = state[3];
         const double q = state[4];
         const double e = parameter[0];
-        const double t0 = (1.0/2.0)*zeta1_;
-        const double t1 = (1.0/2.0)*zeta4_;
-        const double t2 = (1.0/2.0)*e*zeta1_;
-        const double t3 = (1.0/2.0)*e*zeta4_;
-        out[0] = t0 - t1 - t2 - t3;
-        out[1] = zeta2_;
-        out[2] = zeta3_;
-        out[3] = t1 - t0 - t2 - t3;
+        const double _t0 = (1.0/2.0)*zeta1;
+        const double _t1 = (1.0/2.0)*zeta4;
+        const double _t2 = (1.0/2.0)*e*zeta1;
+        const double _t3 = (1.0/2.0)*e*zeta4;
+        out[0] = _t0 - _t1 - _t2 - _t3;
+        out[1] = zeta2;
+        out[2] = zeta3;
+        out[3] = _t1 - _t0 - _t2 - _t3;
         out[4] = q;
         break;
       }
@@ -137,21 +137,21 @@ struct gl2 {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta2_ = state[1];
-        const double zeta3_ = state[2];
-        const double zeta4_ = state[3];
+  static void reset_inverse(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
+        const double zeta1 = state[0];
+        const double zeta2 = state[1];
+        const double zeta3 = state[2];
+        const double zeta4 = state[3];
         const double q = state[4];
         const double e = parameter[0];
-        const double t0 = e*zeta1_;
-        const double t1 = e*zeta4_;
-        out[0] = -(1.0/2.0)*(zeta1_ + zeta4_ - t0 + t1)/e;
-        out[1] = zeta2_;
-        out[2] = zeta3_;
-        out[3] = -(1.0/2.0)*(zeta1_ + zeta4_ + t0 - t1)/e;
+        const double _t0 = e*zeta1;
+        const double _t1 = e*zeta4;
+        out[0] = -(1.0/2.0)*(zeta1 + zeta4 - _t0 + _t1)/e;
+        out[1] = zeta2;
+        out[2] = zeta3;
+        out[3] = -(1.0/2.0)*(zeta1 + zeta4 + _t0 - _t1)/e;
         out[4] = q;
         break;
       }
@@ -162,17 +162,17 @@ struct gl2 {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double e = parameter[0];
-        const double t0 = (1.0/2.0)*e;
-        const double t1 = (1.0/2.0) - t0;
-        const double t2 = -t0 - (1.0/2.0);
-        out[0] = t1;
+        const double _t0 = (1.0/2.0)*e;
+        const double _t1 = (1.0/2.0) - _t0;
+        const double _t2 = -_t0 - (1.0/2.0);
+        out[0] = _t1;
         out[1] = 0.0;
         out[2] = 0.0;
-        out[3] = t2;
+        out[3] = _t2;
         out[4] = 0.0;
         out[5] = 0.0;
         out[6] = 1.0;
@@ -184,10 +184,10 @@ struct gl2 {
         out[12] = 1.0;
         out[13] = 0.0;
         out[14] = 0.0;
-        out[15] = t2;
+        out[15] = _t2;
         out[16] = 0.0;
         out[17] = 0.0;
-        out[18] = t1;
+        out[18] = _t1;
         out[19] = 0.0;
         out[20] = 0.0;
         out[21] = 0.0;
@@ -203,10 +203,10 @@ struct gl2 {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double*, const double* parameter) {
+  static double hybrid_jacobian(int guard, const double*, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double e = parameter[0];
         result = e*e;
         break;
@@ -220,9 +220,9 @@ struct gl2 {
   /// Whether x lies in the state space (the model's `support` relations).
   static bool in_support(const double* state, const double*) {
     const double q = state[4];
-    double c0 = 0.0;
-    c0 = q;
-    return c0 >= 0.0;
+    double _c0 = 0.0;
+    _c0 = q;
+    return _c0 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -230,14 +230,14 @@ struct gl2 {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta2_ = state[1];
-        const double zeta3_ = state[2];
-        const double zeta4_ = state[3];
+      case 0: {  // mode flow
+        const double zeta1 = state[0];
+        const double zeta2 = state[1];
+        const double zeta3 = state[2];
+        const double zeta4 = state[3];
         const double q = state[4];
-        const double t0 = 2.0*q - 1.0;
-        result = std::exp(-2.0*(zeta1_*zeta1_) - 2.0*(zeta2_*zeta2_) - 2.0*(zeta3_*zeta3_) - 2.0*(zeta4_*zeta4_) - t0*t0);
+        const double _t0 = 2.0*q - 1.0;
+        result = std::exp(-2.0*(zeta1*zeta1) - 2.0*(zeta2*zeta2) - 2.0*(zeta3*zeta3) - 2.0*(zeta4*zeta4) - _t0*_t0);
         break;
       }
       default:

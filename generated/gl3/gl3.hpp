@@ -39,36 +39,36 @@ struct gl3 {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double*, double* out) {
     switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta2_ = state[1];
-        const double zeta3_ = state[2];
-        const double zeta4_ = state[3];
-        const double zeta5_ = state[4];
-        const double zeta6_ = state[5];
-        const double zeta7_ = state[6];
-        const double zeta8_ = state[7];
-        const double zeta9_ = state[8];
+      case 0: {  // mode flow
+        const double zeta1 = state[0];
+        const double zeta2 = state[1];
+        const double zeta3 = state[2];
+        const double zeta4 = state[3];
+        const double zeta5 = state[4];
+        const double zeta6 = state[5];
+        const double zeta7 = state[6];
+        const double zeta8 = state[7];
+        const double zeta9 = state[8];
         const double q = state[9];
-        const double t0 = zeta4_*zeta4_;
-        const double t1 = zeta7_*zeta7_;
-        const double t2 = zeta2_*zeta2_;
-        const double t3 = zeta3_*zeta3_;
-        const double t4 = zeta1_*zeta2_ - zeta1_*zeta4_ - zeta2_*zeta5_ - zeta3_*zeta6_ + zeta4_*zeta5_ + zeta7_*zeta8_;
-        const double t5 = zeta1_*zeta3_ - zeta1_*zeta7_ - zeta2_*zeta8_ - zeta3_*zeta9_ + zeta4_*zeta6_ + zeta7_*zeta9_;
-        const double t6 = zeta6_*zeta6_;
-        const double t7 = zeta8_*zeta8_;
-        const double t8 = zeta2_*zeta3_ - zeta4_*zeta7_ + zeta5_*zeta6_ - zeta5_*zeta8_ - zeta6_*zeta9_ + zeta8_*zeta9_;
-        out[0] = t0 + t1 - t2 - t3;
-        out[1] = t4;
-        out[2] = t5;
-        out[3] = t4;
-        out[4] = t2 - t0 - t6 + t7;
-        out[5] = t8;
-        out[6] = t5;
-        out[7] = t8;
-        out[8] = t3 + t6 - t1 - t7;
-        out[9] = (q + 1.0)*(zeta1_ + zeta5_ + zeta9_);
+        const double _t0 = zeta4*zeta4;
+        const double _t1 = zeta7*zeta7;
+        const double _t2 = zeta2*zeta2;
+        const double _t3 = zeta3*zeta3;
+        const double _t4 = zeta1*zeta2 - zeta1*zeta4 - zeta2*zeta5 - zeta3*zeta6 + zeta4*zeta5 + zeta7*zeta8;
+        const double _t5 = zeta1*zeta3 - zeta1*zeta7 - zeta2*zeta8 - zeta3*zeta9 + zeta4*zeta6 + zeta7*zeta9;
+        const double _t6 = zeta6*zeta6;
+        const double _t7 = zeta8*zeta8;
+        const double _t8 = zeta2*zeta3 - zeta4*zeta7 + zeta5*zeta6 - zeta5*zeta8 - zeta6*zeta9 + zeta8*zeta9;
+        out[0] = _t0 + _t1 - _t2 - _t3;
+        out[1] = _t4;
+        out[2] = _t5;
+        out[3] = _t4;
+        out[4] = _t2 - _t0 - _t6 + _t7;
+        out[5] = _t8;
+        out[6] = _t5;
+        out[7] = _t8;
+        out[8] = _t3 + _t6 - _t1 - _t7;
+        out[9] = (q + 1.0)*(zeta1 + zeta5 + zeta9);
         break;
       }
       default:
@@ -81,11 +81,11 @@ struct gl3 {
   static double divergence(int mode, const double* state, const double*) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta5_ = state[4];
-        const double zeta9_ = state[8];
-        result = zeta1_ + zeta5_ + zeta9_;
+      case 0: {  // mode flow
+        const double zeta1 = state[0];
+        const double zeta5 = state[4];
+        const double zeta9 = state[8];
+        result = zeta1 + zeta5 + zeta9;
         break;
       }
       default:
@@ -95,10 +95,10 @@ struct gl3 {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double*) {
+  static double guard_surface(int guard, const double* state, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double q = state[9];
         result = q;
         break;
@@ -110,9 +110,9 @@ struct gl3 {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         out[0] = 0.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -132,31 +132,31 @@ struct gl3 {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta2_ = state[1];
-        const double zeta3_ = state[2];
-        const double zeta4_ = state[3];
-        const double zeta5_ = state[4];
-        const double zeta6_ = state[5];
-        const double zeta7_ = state[6];
-        const double zeta8_ = state[7];
-        const double zeta9_ = state[8];
+  static void reset(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
+        const double zeta1 = state[0];
+        const double zeta2 = state[1];
+        const double zeta3 = state[2];
+        const double zeta4 = state[3];
+        const double zeta5 = state[4];
+        const double zeta6 = state[5];
+        const double zeta7 = state[6];
+        const double zeta8 = state[7];
+        const double zeta9 = state[8];
         const double q = state[9];
-        const double t0 = (2.0/3.0)*zeta5_;
-        const double t1 = (2.0/3.0)*zeta9_;
-        const double t2 = (2.0/3.0)*zeta1_;
-        out[0] = (1.0/3.0)*zeta1_ - t0 - t1;
-        out[1] = zeta2_;
-        out[2] = zeta3_;
-        out[3] = zeta4_;
-        out[4] = (1.0/3.0)*zeta5_ - t2 - t1;
-        out[5] = zeta6_;
-        out[6] = zeta7_;
-        out[7] = zeta8_;
-        out[8] = (1.0/3.0)*zeta9_ - t2 - t0;
+        const double _t0 = (2.0/3.0)*zeta5;
+        const double _t1 = (2.0/3.0)*zeta9;
+        const double _t2 = (2.0/3.0)*zeta1;
+        out[0] = (1.0/3.0)*zeta1 - _t0 - _t1;
+        out[1] = zeta2;
+        out[2] = zeta3;
+        out[3] = zeta4;
+        out[4] = (1.0/3.0)*zeta5 - _t2 - _t1;
+        out[5] = zeta6;
+        out[6] = zeta7;
+        out[7] = zeta8;
+        out[8] = (1.0/3.0)*zeta9 - _t2 - _t0;
         out[9] = q;
         break;
       }
@@ -167,31 +167,31 @@ struct gl3 {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta2_ = state[1];
-        const double zeta3_ = state[2];
-        const double zeta4_ = state[3];
-        const double zeta5_ = state[4];
-        const double zeta6_ = state[5];
-        const double zeta7_ = state[6];
-        const double zeta8_ = state[7];
-        const double zeta9_ = state[8];
+  static void reset_inverse(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
+        const double zeta1 = state[0];
+        const double zeta2 = state[1];
+        const double zeta3 = state[2];
+        const double zeta4 = state[3];
+        const double zeta5 = state[4];
+        const double zeta6 = state[5];
+        const double zeta7 = state[6];
+        const double zeta8 = state[7];
+        const double zeta9 = state[8];
         const double q = state[9];
-        const double t0 = (2.0/3.0)*zeta5_;
-        const double t1 = (2.0/3.0)*zeta9_;
-        const double t2 = (2.0/3.0)*zeta1_;
-        out[0] = (1.0/3.0)*zeta1_ - t0 - t1;
-        out[1] = zeta2_;
-        out[2] = zeta3_;
-        out[3] = zeta4_;
-        out[4] = (1.0/3.0)*zeta5_ - t2 - t1;
-        out[5] = zeta6_;
-        out[6] = zeta7_;
-        out[7] = zeta8_;
-        out[8] = (1.0/3.0)*zeta9_ - t2 - t0;
+        const double _t0 = (2.0/3.0)*zeta5;
+        const double _t1 = (2.0/3.0)*zeta9;
+        const double _t2 = (2.0/3.0)*zeta1;
+        out[0] = (1.0/3.0)*zeta1 - _t0 - _t1;
+        out[1] = zeta2;
+        out[2] = zeta3;
+        out[3] = zeta4;
+        out[4] = (1.0/3.0)*zeta5 - _t2 - _t1;
+        out[5] = zeta6;
+        out[6] = zeta7;
+        out[7] = zeta8;
+        out[8] = (1.0/3.0)*zeta9 - _t2 - _t0;
         out[9] = q;
         break;
       }
@@ -202,9 +202,9 @@ struct gl3 {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         out[0] = (1.0/3.0);
         out[1] = 0.0;
         out[2] = 0.0;
@@ -314,10 +314,10 @@ struct gl3 {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double*, const double*) {
+  static double hybrid_jacobian(int guard, const double*, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         result = 1.0;
         break;
       }
@@ -329,21 +329,21 @@ struct gl3 {
 
   /// Whether x lies in the state space (the model's `support` relations).
   static bool in_support(const double* state, const double*) {
-    const double zeta1_ = state[0];
-    const double zeta2_ = state[1];
-    const double zeta3_ = state[2];
-    const double zeta4_ = state[3];
-    const double zeta5_ = state[4];
-    const double zeta6_ = state[5];
-    const double zeta7_ = state[6];
-    const double zeta8_ = state[7];
-    const double zeta9_ = state[8];
+    const double zeta1 = state[0];
+    const double zeta2 = state[1];
+    const double zeta3 = state[2];
+    const double zeta4 = state[3];
+    const double zeta5 = state[4];
+    const double zeta6 = state[5];
+    const double zeta7 = state[6];
+    const double zeta8 = state[7];
+    const double zeta9 = state[8];
     const double q = state[9];
-    double c0 = 0.0;
-    double c1 = 0.0;
-    c0 = q;
-    c1 = zeta1_*zeta1_ + zeta2_*zeta2_ + zeta3_*zeta3_ + zeta4_*zeta4_ + zeta5_*zeta5_ + zeta6_*zeta6_ + zeta7_*zeta7_ + zeta8_*zeta8_ + zeta9_*zeta9_ - (25.0/4.0);
-    return c0 >= 0.0 && c1 <= 0.0;
+    double _c0 = 0.0;
+    double _c1 = 0.0;
+    _c0 = q;
+    _c1 = zeta1*zeta1 + zeta2*zeta2 + zeta3*zeta3 + zeta4*zeta4 + zeta5*zeta5 + zeta6*zeta6 + zeta7*zeta7 + zeta8*zeta8 + zeta9*zeta9 - (25.0/4.0);
+    return _c0 >= 0.0 && _c1 <= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -351,19 +351,19 @@ struct gl3 {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
-        const double zeta1_ = state[0];
-        const double zeta2_ = state[1];
-        const double zeta3_ = state[2];
-        const double zeta4_ = state[3];
-        const double zeta5_ = state[4];
-        const double zeta6_ = state[5];
-        const double zeta7_ = state[6];
-        const double zeta8_ = state[7];
-        const double zeta9_ = state[8];
+      case 0: {  // mode flow
+        const double zeta1 = state[0];
+        const double zeta2 = state[1];
+        const double zeta3 = state[2];
+        const double zeta4 = state[3];
+        const double zeta5 = state[4];
+        const double zeta6 = state[5];
+        const double zeta7 = state[6];
+        const double zeta8 = state[7];
+        const double zeta9 = state[8];
         const double q = state[9];
-        const double t0 = 2.0*q - 1.0;
-        result = std::exp(-4.0*(zeta1_*zeta1_) - 4.0*(zeta2_*zeta2_) - 4.0*(zeta3_*zeta3_) - 4.0*(zeta4_*zeta4_) - 4.0*(zeta5_*zeta5_) - 4.0*(zeta6_*zeta6_) - 4.0*(zeta7_*zeta7_) - 4.0*(zeta8_*zeta8_) - 4.0*(zeta9_*zeta9_) - 2.0*(t0*t0));
+        const double _t0 = 2.0*q - 1.0;
+        result = std::exp(-4.0*(zeta1*zeta1) - 4.0*(zeta2*zeta2) - 4.0*(zeta3*zeta3) - 4.0*(zeta4*zeta4) - 4.0*(zeta5*zeta5) - 4.0*(zeta6*zeta6) - 4.0*(zeta7*zeta7) - 4.0*(zeta8*zeta8) - 4.0*(zeta9*zeta9) - 2.0*(_t0*_t0));
         break;
       }
       default:

@@ -39,7 +39,7 @@ struct heisenberg_algebra {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double*, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         const double zeta_x = state[0];
         const double zeta_y = state[1];
         const double zeta_z = state[2];
@@ -59,7 +59,7 @@ struct heisenberg_algebra {
   static double divergence(int mode, const double*, const double*) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         result = 0.0;
         break;
       }
@@ -70,15 +70,15 @@ struct heisenberg_algebra {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double*) {
+  static double guard_surface(int guard, const double* state, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard right: flow -> flow
         const double q = state[3];
         result = q - 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard left: flow -> flow
         const double q = state[3];
         result = q + 1.0;
         break;
@@ -90,16 +90,16 @@ struct heisenberg_algebra {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard right: flow -> flow
         out[0] = 0.0;
         out[1] = 0.0;
         out[2] = 0.0;
         out[3] = 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard left: flow -> flow
         out[0] = 0.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -113,9 +113,9 @@ struct heisenberg_algebra {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard right: flow -> flow
         const double zeta_x = state[0];
         const double zeta_y = state[1];
         const double zeta_z = state[2];
@@ -127,7 +127,7 @@ struct heisenberg_algebra {
         out[3] = q;
         break;
       }
-      case 1: {
+      case 1: {  // guard left: flow -> flow
         const double zeta_x = state[0];
         const double zeta_y = state[1];
         const double zeta_z = state[2];
@@ -146,9 +146,9 @@ struct heisenberg_algebra {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard right: flow -> flow
         const double zeta_x = state[0];
         const double zeta_y = state[1];
         const double zeta_z = state[2];
@@ -160,7 +160,7 @@ struct heisenberg_algebra {
         out[3] = q;
         break;
       }
-      case 1: {
+      case 1: {  // guard left: flow -> flow
         const double zeta_x = state[0];
         const double zeta_y = state[1];
         const double zeta_z = state[2];
@@ -179,9 +179,9 @@ struct heisenberg_algebra {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard right: flow -> flow
         const double e = parameter[0];
         out[0] = -e;
         out[1] = 0.0;
@@ -201,7 +201,7 @@ struct heisenberg_algebra {
         out[15] = 1.0;
         break;
       }
-      case 1: {
+      case 1: {  // guard left: flow -> flow
         const double e = parameter[0];
         out[0] = -e;
         out[1] = 0.0;
@@ -228,15 +228,15 @@ struct heisenberg_algebra {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double*, const double* parameter) {
+  static double hybrid_jacobian(int guard, const double*, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard right: flow -> flow
         const double e = parameter[0];
         result = e*e;
         break;
       }
-      case 1: {
+      case 1: {  // guard left: flow -> flow
         const double e = parameter[0];
         result = e*e;
         break;
@@ -250,11 +250,11 @@ struct heisenberg_algebra {
   /// Whether x lies in the state space (the model's `support` relations).
   static bool in_support(const double* state, const double*) {
     const double q = state[3];
-    double c0 = 0.0;
-    double c1 = 0.0;
-    c0 = q + 1.0;
-    c1 = q - 1.0;
-    return c0 >= 0.0 && c1 <= 0.0;
+    double _c0 = 0.0;
+    double _c1 = 0.0;
+    _c0 = q + 1.0;
+    _c1 = q - 1.0;
+    return _c0 >= 0.0 && _c1 <= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -262,14 +262,14 @@ struct heisenberg_algebra {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         const double zeta_x = state[0];
         const double zeta_y = state[1];
         const double zeta_z = state[2];
         const double q = state[3];
-        const double t0 = 2.0*zeta_x - 1.0;
-        const double t1 = 2.0*zeta_z - 1.0;
-        result = std::exp(-4.0*(q*q) - 2.0*(zeta_y*zeta_y) - (1.0/2.0)*(t0*t0) - (1.0/2.0)*(t1*t1));
+        const double _t0 = 2.0*zeta_x - 1.0;
+        const double _t1 = 2.0*zeta_z - 1.0;
+        result = std::exp(-4.0*(q*q) - 2.0*(zeta_y*zeta_y) - (1.0/2.0)*(_t0*_t0) - (1.0/2.0)*(_t1*_t1));
         break;
       }
       default:

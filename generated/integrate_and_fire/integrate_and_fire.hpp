@@ -39,7 +39,7 @@ struct integrate_and_fire {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode subthreshold
         const double v = state[0];
         const double w = state[1];
         const double I = parameter[0];
@@ -58,7 +58,7 @@ struct integrate_and_fire {
   static double divergence(int mode, const double*, const double* parameter) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode subthreshold
         const double tau = parameter[1];
         result = -1.0/tau - 1.0;
         break;
@@ -70,10 +70,10 @@ struct integrate_and_fire {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double*) {
+  static double guard_surface(int guard, const double* state, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard spike: subthreshold -> subthreshold
         const double v = state[0];
         result = v - 1.0;
         break;
@@ -85,9 +85,9 @@ struct integrate_and_fire {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard spike: subthreshold -> subthreshold
         out[0] = 1.0;
         out[1] = 0.0;
         break;
@@ -99,9 +99,9 @@ struct integrate_and_fire {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard spike: subthreshold -> subthreshold
         const double w = state[1];
         const double b = parameter[2];
         out[0] = 0.0;
@@ -115,9 +115,9 @@ struct integrate_and_fire {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard spike: subthreshold -> subthreshold
         const double v = state[0];
         const double w = state[1];
         out[0] = v;
@@ -131,9 +131,9 @@ struct integrate_and_fire {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard spike: subthreshold -> subthreshold
         out[0] = 0.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -147,10 +147,10 @@ struct integrate_and_fire {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double* state, const double* parameter) {
+  static double hybrid_jacobian(int guard, const double* state, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard spike: subthreshold -> subthreshold
         const double w = state[1];
         const double I = parameter[0];
         const double b = parameter[2];
@@ -173,12 +173,12 @@ struct integrate_and_fire {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode subthreshold
         const double v = state[0];
         const double w = state[1];
-        const double t0 = 2.0*v - 1.0;
-        const double t1 = 2.0*w - 1.0;
-        result = std::exp(-(25.0/2.0)*(t0*t0) - (25.0/2.0)*(t1*t1));
+        const double _t0 = 2.0*v - 1.0;
+        const double _t1 = 2.0*w - 1.0;
+        result = std::exp(-(25.0/2.0)*(_t0*_t0) - (25.0/2.0)*(_t1*_t1));
         break;
       }
       default:

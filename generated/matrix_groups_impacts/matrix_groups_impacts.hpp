@@ -39,7 +39,7 @@ struct matrix_groups_impacts {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double*, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         const double C = state[0];
         const double q = state[1];
         out[0] = 0.0;
@@ -56,7 +56,7 @@ struct matrix_groups_impacts {
   static double divergence(int mode, const double* state, const double*) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         const double C = state[0];
         result = C;
         break;
@@ -68,10 +68,10 @@ struct matrix_groups_impacts {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double*) {
+  static double guard_surface(int guard, const double* state, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double q = state[1];
         result = q;
         break;
@@ -83,9 +83,9 @@ struct matrix_groups_impacts {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         out[0] = 0.0;
         out[1] = 1.0;
         break;
@@ -97,9 +97,9 @@ struct matrix_groups_impacts {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double C = state[0];
         const double q = state[1];
         const double e = parameter[0];
@@ -114,9 +114,9 @@ struct matrix_groups_impacts {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double C = state[0];
         const double q = state[1];
         const double e = parameter[0];
@@ -131,9 +131,9 @@ struct matrix_groups_impacts {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double e = parameter[0];
         out[0] = -e;
         out[1] = 0.0;
@@ -148,10 +148,10 @@ struct matrix_groups_impacts {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double*, const double* parameter) {
+  static double hybrid_jacobian(int guard, const double*, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard impact: flow -> flow
         const double e = parameter[0];
         result = e*e;
         break;
@@ -165,9 +165,9 @@ struct matrix_groups_impacts {
   /// Whether x lies in the state space (the model's `support` relations).
   static bool in_support(const double* state, const double*) {
     const double q = state[1];
-    double c0 = 0.0;
-    c0 = q;
-    return c0 >= 0.0;
+    double _c0 = 0.0;
+    _c0 = q;
+    return _c0 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -175,12 +175,12 @@ struct matrix_groups_impacts {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode flow
         const double C = state[0];
         const double q = state[1];
-        const double t0 = C + 1.0;
-        const double t1 = 2.0*q - 3.0;
-        result = std::exp(-2.0*(t0*t0) - (1.0/4.0)*(t1*t1));
+        const double _t0 = C + 1.0;
+        const double _t1 = 2.0*q - 3.0;
+        result = std::exp(-2.0*(_t0*_t0) - (1.0/4.0)*(_t1*_t1));
         break;
       }
       default:

@@ -39,7 +39,7 @@ struct sawtooth {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double*, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode grow
         const double x = state[0];
         out[0] = x + 1.0;
         break;
@@ -54,7 +54,7 @@ struct sawtooth {
   static double divergence(int mode, const double*, const double*) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode grow
         result = 1.0;
         break;
       }
@@ -65,10 +65,10 @@ struct sawtooth {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double*) {
+  static double guard_surface(int guard, const double* state, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard fire: grow -> grow
         const double x = state[0];
         result = x - 1.0;
         break;
@@ -80,9 +80,9 @@ struct sawtooth {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard fire: grow -> grow
         out[0] = 1.0;
         break;
       }
@@ -93,9 +93,9 @@ struct sawtooth {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard fire: grow -> grow
         out[0] = 0.0;
         break;
       }
@@ -106,9 +106,9 @@ struct sawtooth {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard fire: grow -> grow
         const double x = state[0];
         out[0] = x;
         break;
@@ -120,9 +120,9 @@ struct sawtooth {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard fire: grow -> grow
         out[0] = 0.0;
         break;
       }
@@ -133,10 +133,10 @@ struct sawtooth {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double*, const double*) {
+  static double hybrid_jacobian(int guard, const double*, const double*) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard fire: grow -> grow
         result = (1.0/2.0);
         break;
       }
@@ -156,7 +156,7 @@ struct sawtooth {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode grow
         result = 1.0;
         break;
       }

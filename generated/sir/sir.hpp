@@ -39,7 +39,7 @@ struct sir {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode epidemic
         const double s = state[0];
         const double i = state[1];
         const double beta = parameter[0];
@@ -60,7 +60,7 @@ struct sir {
   static double divergence(int mode, const double* state, const double* parameter) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode epidemic
         const double s = state[0];
         const double i = state[1];
         const double beta = parameter[0];
@@ -77,10 +77,10 @@ struct sir {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double* parameter) {
+  static double guard_surface(int guard, const double* state, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double i = state[1];
         const double alpha = parameter[5];
         result = i - alpha;
@@ -93,9 +93,9 @@ struct sir {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double*, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double*, double* out) {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         out[0] = 0.0;
         out[1] = 1.0;
         break;
@@ -107,9 +107,9 @@ struct sir {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double s = state[0];
         const double i = state[1];
         const double f = parameter[4];
@@ -124,9 +124,9 @@ struct sir {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double s = state[0];
         const double i = state[1];
         const double f = parameter[4];
@@ -141,9 +141,9 @@ struct sir {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double f = parameter[4];
         out[0] = 1.0;
         out[1] = 0.0;
@@ -158,10 +158,10 @@ struct sir {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double* state, const double* parameter) {
+  static double hybrid_jacobian(int guard, const double* state, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double s = state[0];
         const double beta = parameter[0];
         const double gamma = parameter[1];
@@ -169,9 +169,9 @@ struct sir {
         const double mu = parameter[3];
         const double f = parameter[4];
         const double alpha = parameter[5];
-        const double t0 = alpha - alpha*f;
-        const double t1 = delta + gamma + mu;
-        result = (beta*s*t0 + delta*(t0*t0) - t0*t1)/(alpha*beta*s - alpha*t1 + alpha*alpha*delta);
+        const double _t0 = alpha - alpha*f;
+        const double _t1 = delta + gamma + mu;
+        result = (beta*s*_t0 + delta*(_t0*_t0) - _t0*_t1)/(alpha*beta*s - alpha*_t1 + alpha*alpha*delta);
         break;
       }
       default:
@@ -184,13 +184,13 @@ struct sir {
   static bool in_support(const double* state, const double*) {
     const double s = state[0];
     const double i = state[1];
-    double c0 = 0.0;
-    double c1 = 0.0;
-    double c2 = 0.0;
-    c0 = i + s - 1.0;
-    c1 = s;
-    c2 = i;
-    return c0 <= 0.0 && c1 >= 0.0 && c2 >= 0.0;
+    double _c0 = 0.0;
+    double _c1 = 0.0;
+    double _c2 = 0.0;
+    _c0 = i + s - 1.0;
+    _c1 = s;
+    _c2 = i;
+    return _c0 <= 0.0 && _c1 >= 0.0 && _c2 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -198,12 +198,12 @@ struct sir {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode epidemic
         const double s = state[0];
         const double i = state[1];
-        const double t0 = i + s - 1.0;
-        const double t1 = 2.0*s - 1.0;
-        result = std::exp(-10.0*(t0*t0) - (1.0/4.0)*(t1*t1));
+        const double _t0 = i + s - 1.0;
+        const double _t1 = 2.0*s - 1.0;
+        result = std::exp(-10.0*(_t0*_t0) - (1.0/4.0)*(_t1*_t1));
         break;
       }
       default:

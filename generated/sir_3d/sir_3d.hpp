@@ -39,7 +39,7 @@ struct sir_3d {
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
     switch (mode) {
-      case 0: {
+      case 0: {  // mode epidemic
         const double S = state[0];
         const double I = state[1];
         const double R = state[2];
@@ -47,11 +47,11 @@ struct sir_3d {
         const double gamma = parameter[1];
         const double delta = parameter[2];
         const double mu = parameter[3];
-        const double t0 = R*mu;
-        const double t1 = I*S*beta/(I + R + S);
-        out[0] = I*mu + t0 - t1;
-        out[1] = t1 - I*(delta + gamma + mu);
-        out[2] = I*gamma - t0;
+        const double _t0 = R*mu;
+        const double _t1 = I*S*beta/(I + R + S);
+        out[0] = I*mu + _t0 - _t1;
+        out[1] = _t1 - I*(delta + gamma + mu);
+        out[2] = I*gamma - _t0;
         break;
       }
       default:
@@ -64,7 +64,7 @@ struct sir_3d {
   static double divergence(int mode, const double* state, const double* parameter) {
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode epidemic
         const double S = state[0];
         const double I = state[1];
         const double R = state[2];
@@ -72,8 +72,8 @@ struct sir_3d {
         const double gamma = parameter[1];
         const double delta = parameter[2];
         const double mu = parameter[3];
-        const double t0 = I + R + S;
-        result = S*beta/t0 - delta - gamma - 2.0*mu - I*beta/t0;
+        const double _t0 = I + R + S;
+        result = S*beta/_t0 - delta - gamma - 2.0*mu - I*beta/_t0;
         break;
       }
       default:
@@ -83,10 +83,10 @@ struct sir_3d {
   }
 
   /// Guard function s_k; the guard surface is s_k = 0.
-  static double guard_surface(int mode, const double* state, const double* parameter) {
+  static double guard_surface(int guard, const double* state, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double S = state[0];
         const double I = state[1];
         const double R = state[2];
@@ -101,9 +101,9 @@ struct sir_3d {
   }
 
   /// Gradient of s_k.
-  static void guard_gradient(int mode, const double*, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void guard_gradient(int guard, const double*, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double alpha = parameter[5];
         out[0] = -alpha;
         out[1] = 1.0 - alpha;
@@ -117,17 +117,17 @@ struct sir_3d {
   }
 
   /// Reset map of guard k.
-  static void reset(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double S = state[0];
         const double I = state[1];
         const double R = state[2];
         const double f = parameter[4];
-        const double t0 = I*f;
+        const double _t0 = I*f;
         out[0] = S;
-        out[1] = I - t0;
-        out[2] = R + t0;
+        out[1] = I - _t0;
+        out[2] = R + _t0;
         break;
       }
       default:
@@ -137,9 +137,9 @@ struct sir_3d {
   }
 
   /// Inverse reset of guard k (closed form where guards[k].has_inverse).
-  static void reset_inverse(int mode, const double* state, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_inverse(int guard, const double* state, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double S = state[0];
         const double I = state[1];
         const double R = state[2];
@@ -156,9 +156,9 @@ struct sir_3d {
   }
 
   /// Jacobian matrix of the reset of guard k, row-major.
-  static void reset_jacobian(int mode, const double*, const double* parameter, double* out) {
-    switch (mode) {
-      case 0: {
+  static void reset_jacobian(int guard, const double*, const double* parameter, double* out) {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double f = parameter[4];
         out[0] = 1.0;
         out[1] = 0.0;
@@ -178,10 +178,10 @@ struct sir_3d {
   }
 
   /// Hybrid Jacobian of guard k at a point of its surface.
-  static double hybrid_jacobian(int mode, const double* state, const double* parameter) {
+  static double hybrid_jacobian(int guard, const double* state, const double* parameter) {
     double result = 0.0;
-    switch (mode) {
-      case 0: {
+    switch (guard) {
+      case 0: {  // guard intervention: epidemic -> epidemic
         const double I = state[1];
         const double R = state[2];
         const double beta = parameter[0];
@@ -190,14 +190,14 @@ struct sir_3d {
         const double mu = parameter[3];
         const double f = parameter[4];
         const double alpha = parameter[5];
-        const double t0 = I*alpha*beta;
-        const double t1 = I*alpha*delta;
-        const double t2 = I*beta;
-        const double t3 = I*delta;
-        const double t4 = I*gamma;
-        const double t5 = I*mu;
-        const double t6 = R*alpha*beta;
-        result = (t0 - I*alpha*beta*f - t1 + 2.0*I*alpha*delta*f - I*alpha*delta*(f*f) - t2 + I*beta*f + t3 - I*delta*f - I*f*gamma - I*f*mu + t4 + t5 + t6 - R*alpha*beta*f)/(t0 - t1 - t2 + t3 + t4 + t5 + t6);
+        const double _t0 = I*alpha*beta;
+        const double _t1 = I*alpha*delta;
+        const double _t2 = I*beta;
+        const double _t3 = I*delta;
+        const double _t4 = I*gamma;
+        const double _t5 = I*mu;
+        const double _t6 = R*alpha*beta;
+        result = (_t0 - I*alpha*beta*f - _t1 + 2.0*I*alpha*delta*f - I*alpha*delta*(f*f) - _t2 + I*beta*f + _t3 - I*delta*f - I*f*gamma - I*f*mu + _t4 + _t5 + _t6 - R*alpha*beta*f)/(_t0 - _t1 - _t2 + _t3 + _t4 + _t5 + _t6);
         break;
       }
       default:
@@ -211,13 +211,13 @@ struct sir_3d {
     const double S = state[0];
     const double I = state[1];
     const double R = state[2];
-    double c0 = 0.0;
-    double c1 = 0.0;
-    double c2 = 0.0;
-    c0 = S;
-    c1 = I;
-    c2 = R;
-    return c0 >= 0.0 && c1 >= 0.0 && c2 >= 0.0;
+    double _c0 = 0.0;
+    double _c1 = 0.0;
+    double _c2 = 0.0;
+    _c0 = S;
+    _c1 = I;
+    _c2 = R;
+    return _c0 >= 0.0 && _c1 >= 0.0 && _c2 >= 0.0;
   }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
@@ -225,14 +225,14 @@ struct sir_3d {
     if (!in_support(state, parameter)) return 0.0;
     double result = 0.0;
     switch (mode) {
-      case 0: {
+      case 0: {  // mode epidemic
         const double S = state[0];
         const double I = state[1];
         const double R = state[2];
-        const double t0 = 4.0*I - 3.0;
-        const double t1 = 10.0*R - 3.0;
-        const double t2 = 10.0*S - 3.0;
-        result = std::exp(-(5.0/8.0)*(t0*t0) - (1.0/10.0)*(t1*t1) - (1.0/10.0)*(t2*t2));
+        const double _t0 = 4.0*I - 3.0;
+        const double _t1 = 10.0*R - 3.0;
+        const double _t2 = 10.0*S - 3.0;
+        result = std::exp(-(5.0/8.0)*(_t0*_t0) - (1.0/10.0)*(_t1*_t1) - (1.0/10.0)*(_t2*_t2));
         break;
       }
       default:

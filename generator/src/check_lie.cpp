@@ -1,10 +1,12 @@
-// Stage 2 for Lie-group models: AST -> LieModel (see reduce.hpp).
+// Stage 2 for Lie-group models: AST -> LieModel (check_lie.hpp; the theorem: reduce.hpp).
 //
 // The parts a Lie-group model shares with general models (parameters, guards
 // in the reduced state, the simulation block) are checked by `check` itself on
 // a general AST with the state (ζ_1..ζ_n, q) and one placeholder mode, so both
 // kinds obey the same rules and messages. What is specific (the group, h, q) is
 // converted here with check's Converter (check_internal.hpp).
+
+#include "hybgen/gen/check_lie.hpp"
 
 #include <algorithm>
 #include <cctype>

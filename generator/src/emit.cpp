@@ -1,7 +1,5 @@
-// Stage 4 (emit): IR -> kernel header + report, and the derive renderings.
-//
-// Size: the header, report.md and derive's text, LaTeX and JSON forms print through one
-// Printer (one DAG, so one naming of subexpressions); the emitter owns the layout.
+// Stage 4 (emit): IR -> kernel header + report.md. `hybgen derive`'s renderings of the
+// same system are in render.cpp (report.md embeds its LaTeX).
 //
 // Builder in the style of CasADi's code generator: separate buffers for the
 // provenance header, the static tables and each kernel, assembled at the end.
@@ -16,10 +14,11 @@
 #include <set>
 #include <sstream>
 
+#include "expr_printer.hpp"
 #include "hybgen/gen/dag.hpp"
 #include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/fs.hpp"
-#include "hybgen/gen/tex.hpp"
+#include "hybgen/gen/render.hpp"
 
 #ifndef HYBGEN_VERSION
 #define HYBGEN_VERSION "0.0.0"
@@ -59,36 +58,11 @@ std::string quoted(const std::string& s) {
   return out + "\"";
 }
 
-const char* direction_word(Direction d) {
-  return d == Direction::Decreasing ? "decreasing" : "increasing";
-}
-
-/// Prints GiNaC expressions deterministically through one DAG.
-class Printer {
- public:
-  explicit Printer(const Model& m) : tex_(m.tex) {}
-  std::string ginac(const ex& e) { return dag_.to_ginac(dag_.import(e)); }
-  std::string latex(const ex& e) { return dag_.to_latex(dag_.import(e), tex_); }
-  NodeId node(const ex& e) { return dag_.import(e); }
-  ExprDag& dag() { return dag_; }
-  /// "+ latex" / "- latex(-e)" for a term of a sum.
-  std::string signed_term(const ex& e) {
-    std::string s = latex(e);
-    if (!GiNaC::is_a<GiNaC::add>(e) && !s.empty() && s[0] == '-') return " - " + latex(-e);
-    if (GiNaC::is_a<GiNaC::add>(e)) return " + \\left(" + s + "\\right)";
-    return " + " + s;
-  }
-
- private:
-  ExprDag dag_;
-  std::map<std::string, std::string> tex_;
-};
-
 /// Names in generated kernels that a state variable or parameter must not take: C++
 /// keywords, the kernels' arguments and locals, the generated struct's members, and the
-/// object-like macros of <cmath> (glibc's), <cerrno> and <cstdio>. Temporaries (t0, ct0, c0,
-/// w0, …) are matched by is_temporary_name. Every name here becomes a free one by appending
-/// '_' (none ends in '_'), so the renaming loop ends.
+/// object-like macros of <cmath> (glibc's), <cerrno> and <cstdio>. The locals the emitter
+/// numbers (_t0, _c0, …) are matched by is_generated_local. Every name here becomes a free
+/// one by appending '_' (none ends in '_'), so the renaming loop ends.
 const std::set<std::string>& c_reserved_names() {
   static const std::set<std::string> r = {
       // C++20 keywords and alternative tokens.
@@ -103,9 +77,10 @@ const std::set<std::string>& c_reserved_names() {
       "static_assert", "static_cast", "struct", "switch", "template", "this", "thread_local",
       "throw", "true", "try", "typedef", "typeid", "typename", "union", "unsigned", "using",
       "virtual", "void", "volatile", "wchar_t", "while", "xor", "xor_eq",
-      // The kernels' arguments and locals (mode, state and parameter are words of the model
-      // language, so no model name can clash with them), and the namespaces they name.
-      "mode", "state", "parameter", "out", "result", "slot", "std", "hybgen", "hybgen_model",
+      // The kernels' arguments and locals (mode, guard, state and parameter are words of the
+      // model language, so no model name can clash with them), and the namespaces they name.
+      "mode", "guard", "state", "parameter", "out", "result", "slot", "std", "hybgen",
+      "hybgen_model",
       // The generated struct's members.
       "name", "n_state", "n_param", "n_mode", "n_guard", "state_names", "param_names",
       "param_defaults", "mode_names", "guard_names", "guards", "flow", "divergence",
@@ -122,28 +97,56 @@ const std::set<std::string>& c_reserved_names() {
   return r;
 }
 
-/// Whether `n` is a name emit_c_block gives a temporary: a lower-case prefix and a number.
-/// (Appending '_' makes any name not one, so HeaderBuilder's renaming ends.)
-bool is_temporary_name(const std::string& n) {
-  std::size_t i = 0;
+// Names of the locals the emitter numbers. A kernel declares three kinds of names: the
+// model's state variables and parameters, as the model writes them (`zeta1`, `theta0`);
+// its fixed arguments and locals (`mode`, `guard`, `state`, `out`, `result`, `slot`:
+// c_reserved_names); and numbered locals — emit_c_block's common subexpressions and the
+// values of `support` and `where` relations. The numbered ones are an underscore, a
+// lower-case prefix and a number, `_[a-z]+[0-9]+`:
+//   _t0, _t1, …    common subexpressions of a kernel or `case` (kTempPrefix);
+//   _c0, _c1, …    the support relations of in_support, their subexpressions _ct0, …;
+//   _w0, _w1, …    a mode's `where` relations, their subexpressions _wt0, ….
+// They live in function scope, where C++ reserves only names with a double underscore or an
+// underscore and an upper-case letter ([lex.name]); `_t0` is neither. The model language
+// accepts every identifier [A-Za-z_][A-Za-z0-9_]* (generator/src/lexer.hpp,
+// is_ident_start), so no spelling is out of its reach: a model name of the numbered form
+// (`_t0`; no shipped model has a leading underscore) is renamed to `_t0_`, which is not of
+// the form, and every other name — lower-case letters and digits included — stays as
+// written.
+
+/// Prefix of emit_c_block's temporaries in generated kernels (see above).
+constexpr const char* kTempPrefix = "_t";
+
+/// Whether `n` has the form of a numbered local of a generated kernel, `_[a-z]+[0-9]+` (see
+/// above). Appending '_' makes any name not one, so HeaderBuilder's renaming ends.
+bool is_generated_local(const std::string& n) {
+  if (n.empty() || n[0] != '_') return false;
+  std::size_t i = 1;
   while (i < n.size() && std::islower(static_cast<unsigned char>(n[i]))) ++i;
-  if (i == 0 || i == n.size()) return false;
+  if (i == 1 || i == n.size()) return false;
   for (std::size_t j = i; j < n.size(); ++j)
     if (!std::isdigit(static_cast<unsigned char>(n[j]))) return false;
   return true;
 }
+
+/// The cases of a kernel's switch: the index it switches on (`mode` or `guard`) and, per
+/// case, the comment naming it (`mode heat`, `guard off: heat -> cool`).
+struct KernelCases {
+  std::string index;                ///< Name of the index argument.
+  std::vector<std::string> labels;  ///< One per case, in index order.
+};
 
 /// The kernel-header builder: one buffer per kernel. A kernel names the state variables
 /// and parameters it reads (`const double p = state[1];`) and leaves unread arguments unnamed,
 /// so that it compiles without warnings and reads like the model.
 class HeaderBuilder {
  public:
-  HeaderBuilder(const HybridSystem& sys, Printer& pr) : sys_(sys), m_(*sys.model), pr_(pr) {
+  HeaderBuilder(const HybridSystem& sys, ExprPrinter& pr) : sys_(sys), m_(*sys.model), pr_(pr) {
     // C names: the model's own, with '_' appended while one clashes (c_reserved_names) or
     // repeats an earlier one.
     std::set<std::string> taken;
     auto c_name = [&](std::string n) {
-      while (c_reserved_names().count(n) || is_temporary_name(n) || taken.count(n)) n += '_';
+      while (c_reserved_names().count(n) || is_generated_local(n) || taken.count(n)) n += '_';
       taken.insert(n);
       return n;
     };
@@ -157,52 +160,70 @@ class HeaderBuilder {
     }
   }
 
-  /// A kernel `static void NAME(int mode, const double* state, const double* parameter, double*
-  /// out)` switching on k; `outputs(k)` gives the expressions for case k.
-  void vector_kernel(const std::string& doc, const std::string& name, std::size_t cases,
+  /// The modes as the cases of a kernel: `int mode`, `case k: {  // mode NAME`.
+  [[nodiscard]] KernelCases mode_cases() const {
+    KernelCases cases{"mode", {}};
+    for (const auto& md : sys_.modes) cases.labels.push_back("mode " + md.name);
+    return cases;
+  }
+
+  /// The guards as the cases of a kernel: `int guard`, `case k: {  // guard NAME: FROM -> TO`.
+  [[nodiscard]] KernelCases guard_cases() const {
+    KernelCases cases{"guard", {}};
+    for (const auto& g : sys_.guards)
+      cases.labels.push_back("guard " + g.name + ": " +
+                             sys_.modes[static_cast<std::size_t>(g.from)].name + " -> " +
+                             sys_.modes[static_cast<std::size_t>(g.to)].name);
+    return cases;
+  }
+
+  /// A kernel `static void NAME(int INDEX, const double* state, const double* parameter,
+  /// double* out)` switching on INDEX (`mode` or `guard`); `outputs(k)` gives the expressions
+  /// for case k.
+  void vector_kernel(const std::string& doc, const std::string& name, const KernelCases& cases,
                      std::size_t n_out,
                      const std::function<std::vector<ex>(std::size_t)>& outputs) {
     begin_kernel();
     std::ostringstream body;
-    body << "    switch (mode) {\n";
-    for (std::size_t c = 0; c < cases; ++c) {
+    body << "    switch (" << cases.index << ") {\n";
+    for (std::size_t c = 0; c < cases.labels.size(); ++c) {
       std::vector<CAssignment> as;
       const auto es = outputs(c);
       for (std::size_t i = 0; i < es.size(); ++i)
         as.push_back({"out[" + std::to_string(i) + "]", pr_.node(es[i])});
       begin_case();
-      body << "      case " << c << ": {\n"
-           << name_values(es, "        ") << emit_c_block(pr_.dag(), as, bind_, "        ")
+      body << case_line(cases, c) << name_values(es, "        ")
+           << emit_c_block(pr_.dag(), as, bind_, "        ", kTempPrefix)
            << "        break;\n      }\n";
     }
     // An invalid index yields NaN in every output, never stale memory.
     body << "      default:\n        for (int slot = 0; slot < " << n_out
          << "; ++slot) out[slot] = std::nan(\"\");\n        break;\n    }\n  }\n\n";
-    kernels_ += "  /// " + doc + "\n  static void " + name + "(int mode, " + arguments() +
-                ", double* out) {\n" + body.str();
+    kernels_ += "  /// " + doc + "\n  static void " + name + "(int " + cases.index + ", " +
+                arguments() + ", double* out) {\n" + body.str();
   }
 
-  /// A kernel `static double NAME(int mode, const double* state, const double* parameter)`.
-  void scalar_kernel(const std::string& doc, const std::string& name, std::size_t cases,
+  /// A kernel `static double NAME(int INDEX, const double* state, const double* parameter)`.
+  void scalar_kernel(const std::string& doc, const std::string& name, const KernelCases& cases,
                      const std::function<ex(std::size_t)>& value) {
     begin_kernel();
     std::ostringstream body;
-    body << "    double result = 0.0;\n    switch (mode) {\n";
-    for (std::size_t c = 0; c < cases; ++c) {
+    body << "    double result = 0.0;\n    switch (" << cases.index << ") {\n";
+    for (std::size_t c = 0; c < cases.labels.size(); ++c) {
       const ex v = value(c);
       std::vector<CAssignment> as{{"result", pr_.node(v)}};
       begin_case();
-      body << "      case " << c << ": {\n"
-           << name_values({v}, "        ") << emit_c_block(pr_.dag(), as, bind_, "        ")
+      body << case_line(cases, c) << name_values({v}, "        ")
+           << emit_c_block(pr_.dag(), as, bind_, "        ", kTempPrefix)
            << "        break;\n      }\n";
     }
     body << "      default:\n        break;\n    }\n    return result;\n  }\n\n";
-    kernels_ += "  /// " + doc + "\n  static double " + name + "(int mode, " + arguments() +
-                ") {\n" + body.str();
+    kernels_ += "  /// " + doc + "\n  static double " + name + "(int " + cases.index + ", " +
+                arguments() + ") {\n" + body.str();
   }
 
   /// Emit `conds` as a boolean test into `os`, after naming the values they read (returns
-  /// the C condition).
+  /// the C condition). The values are named `var` and a number (`_c0`, `_w0`).
   std::string conditions(std::ostringstream& os, const std::vector<Condition>& conds,
                          const std::string& indent, const std::string& var) {
     if (conds.empty()) return "true";
@@ -214,7 +235,7 @@ class HeaderBuilder {
       os << indent << "double " << var << i << " = 0.0;\n";
       as.push_back({var + std::to_string(i), pr_.node(conds[i].expr)});
     }
-    os << emit_c_block(pr_.dag(), as, bind_, indent, var + "t");
+    os << emit_c_block(pr_.dag(), as, bind_, indent, var + "t");  // _ct0, …; _wt0, …
     std::string test;
     for (std::size_t i = 0; i < conds.size(); ++i)
       test += (i ? " && " : "") + var + std::to_string(i) + " " + conds[i].op + " 0.0";
@@ -223,10 +244,11 @@ class HeaderBuilder {
 
   void density_kernels() {
     const auto& sim = m_.sim;
+    const KernelCases modes = mode_cases();
     {
       begin_kernel();
       std::ostringstream body;
-      const std::string test = conditions(body, sim.support, "    ", "c");
+      const std::string test = conditions(body, sim.support, "    ", "_c");
       kernels_ +=
           "  /// Whether x lies in the state space (the model's `support` relations).\n"
           "  static bool in_support(" +
@@ -248,8 +270,8 @@ class HeaderBuilder {
           if (cond.op == ">") cond.op = ">=";
         }
         begin_case();
-        body << "      case " << c << ": {\n";
-        const std::string region = conditions(body, closed, "        ", "w");
+        body << case_line(modes, c);
+        const std::string region = conditions(body, closed, "        ", "_w");
         body << "        return " << region << ";\n      }\n";
       }
       body << "      default:\n        return false;\n    }\n  }\n\n";
@@ -265,12 +287,12 @@ class HeaderBuilder {
     body << "    double result = 0.0;\n    switch (mode) {\n";
     for (std::size_t c = 0; c < sys_.modes.size(); ++c) {
       begin_case();
-      body << "      case " << c << ": {\n";
-      const std::string region = conditions(body, sys_.modes[c].where, "        ", "w");
+      body << case_line(modes, c);
+      const std::string region = conditions(body, sys_.modes[c].where, "        ", "_w");
       const ex u0 = c < sim.initial.size() ? sim.initial[c] : ex(0);
       if (region != "true") body << "        if (!(" << region << ")) return 0.0;\n";
       body << name_values({u0}, "        ")
-           << emit_c_block(pr_.dag(), {{"result", pr_.node(u0)}}, bind_, "        ")
+           << emit_c_block(pr_.dag(), {{"result", pr_.node(u0)}}, bind_, "        ", kTempPrefix)
            << "        break;\n      }\n";
     }
     body << "      default:\n        break;\n    }\n    return result;\n  }\n\n";
@@ -345,12 +367,17 @@ class HeaderBuilder {
  private:
   const HybridSystem& sys_;
   const Model& m_;
-  Printer& pr_;
+  ExprPrinter& pr_;
   std::map<std::string, std::string> bind_;    ///< Symbol -> its C name in kernels.
   std::map<std::string, std::string> source_;  ///< Symbol -> "state[i]" or "parameter[j]".
   std::string kernels_;
   bool uses_x_ = false, uses_par_ = false;  ///< Whether the kernel reads state, parameter.
   std::set<std::string> declared_;          ///< Symbols named in the current scope.
+
+  /// `      case k: {  // LABEL`: the line opening case k of a switch over `cases`.
+  static std::string case_line(const KernelCases& cases, std::size_t k) {
+    return "      case " + std::to_string(k) + ": {  // " + cases.labels[k] + "\n";
+  }
 
   /// Start a kernel: nothing read yet.
   void begin_kernel() {
@@ -385,216 +412,8 @@ class HeaderBuilder {
   }
 };
 
-/// |J| in LaTeX: a number is printed as its absolute value.
-std::string abs_latex(Printer& pr, const ex& e) {
-  if (GiNaC::is_a<GiNaC::numeric>(e)) return pr.latex(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)));
-  return "\\left|" + pr.latex(e) + "\\right|";
-}
-
-std::string tuple_latex(Printer& pr, const std::vector<ex>& v) {
-  std::string s = "\\left(";
-  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + pr.latex(v[i]);
-  return s + "\\right)";
-}
-
-std::string tuple_text(Printer& pr, const std::vector<ex>& v) {
-  std::string s = "(";
-  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + pr.ginac(v[i]);
-  return s + ")";
-}
-
-/// J∘Δ⁻¹: the factor of the jump condition written at the post-reset point.
-ex jacobian_at_preimage(const HybridSystem& sys, const IrGuard& g) {
-  if (!g.has_inverse) return g.hybrid_jacobian_on_surface;
-  GiNaC::exmap at;
-  for (std::size_t i = 0; i < g.reset_inverse.size(); ++i)
-    at[sys.model->state_symbols[i]] = g.reset_inverse[i];
-  return simplify(g.hybrid_jacobian_on_surface.subs(at, GiNaC::subs_options::no_pattern));
-}
-
-std::string pde_latex(const HybridSystem& sys, Printer& pr, const IrMode& md,
-                      const std::string& u) {
-  const Model& m = *sys.model;
-  std::string s = "\\frac{\\partial " + u + "}{\\partial t}";
-  for (std::size_t i = 0; i < m.state.size(); ++i) {
-    if (md.flow[i].is_zero()) continue;
-    // A coefficient ±1 is a sign only (not "+ 1 ∂u/∂x").
-    const std::string coefficient = md.flow[i].is_equal(1)    ? " + "
-                                    : md.flow[i].is_equal(-1) ? " - "
-                                                              : pr.signed_term(md.flow[i]) + "\\,";
-    s += coefficient + "\\frac{\\partial " + u + "}{\\partial " + m.tex.at(m.state[i]) + "}";
-  }
-  if (md.divergence.is_zero()) return s + " = 0";
-  // −div·u, with the sign folded into a single term when div is not a sum.
-  const std::string rhs = GiNaC::is_a<GiNaC::add>(md.divergence)
-                              ? "-\\left(" + pr.latex(md.divergence) + "\\right)"
-                              : pr.latex(-md.divergence);
-  return s + " = " + rhs + "\\, " + u;
-}
-
-std::string state_args_latex(const Model& m) {
-  std::string s;
-  for (const auto& x : m.state) s += ", " + m.tex.at(x);
-  return s;
-}
-
-/// "(e1, e2, ...)" of names.
-std::string name_tuple(const std::vector<std::string>& v) {
-  std::string s = "(";
-  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + v[i];
-  return s + ")";
-}
-
-/// " - c" of q = φ − c: nothing for c = 0, " + 2" for c = −2, " - (a + b)" for sums.
-std::string minus_level(const ex& c, const std::function<std::string(const ex&)>& print,
-                        const std::string& open, const std::string& close) {
-  if (c.is_zero()) return "";
-  if (GiNaC::is_a<GiNaC::numeric>(c))
-    return GiNaC::ex_to<GiNaC::numeric>(c).is_negative() ? " + " + print(-c) : " - " + print(c);
-  if (GiNaC::is_a<GiNaC::add>(c)) return " - " + open + print(c) + close;
-  return " - " + print(c);
-}
-
-/// The reduction objects of a Lie-group model in text (derive --format text).
-void reduction_text(std::ostream& os, const Model& m, Printer& pr) {
-  const Reduction& r = *m.reduction;
-  const unsigned n = r.algebra_dim;
-  os << "\nLie-group reduction (paper §3.2, Impact Lie-Poisson Reduction theorem)\n";
-  if (r.coordinates.empty())
-    os << "  group        " << r.group << ", given by structure constants on the basis "
-       << name_tuple(r.basis) << "\n";
-  else
-    os << "  group        " << r.group << ", coordinates " << name_tuple(r.coordinates)
-       << ", basis E_i = dg/dc_i at the identity " << name_tuple(r.basis) << "\n";
-  os << "  brackets     ";
-  bool any = false;
-  for (unsigned i = 0; i < n; ++i)
-    for (unsigned j = i + 1; j < n; ++j)
-      if (r.bracket[i][j] != "0") {
-        os << (any ? ", " : "") << "[" << r.basis[i] << ", " << r.basis[j]
-           << "] = " << r.bracket[i][j];
-        any = true;
-      }
-  os << (any ? "   (others zero)\n" : "all zero (abelian)\n");
-  if (r.constrained) {
-    os << "  constraints  body velocity xi(w) = " << tuple_text(pr, r.dh)
-       << "   (Euler-Poincare-Suslov, multipliers eliminated)\n";
-    os << "  energy       = " << pr.ginac(r.hamiltonian)
-       << "   (1/2 xi^T I xi on the constraints)\n";
-    os << "  ad*_{xi}     (mu' = ad*_{xi} mu + constraint forces, mu = I xi)\n";
-  } else {
-    os << "  h(zeta)      = " << pr.ginac(r.hamiltonian)
-       << "   (H(g, p) = h((l_g)^* p): left-invariant)\n";
-    os << "  zeta^#       = dh/dzeta = " << tuple_text(pr, r.dh) << "\n";
-    os << "  ad*_{dh}     (zeta' = ad*_{dh} zeta for the column vector zeta)\n";
-  }
-  for (unsigned i = 0; i < n; ++i) {
-    os << "    [";
-    for (unsigned j = 0; j < n; ++j) os << (j ? ", " : "") << pr.ginac(r.coadjoint(i, j));
-    os << "]\n";
-  }
-  os << "  q            = phi(g)"
-     << minus_level(
-            r.level, [&](const ex& e) { return pr.ginac(e); }, "(", ")")
-     << (r.coordinates.empty() ? std::string() : ",  phi = " + pr.ginac(r.phi)) << "  ("
-     << (r.multiplicative ? "a homomorphism to R*" : "a homomorphism to R or S^1")
-     << (r.coordinates.empty() ? ", given by dphi_e" : "") << ")\n";
-  os << "  K            = ker phi,  k = ker dphi_e,  dphi_e = " << tuple_text(pr, r.dphi_e) << "\n";
-  os << "  q'           = " << pr.ginac(r.q_dot) << "   (depends on (zeta, q) only)\n";
-  for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
-    os << (r.constrained ? "  Delta w      = " : "  Delta zeta   = ")
-       << tuple_text(pr, r.momentum_jumps[k]) << "   (guard " << m.guards[k].name
-       << (r.constrained ? "; I B Delta w in Ann(k) + constraint forms)\n" : "; in Ann(k))\n");
-  os << "  hypotheses   normal: " << (r.normal ? "yes" : "no")
-     << ", codim1: " << (r.codim1 ? "yes" : "no")
-     << ", left_invariant: " << (r.left_invariant ? "yes" : "no")
-     << ", transversal: " << (r.transversal ? "yes" : "no") << "\n";
-}
-
-/// The reduction objects in LaTeX (derive --format latex and report.md).
-void reduction_latex(std::ostream& os, const Model& m, Printer& pr) {
-  const Reduction& r = *m.reduction;
-  const unsigned n = r.algebra_dim;
-  const std::string q = m.tex.at(r.q);
-  os << "% Lie-group reduction (Impact Lie--Poisson Reduction theorem), group " << r.group << "\n";
-  os << "\\[\n  h(\\zeta) = " << pr.latex(r.hamiltonian)
-     << ", \\qquad \\zeta^\\sharp = \\frac{\\partial h}{\\partial\\zeta} = "
-     << tuple_latex(pr, r.dh) << "\n\\]\n";
-  os << "\\[\n  \\mathrm{ad}^*_{\\partial h/\\partial\\zeta} = \\begin{pmatrix}\n";
-  for (unsigned i = 0; i < n; ++i) {
-    os << "    ";
-    for (unsigned j = 0; j < n; ++j) os << (j ? " & " : "") << pr.latex(r.coadjoint(i, j));
-    os << (i + 1 < n ? " \\\\\n" : "\n");
-  }
-  os << "  \\end{pmatrix}, \\qquad \\dot\\zeta = "
-        "\\mathrm{ad}^*_{\\partial h/\\partial\\zeta}\\,\\zeta, \\qquad "
-     << tex_dot(q) << " = " << pr.latex(r.q_dot) << "\n\\]\n";
-  os << "\\[\n  " << q << " = " << pr.latex(r.phi)
-     << minus_level(
-            r.level, [&](const ex& e) { return pr.latex(e); }, "\\left(", "\\right)")
-     << ", \\qquad \\mathfrak k = \\ker d\\phi_e,\\ d\\phi_e = " << tuple_latex(pr, r.dphi_e);
-  for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
-    os << ", \\qquad \\Delta\\zeta_{" << tex_label(m.guards[k].name)
-       << "} = " << tuple_latex(pr, r.momentum_jumps[k]);
-  os << "\n\\]\n";
-}
-
-/// The `reduction` block of derive --format json (docs/design.md).
-nlohmann::ordered_json reduction_json(const Model& m, Printer& pr) {
-  const Reduction& r = *m.reduction;
-  const unsigned n = r.algebra_dim;
-  auto strings = [&](const std::vector<ex>& v) {
-    std::vector<std::string> out;
-    for (const auto& e : v) out.push_back(pr.ginac(e));
-    return out;
-  };
-  nlohmann::ordered_json j;
-  j["algebra_dim"] = n;
-  j["momenta"] = r.momenta;
-  j["q"] = r.q;
-  j["group"] = r.group;
-  j["coordinates"] = r.coordinates;
-  j["basis"] = r.basis;
-  j["bracket"] = r.bracket;
-  nlohmann::ordered_json c = nlohmann::ordered_json::array();
-  for (unsigned i = 0; i < n; ++i) {
-    nlohmann::ordered_json ci = nlohmann::ordered_json::array();
-    for (unsigned k = 0; k < n; ++k) {
-      std::vector<std::string> row;
-      for (unsigned l = 0; l < n; ++l)
-        row.push_back(pr.ginac(r.structure_constants[(i * n + k) * n + l]));
-      ci.push_back(row);
-    }
-    c.push_back(ci);
-  }
-  j["structure_constants"] = c;
-  nlohmann::ordered_json ad = nlohmann::ordered_json::array();
-  for (unsigned i = 0; i < n; ++i) {
-    std::vector<std::string> row;
-    for (unsigned k = 0; k < n; ++k) row.push_back(pr.ginac(r.coadjoint(i, k)));
-    ad.push_back(row);
-  }
-  j["coadjoint"] = ad;
-  j["hamiltonian"] = pr.ginac(r.hamiltonian);
-  j["dh"] = strings(r.dh);
-  j["phi"] = pr.ginac(r.phi);
-  j["level"] = pr.ginac(r.level);
-  j["homomorphism"] = r.multiplicative ? "multiplicative" : "additive";
-  j["dphi_e"] = strings(r.dphi_e);
-  j["q_equation"] = pr.ginac(r.q_dot);
-  nlohmann::ordered_json jumps = nlohmann::ordered_json::array();
-  for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
-    jumps.push_back({{"guard", m.guards[k].name}, {"delta_zeta", strings(r.momentum_jumps[k])}});
-  j["momentum_jumps"] = jumps;
-  j["constrained"] = r.constrained;
-  j["hypotheses"] = {{"normal", r.normal},
-                     {"codim1", r.codim1},
-                     {"left_invariant", r.left_invariant},
-                     {"transversal", r.transversal}};
-  return j;
-}
-
-std::string report_markdown(const HybridSystem& sys, Printer& pr) {
+/// report.md: the state, the parameters' defaults, derive_latex (render.hpp) and the warnings.
+std::string report_markdown(const HybridSystem& sys, ExprPrinter& pr) {
   const Model& m = *sys.model;
   std::ostringstream os;
   os << "<!-- Generated by hybgen " << generator_version()
@@ -624,29 +443,30 @@ std::string report_markdown(const HybridSystem& sys, Printer& pr) {
 
 GeneratedFiles emit(const HybridSystem& sys) {
   const Model& m = *sys.model;
-  Printer pr(m);
+  ExprPrinter pr(m);
   HeaderBuilder hb(sys, pr);
-  const std::size_t nm = sys.modes.size(), ng = sys.guards.size();
+  const KernelCases modes = hb.mode_cases(), guards = hb.guard_cases();
+  const std::size_t ng = sys.guards.size();
   const std::size_t n = m.state.size();
-  hb.vector_kernel("Vector field X of mode k.", "flow", nm, n,
+  hb.vector_kernel("Vector field X of mode k.", "flow", modes, n,
                    [&](std::size_t k) { return sys.modes[k].flow; });
   hb.scalar_kernel("Divergence of X in mode k (Lebesgue measure in the state coordinates).",
-                   "divergence", nm, [&](std::size_t k) { return sys.modes[k].divergence; });
-  hb.scalar_kernel("Guard function s_k; the guard surface is s_k = 0.", "guard_surface", ng,
+                   "divergence", modes, [&](std::size_t k) { return sys.modes[k].divergence; });
+  hb.scalar_kernel("Guard function s_k; the guard surface is s_k = 0.", "guard_surface", guards,
                    [&](std::size_t k) { return sys.guards[k].surface; });
-  hb.vector_kernel("Gradient of s_k.", "guard_gradient", ng, n,
+  hb.vector_kernel("Gradient of s_k.", "guard_gradient", guards, n,
                    [&](std::size_t k) { return sys.guards[k].gradient; });
-  hb.vector_kernel("Reset map of guard k.", "reset", ng, n,
+  hb.vector_kernel("Reset map of guard k.", "reset", guards, n,
                    [&](std::size_t k) { return sys.guards[k].reset; });
   hb.vector_kernel("Inverse reset of guard k (closed form where guards[k].has_inverse).",
-                   "reset_inverse", ng, n, [&](std::size_t k) {
+                   "reset_inverse", guards, n, [&](std::size_t k) {
                      return sys.guards[k].has_inverse ? sys.guards[k].reset_inverse
                                                       : m.state_symbols;
                    });
-  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", ng,
+  hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", guards,
                    n * n, [&](std::size_t k) { return sys.guards[k].reset_jacobian; });
-  hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian", ng,
-                   [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
+  hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian",
+                   guards, [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
   hb.density_kernels();
   GeneratedFiles files;
   files.header_name = m.name + ".hpp";
@@ -662,226 +482,6 @@ void write_generated(const GeneratedFiles& files, const std::string& dir) {
   std::filesystem::create_directories(dir);
   write_file_atomic(dir + "/" + files.header_name, files.header);
   write_file_atomic(dir + "/" + files.report_name, files.report);
-}
-
-std::string derive_text(const HybridSystem& sys) {
-  const Model& m = *sys.model;
-  Printer pr(m);
-  std::ostringstream os;
-  os << "model " << m.name << " ("
-     << (m.reduction ? "Lie-group impact system reduced to g* x K\\G: " : "general hybrid system: ")
-     << m.state.size() << " states, " << sys.modes.size() << " mode"
-     << (sys.modes.size() == 1 ? "" : "s") << ", " << sys.guards.size() << " guard"
-     << (sys.guards.size() == 1 ? "" : "s") << ")\n";
-  os << "state       (";
-  for (std::size_t i = 0; i < m.state.size(); ++i) os << (i ? ", " : "") << m.state[i];
-  os << ")   measure: Lebesgue in these coordinates\n";
-  os << "parameters  ";
-  for (std::size_t j = 0; j < m.params.size(); ++j)
-    os << (j ? ", " : "") << m.params[j].name << " = " << pr.ginac(m.params[j].value);
-  os << "\n";
-  if (m.reduction) reduction_text(os, m, pr);
-  for (const auto& md : sys.modes) {
-    os << "\nmode " << md.name << "\n";
-    if (md.hamiltonian)
-      os << "  H = " << pr.ginac(*md.hamiltonian) << "   (Hamilton's equations)\n";
-    for (std::size_t i = 0; i < m.state.size(); ++i)
-      os << "  " << m.state[i] << "' = " << pr.ginac(md.flow[i]) << "\n";
-    os << "  div X = " << pr.ginac(md.divergence) << "\n";
-  }
-  for (const auto& g : sys.guards) {
-    os << "\nguard " << g.name << ": " << sys.modes[static_cast<std::size_t>(g.from)].name << " -> "
-       << sys.modes[static_cast<std::size_t>(g.to)].name << " when s = " << pr.ginac(g.surface)
-       << " crosses 0, " << direction_word(g.direction) << "\n";
-    os << "  reset            Delta" << tuple_text(pr, m.state_symbols) << " = "
-       << tuple_text(pr, g.reset) << "\n";
-    if (g.has_inverse)
-      os << "  inverse reset    Delta^-1" << tuple_text(pr, m.state_symbols) << " = "
-         << tuple_text(pr, g.reset_inverse) << "\n";
-    else if (g.inverse_on_guard_only)
-      os << "  inverse reset    none: locally injective on the guard only (methods transfer, "
-            "invariant, particles)\n";
-    else
-      os << "  inverse reset    numeric (Newton at run time)\n";
-    os << "  hybrid Jacobian  J = " << pr.ginac(g.hybrid_jacobian_on_surface) << "   (on s = 0)\n";
-    if (!g.surface_note.empty() &&
-        !is_identically_zero(g.hybrid_jacobian - g.hybrid_jacobian_on_surface, {}))
-      os << "                   general form: J = " << pr.ginac(g.hybrid_jacobian) << "\n";
-  }
-  os << "\nhybrid Frobenius-Perron PDE (paper Thm 3.11)\n";
-  for (const auto& md : sys.modes) {
-    std::string u = sys.modes.size() > 1 ? "u_" + md.name : "u";
-    os << "  d" << u << "/dt";
-    for (std::size_t i = 0; i < m.state.size(); ++i)
-      if (!md.flow[i].is_zero())
-        os << " + (" << pr.ginac(md.flow[i]) << ") d" << u << "/d" << m.state[i];
-    os << " = " << (md.divergence.is_zero() ? "0" : "-(" + pr.ginac(md.divergence) + ") " + u)
-       << "\n";
-  }
-  for (const auto& g : sys.guards) {
-    std::string uf =
-        sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.from)].name : "u";
-    std::string ut =
-        sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.to)].name : "u";
-    os << "  jump at " << g.name << ": " << ut << "(t+, y) = " << uf
-       << "(t-, Delta^-1(y)) / |J(Delta^-1(y))|";
-    if (g.has_inverse) {
-      std::string pre = tuple_text(pr, g.reset_inverse);
-      os << "\n      = " << uf << "(t-, " << pre.substr(1, pre.size() - 2) << ") / |"
-         << pr.ginac(jacobian_at_preimage(sys, g)) << "|";
-    }
-    os << "   for y in Delta(S)\n";
-  }
-  if (!sys.warnings.empty()) {
-    os << "\nwarnings\n";
-    for (const auto& w : sys.warnings) os << "  " << w << "\n";
-  }
-  return os.str();
-}
-
-std::string derive_latex(const HybridSystem& sys) {
-  const Model& m = *sys.model;
-  Printer pr(m);
-  std::ostringstream os;
-  const bool multi = sys.modes.size() > 1;
-  os << "% hybgen " << generator_version() << ": hybrid Frobenius--Perron PDE of '" << m.name
-     << "' (needs amsmath)\n";
-  if (m.reduction) reduction_latex(os, m, pr);
-  // Each mode's field, one line per state (its own derivative), and its divergence.
-  for (const auto& md : sys.modes) {
-    os << "\\[\n  \\text{mode } " << tex_label(md.name) << ":\\qquad\n  \\begin{aligned}\n";
-    for (std::size_t i = 0; i < m.state.size(); ++i)
-      os << "    " << tex_dot(m.tex.at(m.state[i])) << " &= " << pr.latex(md.flow[i]) << ", \\\\\n";
-    os << "    \\operatorname{div}_\\mu X &= " << pr.latex(md.divergence)
-       << "\n  \\end{aligned}\n\\]\n";
-  }
-  // Each guard: its surface, its reset (and inverse) and the hybrid Jacobian.
-  for (const auto& g : sys.guards) {
-    os << "\\[\n  \\text{guard } " << tex_label(g.name) << "\\ ("
-       << tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) << " \\to "
-       << tex_label(sys.modes[static_cast<std::size_t>(g.to)].name)
-       << "):\\qquad\n  \\begin{aligned}\n    \\mathcal S_{" << tex_label(g.name) << "} &= \\{"
-       << pr.latex(g.surface) << " = 0\\}, \\\\\n    \\Delta" << tuple_latex(pr, m.state_symbols)
-       << " &= " << tuple_latex(pr, g.reset) << ", \\\\\n";
-    if (g.has_inverse)
-      os << "    \\Delta^{-1}" << tuple_latex(pr, m.state_symbols)
-         << " &= " << tuple_latex(pr, g.reset_inverse) << ", \\\\\n";
-    os << "    \\mathcal J^X_\\mu(\\Delta) &= " << pr.latex(g.hybrid_jacobian_on_surface)
-       << "\n  \\end{aligned}\n\\]\n";
-  }
-  os << "\\[\n\\begin{cases}\n";
-  for (const auto& md : sys.modes) {
-    std::string u = multi ? "u_{" + tex_label(md.name) + "}" : "u";
-    os << "  " << pde_latex(sys, pr, md, u) << ", & x \\notin \\Delta(\\mathcal S); \\\\[1ex]\n";
-  }
-  for (std::size_t k = 0; k < sys.guards.size(); ++k) {
-    const auto& g = sys.guards[k];
-    std::string uf =
-        multi ? "u_{" + tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) + "}" : "u";
-    std::string ut =
-        multi ? "u_{" + tex_label(sys.modes[static_cast<std::size_t>(g.to)].name) + "}" : "u";
-    std::string args = state_args_latex(m);
-    os << "  " << ut << "(t^+" << args << ") = ";
-    if (g.has_inverse) {
-      std::string pre;
-      for (const auto& e : g.reset_inverse) pre += ", " + pr.latex(e);
-      const ex Jpre = jacobian_at_preimage(sys, g);
-      if (GiNaC::is_a<GiNaC::numeric>(Jpre) && GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(Jpre)) == 1)
-        os << uf << "(t^-" << pre << ")";
-      else
-        os << "\\dfrac{" << uf << "(t^-" << pre << ")}{" << abs_latex(pr, Jpre) << "}";
-    } else {
-      os << "\\dfrac{" << uf
-         << "(t^-, \\Delta^{-1}(x))}{\\left|\\mathcal J(\\Delta^{-1}(x))\\right|}";
-    }
-    os << ", & x \\in \\Delta(\\mathcal S_{" << tex_label(g.name) << "})"
-       << (k + 1 < sys.guards.size() ? ";\\\\[1ex]" : ".") << "\n";
-  }
-  os << "\\end{cases}\n\\]\n";
-  return os.str();
-}
-
-std::string derive_latex_document(const HybridSystem& sys) {
-  const Model& m = *sys.model;
-  Printer pr(m);
-  std::string name;
-  for (char c : m.name) name += c == '_' ? std::string("\\_") : std::string(1, c);
-  std::ostringstream os;
-  os << "% hybgen " << generator_version() << ": pdflatex this file\n"
-     << "\\documentclass[11pt]{article}\n\\usepackage[margin=2cm]{geometry}\n"
-     << "\\usepackage{amsmath,amssymb}\n\\allowdisplaybreaks\n\\begin{document}\n"
-     << "\\section*{The hybrid Frobenius--Perron equation of \\texttt{" << name << "}}\n"
-     << "State $" << tuple_latex(pr, m.state_symbols) << "$";
-  if (!m.params.empty()) {
-    os << ", parameters ";
-    for (std::size_t j = 0; j < m.params.size(); ++j)
-      os << (j ? ", " : "") << "$" << m.tex.at(m.params[j].name) << " = "
-         << pr.latex(m.params[j].value) << "$";
-  }
-  os << ". The density $u$ is with respect to the Lebesgue measure $\\mu$ in these "
-        "coordinates.\n\n"
-     << derive_latex(sys) << "\\end{document}\n";
-  return os.str();
-}
-
-nlohmann::ordered_json derive_json(const HybridSystem& sys) {
-  const Model& m = *sys.model;
-  Printer pr(m);
-  nlohmann::ordered_json j;
-  j["model"] = m.name;
-  j["kind"] = m.reduction ? "lie" : "hybrid";
-  j["state"] = m.state;
-  nlohmann::ordered_json params = nlohmann::ordered_json::object();
-  for (const auto& p : m.params) {
-    if (GiNaC::is_a<GiNaC::numeric>(p.value) &&
-        GiNaC::ex_to<GiNaC::numeric>(p.value).is_integer() && std::fabs(p.value_d) < 9.0e15)
-      params[p.name] = static_cast<long long>(p.value_d);
-    else
-      params[p.name] = p.value_d;
-  }
-  j["parameters"] = params;
-  nlohmann::ordered_json modes = nlohmann::ordered_json::array();
-  for (const auto& md : sys.modes) {
-    nlohmann::ordered_json mj;
-    mj["name"] = md.name;
-    std::vector<std::string> flow;
-    for (const auto& f : md.flow) flow.push_back(pr.ginac(f));
-    mj["flow"] = flow;
-    mj["divergence"] = pr.ginac(md.divergence);
-    if (md.hamiltonian) mj["hamiltonian"] = pr.ginac(*md.hamiltonian);
-    modes.push_back(mj);
-  }
-  j["modes"] = modes;
-  nlohmann::ordered_json guards = nlohmann::ordered_json::array();
-  for (const auto& g : sys.guards) {
-    nlohmann::ordered_json gj;
-    gj["name"] = g.name;
-    gj["from"] = sys.modes[static_cast<std::size_t>(g.from)].name;
-    gj["to"] = sys.modes[static_cast<std::size_t>(g.to)].name;
-    gj["surface"] = pr.ginac(g.surface);
-    gj["direction"] = direction_word(g.direction);
-    std::vector<std::string> reset, inverse;
-    for (const auto& e : g.reset) reset.push_back(pr.ginac(e));
-    gj["reset"] = reset;
-    if (g.has_inverse) {
-      for (const auto& e : g.reset_inverse) inverse.push_back(pr.ginac(e));
-      gj["reset_inverse"] = inverse;
-    } else {
-      gj["reset_inverse"] = nullptr;
-    }
-    gj["reset_inverse_kind"] =
-        g.has_inverse ? "symbolic" : (g.inverse_on_guard_only ? "none" : "numeric");
-    gj["hybrid_jacobian"] = pr.ginac(g.hybrid_jacobian_on_surface);
-    gj["hybrid_jacobian_general"] = pr.ginac(g.hybrid_jacobian);
-    guards.push_back(gj);
-  }
-  j["guards"] = guards;
-  if (m.reduction)
-    j["reduction"] = reduction_json(m, pr);
-  else
-    j["reduction"] = nullptr;
-  j["warnings"] = sys.warnings;
-  return j;
 }
 
 }  // namespace hybgen::gen

@@ -8,6 +8,7 @@
 #include <ostream>
 
 #include "hybgen/gen/check.hpp"
+#include "hybgen/gen/check_lie.hpp"
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/limits.hpp"
 #include "hybgen/gen/parse.hpp"

@@ -18,6 +18,7 @@
 #include "hybgen/gen/hash.hpp"
 #include "hybgen/gen/outputs.hpp"
 #include "hybgen/gen/process.hpp"
+#include "hybgen/gen/render.hpp"
 #include "hybgen/rt/setting_rules.hpp"
 
 namespace hybgen::gen {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "hybgen/gen/check.hpp"
+#include "hybgen/gen/check_lie.hpp"
 #include "hybgen/gen/parse.hpp"
 #include "hybgen/gen/reduce.hpp"
 
@@ -194,7 +195,7 @@ simulation { domain x in [-1, 1]; initial B: exp(-x^2) }
   EXPECT_FALSE(k.sim.initial[1].is_zero());
 }
 
-// --- Lie-group models: check_lie (reduce.hpp) -------------------------------
+// --- Lie-group models: check_lie (check_lie.hpp) ----------------------------
 
 /// Expect check_lie of `text` to fail at LINE:COL with `fragment`.
 void expect_lie_error(const std::string& text, int line, int col, const std::string& fragment) {

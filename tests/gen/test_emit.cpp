@@ -236,5 +236,56 @@ simulation {
   check_kernels_against_ginac(d, "clash");
 }
 
+TEST(Emit, KernelsReadLikeHandCode) {
+  // Each case names its mode or guard; guard kernels switch on `guard`; the model's names
+  // stay as written (zeta1, t0), and the emitter's numbered locals (_t0, _c0, _w0) take an
+  // underscore, so that only a model name of that form (`_t1`) is renamed.
+  const Frontend d(SourceText("hand.model", R"(model hand
+state zeta1, t0
+parameter _t1 = 0.5, c0 = 2
+mode heat {
+  where zeta1 > 0
+  zeta1' = c0*(t0 + zeta1)^2
+  t0' = -_t1*(t0 + zeta1)^2
+}
+mode cool {
+  where zeta1 < 0
+  zeta1' = -c0
+  t0' = _t1
+}
+guard off {
+  from heat to cool
+  when zeta1 = 0 decreasing
+  reset identity
+}
+guard on {
+  from cool to heat
+  when zeta1 = 0 increasing
+  reset identity
+}
+simulation {
+  domain zeta1 in [-1, 1]
+  domain t0 in [0, 1]
+  initial exp(-zeta1^2)
+}
+)"));
+  const std::string header = emit(d.sys).header;
+  EXPECT_NE(header.find("      case 0: {  // mode heat\n"), std::string::npos) << header;
+  EXPECT_NE(header.find("      case 1: {  // mode cool\n"), std::string::npos);
+  EXPECT_NE(header.find("      case 0: {  // guard off: heat -> cool\n"), std::string::npos);
+  EXPECT_NE(header.find("      case 1: {  // guard on: cool -> heat\n"), std::string::npos);
+  EXPECT_NE(header.find("static void flow(int mode, "), std::string::npos);
+  EXPECT_NE(header.find("static void reset(int guard, "), std::string::npos);
+  EXPECT_NE(header.find("static double guard_surface(int guard, "), std::string::npos);
+  EXPECT_NE(header.find("    switch (guard) {\n"), std::string::npos);
+  EXPECT_NE(header.find("const double zeta1 = state[0];"), std::string::npos);
+  EXPECT_NE(header.find("const double t0 = state[1];"), std::string::npos);
+  EXPECT_NE(header.find("const double c0 = parameter[1];"), std::string::npos);
+  EXPECT_NE(header.find("const double _t1_ = parameter[0];"), std::string::npos);
+  EXPECT_NE(header.find("const double _t0 = t0 + zeta1;"), std::string::npos);
+  EXPECT_NE(header.find("double _w0 = 0.0;"), std::string::npos);
+  check_kernels_against_ginac(d, "hand");
+}
+
 }  // namespace
 }  // namespace hybgen::gen

@@ -23,6 +23,7 @@
 #include "../../fuzz/frontend_pipeline.hpp"
 #include "../../fuzz/overrides_pipeline.hpp"
 #include "hybgen/gen/check.hpp"
+#include "hybgen/gen/check_lie.hpp"
 #include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/fs.hpp"

@@ -19,6 +19,7 @@
 #include <string>
 
 #include "hybgen/gen/check.hpp"
+#include "hybgen/gen/check_lie.hpp"
 #include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/emit.hpp"
 #include "hybgen/gen/fs.hpp"

@@ -22,7 +22,7 @@
 /// - odd functions (sin, tan, asin, atan, sinh, tanh) pull a negative
 ///   coefficient out of their argument, even ones (cos, cosh, abs) drop it.
 ///
-/// Printing (all three printers alike; nodes are not changed): a product with a
+/// Printing (all three printers alike, dag_print.hpp; nodes are not changed): a product with a
 /// negative coefficient prints its sign inside one sum factor with an odd
 /// integer exponent when that saves minus signs (`i*(1-f)`, `i/(1-f)`, not
 /// `-i*(f-1)`); terms of sums keep their sign, and a sum whose first term would

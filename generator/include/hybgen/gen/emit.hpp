@@ -1,12 +1,10 @@
 #pragma once
 /// \file emit.hpp
 /// Stage 4 (emit): HybridSystem IR -> generated sources (a C++ kernel header
-/// satisfying hybgen::rt::HybridModel, and a Markdown derivation report), plus
-/// the human-readable renderings of the derivation used by `hybgen derive`.
+/// satisfying hybgen::rt::HybridModel, and a Markdown derivation report).
 /// Everything printed goes through hybgen's own deterministic DAG printer:
-/// the same model gives the same bytes.
-
-#include <nlohmann/json.hpp>
+/// the same model gives the same bytes. The renderings of `hybgen derive` are in
+/// render.hpp.
 
 #include <string>
 
@@ -32,19 +30,6 @@ GeneratedFiles emit(const HybridSystem& sys);
 
 /// Write `files` into `dir` (created if needed), each atomically.
 void write_generated(const GeneratedFiles& files, const std::string& dir);
-
-/// `hybgen derive --format text`.
-std::string derive_text(const HybridSystem& sys);
-
-/// `hybgen derive --format latex`: the PDE and jump conditions as the paper writes them.
-std::string derive_latex(const HybridSystem& sys);
-
-/// `derive --format latex --standalone`: derive_latex as a document pdflatex compiles
-/// (article, amsmath), with the state and the parameter values.
-std::string derive_latex_document(const HybridSystem& sys);
-
-/// `hybgen derive --format json` (docs/design.md contract).
-nlohmann::ordered_json derive_json(const HybridSystem& sys);
 
 /// C++ identifier for the model's struct (the model name, sanitised).
 std::string model_struct_name(const std::string& model_name);

@@ -4,9 +4,9 @@
 ///
 ///   AST --check_lie--> LieModel --reduce--> Model (general kind) --derive--> IR
 ///
-/// `check_lie` resolves the names of a `lie` model and builds the matrix group;
-/// `reduce` applies the Impact Lie–Poisson Reduction theorem and its corollary
-/// and returns an ordinary Model whose state is (ζ_1..ζ_n, q):
+/// `check_lie` (check_lie.hpp) resolves the names of a `lie` model and builds
+/// the matrix group; `reduce` applies the Impact Lie–Poisson Reduction theorem
+/// and its corollary and returns an ordinary Model whose state is (ζ_1..ζ_n, q):
 ///
 ///   ζ' = ad*_{∂h/∂ζ} ζ,   q' = dφ_e(ζ^♯) (φ additive) or (q + c) dφ_e(ζ^♯) (φ = det-like),
 ///   guard q = c_k,        Δ(ζ, q) = (ζ + Δζ, q),
@@ -44,7 +44,7 @@ struct LieImpact {
   GiNaC::ex restitution = 1;                        ///< e (Elastic: 1).
 };
 
-/// A checked Lie-group model (output of `check_lie`).
+/// A checked Lie-group model (output of `check_lie`, check_lie.hpp).
 ///
 /// Invariants: `base` is a checked general Model whose state is the momenta
 /// followed by q (its one mode and its guards are placeholders that `reduce`
@@ -75,14 +75,6 @@ struct LieModel {
   Components dphi_e;
   HomomorphismKind phi_kind = HomomorphismKind::Additive;  ///< How that φ transforms.
 };
-
-/// Whether the AST is a Lie-group model (it has a `group`, `momenta`,
-/// `hamiltonian`, `inertia` or `reduced` statement).
-bool is_lie_model(const ModelAst& ast);
-
-/// Stage 2 for Lie-group models: resolve names, build the group (hypothesis
-/// lie_algebra), convert h and q. Throws ModelError.
-LieModel check_lie(const ModelAst& ast, const SourceText& src);
 
 /// Which system `reduce` produces.
 enum class ReduceTarget {
