@@ -780,9 +780,10 @@ double parse_override_number(const std::string& key, const std::string& value) {
 /// numbers with a < b. Anything else is refused with the form it needs.
 std::pair<double, double> parse_interval(const std::string& key, const std::string& value) {
   const std::string form = "--set " + key + "=" + value + ": expects an interval [a,b]";
-  if (value.size() < 2 || value.front() != '[' || value.back() != ']')
-    throw UsageError(form + (value.find('[') == std::string::npos ? " (with its brackets)"
-                                                                  : " (brackets around it)"));
+  if (value.empty() || value.front() != '[')
+    throw UsageError(form + " (it does not start with '[')");
+  if (value.size() < 2 || value.back() != ']')
+    throw UsageError(form + " (it does not end with ']')");
   const std::string inner = value.substr(1, value.size() - 2);
   const std::size_t comma = inner.find(',');
   if (comma == std::string::npos || inner.find(',', comma + 1) != std::string::npos ||

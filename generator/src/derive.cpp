@@ -299,7 +299,11 @@ class Evaluator {
   explicit Evaluator(const Model& m) : m_(m) {
     for (const auto& p : m.params) params_[p.symbol] = GiNaC::numeric(p.value_d);
   }
+  /// e at the state x (NaN where it is not a finite real number, or x is not finite: a reset
+  /// image that overflowed, e = 1e308).
   double operator()(const ex& e, const std::vector<double>& x) const {
+    for (const double xi : x)
+      if (!std::isfinite(xi)) return std::nan("");
     GiNaC::exmap at = params_;
     for (std::size_t i = 0; i < x.size(); ++i) at[m_.state_symbols[i]] = GiNaC::numeric(x[i]);
     try {
