@@ -1,0 +1,99 @@
+// What a new user trips over, through the command line: malformed --set values refused with
+// the form they need, a misspelt key with a suggestion, outputs named after the model file
+// (a copied and edited model does not replace the first one's outputs) and no lock file left
+// behind, `check` agreeing with `run`, and values at the edges of a setting's range refused or
+// run, never a crash. Each test failed on a81ba15 (the closing note of docs/hardening.md lists
+// what each saw there).
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+#include "hybgen/rt/exit_codes.hpp"
+#include "support/e2e.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hybgen::rt::ExitCode;
+using hybgen::rt::exit_status;
+using hybgen::testing::e2e_dir;
+using hybgen::testing::Hybgen;
+
+const Hybgen hybgen{e2e_dir("newcomer") / "cache"};
+
+bool has(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+TEST(Newcomer, DomainValuesNeedTheirBrackets) {
+  // On a81ba15 the first two were taken without a word and the third reported "2.5]".
+  for (const auto& [value, why] :
+       {std::pair{"[0,3", "does not end with ']'"}, std::pair{"0.5,2.5", "does not start with '['"},
+        std::pair{"[0.5,2.5]]", "two numbers separated by one comma"},
+        std::pair{"[2,1]", "empty interval"}}) {
+    const auto r = hybgen(std::string("check models/bouncing_ball.model --set 'domain.x=") + value +
+                          "'");
+    EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << value << "\n" << r.out;
+    EXPECT_TRUE(has(r.out, why)) << value << "\n" << r.out;
+  }
+  const auto ok = hybgen("check models/bouncing_ball.model --set 'domain.x=[ 0 , 3 ]'");
+  EXPECT_EQ(ok.code, exit_status(ExitCode::Success)) << ok.out;
+}
+
+TEST(Newcomer, AMisspeltKeyGetsASuggestion) {
+  const auto r = hybgen("check models/bouncing_ball.model --set metod=transfer");
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
+  EXPECT_TRUE(has(r.out, "did you mean 'method'?")) << r.out;
+  const auto d = hybgen("check models/bouncing_ball.model --set domian.x=[0,1]");
+  EXPECT_TRUE(has(d.out, "did you mean 'domain.x'?")) << d.out;
+}
+
+TEST(Newcomer, OutputsAreNamedAfterTheFileAndLeaveNoLock) {
+  // Two files with the same `model NAME` (a copy being edited): each run keeps its own
+  // folder, out/<file>/, and no out/<file>.lock stays behind.
+  const fs::path dir = e2e_dir("newcomer") / "two_files";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string ball = std::string(HYBGEN_SOURCE_DIR) + "/models/bouncing_ball.model";
+  fs::copy_file(ball, dir / "a.model");
+  fs::copy_file(ball, dir / "b.model");
+  const std::string sets = " --set grid=21x21 --set t_end=1 --set dt=0.5 --set outputs=netcdf -q";
+  for (const char* f : {"a.model", "b.model"}) {
+    const auto r = hybgen(std::string("run ") + f + sets, "cd '" + dir.string() + "' &&");
+    ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  }
+  EXPECT_TRUE(fs::exists(dir / "out" / "a" / "summary.json"));
+  EXPECT_TRUE(fs::exists(dir / "out" / "b" / "summary.json"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "bouncing_ball"));
+  for (const auto& e : fs::directory_iterator(dir / "out"))
+    EXPECT_NE(e.path().extension(), ".lock") << e.path();
+}
+
+TEST(Newcomer, CheckAgreesWithRun) {
+  // `check --preflight` printed "ok" and then failed with exit 3; `check` said ok to settings
+  // that `run` refuses.
+  const auto pf = hybgen("check models/bouncing_ball.model --preflight -q --set e=3/2");
+  EXPECT_EQ(pf.code, exit_status(ExitCode::Numerical)) << pf.out;
+  EXPECT_FALSE(has(pf.out, ": ok: model")) << pf.out;
+  const auto ranks = hybgen("check models/bouncing_ball.model --set ranks=2");
+  EXPECT_EQ(ranks.code, exit_status(ExitCode::UsageError)) << ranks.out;
+  EXPECT_TRUE(has(ranks.out, "needs backend=mpi")) << ranks.out;
+  const auto marg = hybgen("check models/bouncing_ball.model --set density=marginals");
+  EXPECT_EQ(marg.code, exit_status(ExitCode::UsageError)) << marg.out;
+  EXPECT_TRUE(has(marg.out, "use method=particles")) << marg.out;
+}
+
+TEST(Newcomer, ValuesAtTheEdgesAreRefusedOrRunNeverACrash) {
+  // On a81ba15: t_end = 1e15 with dt = 1e-9 ended in std::bad_alloc (exit 70), e = 1e308 in
+  // "internal error: floating point overflow" (exit 70).
+  const auto frames = hybgen("run models/bouncing_ball.model -q --set t_end=1e15 --set dt=1e-9");
+  EXPECT_EQ(frames.code, exit_status(ExitCode::UsageError)) << frames.out;
+  EXPECT_TRUE(has(frames.out, "output times")) << frames.out;
+  const auto e = hybgen("run models/bouncing_ball.model -q --set e=1e308 --set grid=21x21");
+  EXPECT_EQ(e.code, exit_status(ExitCode::Numerical)) << e.out;
+  EXPECT_TRUE(has(e.out, "non-finite reset")) << e.out;
+}
+
+}  // namespace
