@@ -260,6 +260,10 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
       for (std::size_t i = 0; i < inv["eigenvalues"].size(); ++i)
         put_number(row, "abs_lambda" + std::to_string(i + 1), inv["eigenvalues"][i], "abs");
   }
+  if (s.contains(k::escape)) {
+    put_number(row, "escape_rate", s[k::escape], "rate");
+    put_number(row, "escape_rate_error", s[k::escape], "rate_error");
+  }
   if (s.contains(k::seconds))
     for (const char* key : {"derive", "build", "solve", "budget", "output"})
       put_number(row, std::string("seconds_") + key, s[k::seconds], key);

@@ -110,6 +110,15 @@ TEST(Sweep, RowTakesTheFinalTimeAndTheMethodsFields) {
   EXPECT_FALSE(ri.contains("t"));
   EXPECT_EQ(ri["spectral_gap"], 0.25);
   EXPECT_EQ(ri["abs_lambda2"], 0.75);
+  EXPECT_FALSE(ri.contains("escape_rate"));
+
+  const nlohmann::json esc = nlohmann::json::parse(R"({
+    "method": "escape", "times": [], "initial_mass": 0, "mass": [],
+    "escape": {"rate": 2.5, "rate_error": 0.125, "lambda1": 0.9}})");
+  const auto re = sweep_row(esc);
+  EXPECT_EQ(re["escape_rate"], 2.5);
+  EXPECT_EQ(re["escape_rate_error"], 0.125);
+  EXPECT_FALSE(re.contains("spectral_gap"));
 }
 
 TEST(Sweep, CsvHasEveryColumnAndExactNumbers) {

@@ -115,9 +115,12 @@ std::string fixed3(double v) {
 
 /// The figure title of frame k.
 std::string frame_title(const RunRecord& run, std::size_t k) {
+  // A one-frame method's frame says what it is (method_table.hpp, frame_what).
+  const MethodSpec* method = find_method(run.method);
   return run.model + "  ·  " +
-         (run.times.empty() ? std::string("invariant density of the transfer operator")
-                            : run.method + "  ·  t = " + fixed3(run.times[k]));
+         (run.times.empty()
+              ? (method != nullptr ? std::string(method->frame_what) : std::string("density"))
+              : run.method + "  ·  t = " + fixed3(run.times[k]));
 }
 
 // Layout of a frame figure, in points (1 px in PNG).

@@ -11,6 +11,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "hybgen/rt/io/hyperslab.hpp"
@@ -202,7 +203,10 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
             "variables, sampled at the grid nodes");
     return v;
   };
-  const std::string what = series ? "density" : "invariant density";
+  // A one-frame method's frame says what it is (method_table.hpp, frame_what).
+  const MethodSpec* method = find_method(run.method);
+  const std::string what =
+      series || method == nullptr ? std::string("density") : std::string(method->frame_what);
   const int density =
       mg ? -1
          : define_density(dn.density, false, n_mode > 1 ? what + ", summed over the modes" : what);
@@ -320,13 +324,30 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
                   inv[key].get<double>());
   }
 
+  // The escape rate (escape): per unit time of the model, −ln λ₁ / transfer_step.
+  if (run.summary.is_object() && run.summary.contains(summary_key::escape)) {
+    const nlohmann::json& e = run.summary[summary_key::escape];
+    for (const auto& [attribute, key] :
+         {std::pair{"escape_rate", "rate"}, std::pair{"escape_rate_error", "rate_error"},
+          std::pair{"escape_lambda1", "lambda1"}, std::pair{"transfer_step", "step"}})
+      if (e.contains(key) && e[key].is_number())
+        nc.number(NC_GLOBAL, attribute, e[key].get<double>());
+    nc.text(NC_GLOBAL, "escape_rate_units", "per unit time");
+    nc.text(NC_GLOBAL, "escape_rate_description",
+            "escape rate of the open system, -ln(escape_lambda1)/transfer_step per unit time: "
+            "the conditionally invariant density loses the fraction exp(-escape_rate t) of its "
+            "mass through the grid box's faces in the time t; escape_rate_error (per unit time) "
+            "is |rate - rate on the grid with (n+1)/2 nodes per axis| + the eigen-solver's "
+            "tolerance/transfer_step");
+  }
+
   // Global attributes.
   const nlohmann::json& pv = run.provenance;
   const std::string version = json_text(pv, "hybgen_version");
   nc.text(NC_GLOBAL, "Conventions", "CF-1.8");
   nc.text(NC_GLOBAL, "title",
-          run.model + ": " + (series ? "density under the hybrid flow" : "invariant density") +
-              " (" + run.method + ")");
+          run.model + ": " + (series ? std::string("density under the hybrid flow") : what) + " (" +
+              run.method + ")");
   nc.text(NC_GLOBAL, "source", "hybgen" + (version.empty() ? "" : " " + version));
   nc.text(NC_GLOBAL, "history", utc_now() + " hybgen run " + json_text(pv, "model_path"));
   nc.text(NC_GLOBAL, "model", run.model);

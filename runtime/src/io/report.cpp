@@ -199,6 +199,15 @@ img { max-width: 100%; } .muted { color: #666; }
       << number(inv.value("decay_rate", 0.0)) << " per unit time</p>\n";
   }
 
+  if (run.summary.is_object() && run.summary.contains(summary_key::escape)) {
+    const nlohmann::json& e = run.summary[summary_key::escape];
+    h << "<h2>Escape rate</h2>\n<p>escape rate " << number(e.value("rate", 0.0)) << " ± "
+      << number(e.value("rate_error", 0.0))
+      << " per unit time (λ<sub>1</sub> = " << number(e.value("lambda1", 0.0)) << " per step of "
+      << number(e.value("step", 0.0))
+      << "); the frame is the conditionally invariant density, of unit mass</p>\n";
+  }
+
   // What derive checked.
   if (pv.is_object() && pv.contains("checks") && pv["checks"].is_object()) {
     const nlohmann::json& c = pv["checks"];

@@ -54,7 +54,7 @@ std::string sweep_label(std::size_t index, std::size_t count,
 /// The summary quantities of one run (its summary.json) as a flat row: method, final time,
 /// initial mass and, at the final time, mass, outflow, atom and the unaccounted mass with
 /// their error bars; for `invariant` the spectral gap, decay rate and |λ| of the leading
-/// eigenvalues; the timings in seconds.
+/// eigenvalues; for `escape` the escape rate and its error; the timings in seconds.
 nlohmann::ordered_json sweep_row(const nlohmann::json& summary);
 
 /// The table as CSV: one header line (the union of the rows' keys, in first-seen order),

@@ -44,10 +44,11 @@ inline constexpr const char* budget = "budget";        ///< characteristics: the
 inline constexpr const char* transfer = "transfer";    ///< transfer: the operator and march.
 inline constexpr const char* invariant = "invariant";  ///< invariant: density and spectrum.
 inline constexpr const char* particles = "particles";  ///< particles: the samples.
+inline constexpr const char* escape = "escape";        ///< escape: the escape rate and its density.
 }  // namespace summary_key
 
 /// A method, in the table's order.
-enum class Method { characteristics, transfer, invariant, particles };
+enum class Method { characteristics, transfer, invariant, particles, escape };
 
 /// One row of the methods table.
 struct MethodSpec {
@@ -59,6 +60,8 @@ struct MethodSpec {
   /// Whether it writes one frame (`frame`, the stationary answer) instead of a time series.
   bool one_frame;
   std::string_view frame;  ///< The one frame's name (its file stem), when `one_frame`.
+  /// What the one frame is, when `one_frame`: the pictures' titles and run.nc's long_name.
+  std::string_view frame_what;
   /// Whether it can keep the 2-D marginals instead of the grid (the setting density).
   bool deposits_marginals;
   /// The member of summary.json that holds its own fields (summary_key).
@@ -68,16 +71,20 @@ struct MethodSpec {
 
 /// The methods table, in the order `--help` lists them.
 inline constexpr std::array kMethods = {
-    MethodSpec{Method::characteristics, "characteristics", true, false, "", false,
+    MethodSpec{Method::characteristics, "characteristics", true, false, "", "", false,
                summary_key::budget,
                "exact backward characteristics per node; the mass budget by adaptive cubature"},
-    MethodSpec{Method::transfer, "transfer", false, false, "", false, summary_key::transfer,
+    MethodSpec{Method::transfer, "transfer", false, false, "", "", false, summary_key::transfer,
                "a one-step transfer operator on node masses, marched by mat-vecs"},
-    MethodSpec{Method::invariant, "invariant", false, true, "invariant", false,
-               summary_key::invariant,
+    MethodSpec{Method::invariant, "invariant", false, true, "invariant",
+               "invariant density of the transfer operator", false, summary_key::invariant,
                "the leading eigenvector of the transfer operator, and its next eigenvalues"},
-    MethodSpec{Method::particles, "particles", false, false, "", true, summary_key::particles,
+    MethodSpec{Method::particles, "particles", false, false, "", "", true, summary_key::particles,
                "Monte-Carlo samples of the initial density pushed forward and deposited"},
+    MethodSpec{Method::escape, "escape", false, true, "escape",
+               "conditionally invariant density of the open system", false, summary_key::escape,
+               "the escape rate of an open system (-ln lambda1 / step) and its conditionally "
+               "invariant density"},
 };
 
 static_assert(

@@ -438,7 +438,8 @@ inline nlohmann::json finish_summary(const RunRecord& rec, const WrittenOutputs&
 }
 
 /// Stage 7, report: the terminal's account of the run (stdout; not with --quiet): the time per
-/// stage, then the spectrum of a method with one frame or the mass budget of a time series.
+/// stage, then the spectrum (invariant), the escape rate (escape) or the mass budget of a time
+/// series.
 inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlohmann::json& s,
                              const WrittenOutputs& written) {
   namespace k = summary_key;
@@ -474,6 +475,11 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
                   l["im"].get<double>(), l["abs"].get<double>());
     std::printf("spectral gap %.3e, decay rate %.4g per unit time\n",
                 inv["spectral_gap"].get<double>(), inv["decay_rate"].get<double>());
+  } else if (s.contains(k::escape)) {
+    const auto& e = s[k::escape];
+    std::printf("escape rate %.10g +/- %.2g per unit time (lambda1 = %.12f, step %g)\n",
+                e["rate"].get<double>(), e["rate_error"].get<double>(), e["lambda1"].get<double>(),
+                e["step"].get<double>());
   } else if (const MassBudget& mb = rec.budget; mb.mass.empty()) {
     std::printf("mass budget: off\n");
   } else {

@@ -77,14 +77,15 @@ inline constexpr std::array kSettings = {
                 "mass budget: fast (capped, about the solve's cost), full (to budget_tol), off"},
     SettingSpec{"budget_tol", SettingType::real, 3e-4, "", 1e-12, 0.1, false, "", "characteristics",
                 "relative tolerance of the full mass budget's cubatures"},
-    SettingSpec{"step", SettingType::real, 0.0, "", 0.0, 1e300, false, "", "transfer invariant",
-                "time step of the transfer operator (0: dt)"},
+    SettingSpec{"step", SettingType::real, 0.0, "", 0.0, 1e300, false, "",
+                "transfer invariant escape", "time step of the transfer operator (0: dt)"},
     SettingSpec{"scheme", SettingType::word, 0.0, "hat", 0, 0, false, "hat|cell",
-                "transfer invariant",
+                "transfer invariant escape",
                 "transfer operator: hat (forward samples on hat functions) or cell (Ulam)"},
-    SettingSpec{"samples", SettingType::integer, 0, "", 0, 64, false, "", "transfer invariant",
+    SettingSpec{"samples", SettingType::integer, 0, "", 0, 64, false, "",
+                "transfer invariant escape",
                 "sample points per axis and cell (0: 4 up to 2-D, 3 in 3-D, 2 above)"},
-    SettingSpec{"eigenvalues", SettingType::integer, 6, "", 1, 64, false, "", "invariant",
+    SettingSpec{"eigenvalues", SettingType::integer, 6, "", 1, 64, false, "", "invariant escape",
                 "eigenvalues of the transfer operator to report"},
     SettingSpec{"particles", SettingType::integer, 1000000, "", 1, 1e10, false, "", "particles",
                 "number of samples"},
@@ -462,7 +463,8 @@ class Settings {
   std::array<bool, kSettings.size()> given_{};
 };
 
-/// The settings as help text, one per line: name, range, default, methods, help.
+/// The settings as help text, one per line: name, range, default, methods, help; under
+/// `method`, each method with its line of help (method_table.hpp, MethodSpec::help).
 inline std::string settings_help() {
   std::string out;
   for (const SettingSpec& s : kSettings) {
@@ -470,16 +472,23 @@ inline std::string settings_help() {
     line.resize(std::max<std::size_t>(line.size() + 1, 20), ' ');
     out += line + std::string(s.help) + "\n" + std::string(20, ' ') + setting_range(s) +
            "; default " + setting_default(s) + "; " + detail::readers(s.methods) + "\n";
+    if (s.name == "method")
+      for (const MethodSpec& m : kMethods)
+        out += std::string(22, ' ') + std::string(m.name) + ": " + std::string(m.help) + "\n";
   }
   return out;
 }
 
-/// The settings as a Markdown table (docs/settings.md).
+/// The settings as a Markdown table (docs/settings.md), then the methods with their lines of
+/// help (method_table.hpp, MethodSpec::help).
 inline std::string settings_markdown() {
   std::string out = "| setting | what | accepts | default | read by |\n|---|---|---|---|---|\n";
   for (const SettingSpec& s : kSettings)
     out += "| `" + std::string(s.name) + "` | " + std::string(s.help) + " | " + setting_range(s) +
            " | " + setting_default(s) + " | " + detail::readers(s.methods) + " |\n";
+  out += "\nThe words of `method`:\n\n";
+  for (const MethodSpec& m : kMethods)
+    out += "- `" + std::string(m.name) + "`: " + std::string(m.help) + "\n";
   return out;
 }
 

@@ -7,12 +7,15 @@
 /// `eigenvalue` (an invariant density), `mode` when the model has several. Variables:
 ///  - a coordinate per state (its grid nodes, both ends included), `time`, `mode` (names);
 ///  - `density` (time, states…): the density summed over the modes; `density_by_mode`
-///    (time, mode, states…) when there are several modes. Without `time` for `invariant`;
+///    (time, mode, states…) when there are several modes. Without `time` for a method with one
+///    frame (`invariant`, `escape`);
 ///  - the mass budget as time series: `mass`, `outflow`, `atom`, `unaccounted`
 ///    (mass0 − mass − outflow − atom) and their `_error` bars (solution.hpp, budget.hpp),
 ///    `initial_mass`;
 ///  - `invariant`: `eigenvalue_real`, `eigenvalue_imag`, `eigenvalue_abs` and the
-///    spectral gap and decay rate as attributes.
+///    spectral gap and decay rate as attributes;
+///  - `escape`: the global attributes `escape_rate`, `escape_rate_error` (per unit time, with
+///    `escape_rate_units` and `escape_rate_description`), `escape_lambda1`, `transfer_step`.
 /// Global attributes: Conventions, title, source, history, model, method, the model's text
 /// and SHA-256, the derived equations, the settings (JSON) and every parameter value.
 /// A name of ours that a state variable already uses gets a trailing `_` (a state called

@@ -13,7 +13,10 @@
 ///    (transfer.hpp); scheme `hat` (default) or `cell`, both conserving mass column by column;
 ///  - invariant: the leading eigenvector of the transfer operator and the next eigenvalues
 ///    (invariant.hpp); one frame, `invariant`, instead of the time series;
-///  - particles: Monte-Carlo samples of u0 pushed forward and deposited (particles.hpp).
+///  - particles: Monte-Carlo samples of u0 pushed forward and deposited (particles.hpp);
+///  - escape: an open system's escape rate −ln λ₁/h and its conditionally invariant density,
+///    the leading eigenpair of the transfer operator (invariant.hpp) on the grid and on the
+///    halved grid for the error (escape.hpp); one frame, `escape`.
 ///
 /// Invariants of a successful result: solution.n_time == frame_names.size() (or, for the
 /// particles with density=marginals, an empty solution and marginals with one block per
@@ -38,6 +41,7 @@
 #include "hybgen/rt/method_table.hpp"
 #include "hybgen/rt/methods/budget.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/escape.hpp"
 #include "hybgen/rt/methods/mass_budget.hpp"
 #include "hybgen/rt/methods/particles.hpp"
 #include "hybgen/rt/model.hpp"
@@ -187,14 +191,15 @@ bool assembly_failed(const TransferOperator<N>& op, MethodResult<N>& r,
   return true;
 }
 
-/// Assemble the transfer operator of M with a progress bar over its rows.
+/// Assemble the transfer operator of M with a progress bar (titled `what`) over its rows.
 template <HybridModel M>
 TransferOperator<state_dim_v<M>> assemble(const TensorGrid<state_dim_v<M>>& grid, const double* par,
-                                          TransferOptions o, bool quiet) {
+                                          TransferOptions o, bool quiet,
+                                          const char* what = "transfer operator: assembly") {
   // Each rank assembles its block of the columns: rank 0's bar counts its own share.
   const Backend& backend = o.backend ? *o.backend : serial_backend();
-  Progress progress("transfer operator: assembly",
-                    backend.block(grid.size() * static_cast<std::size_t>(M::n_mode)).size(), quiet);
+  Progress progress(what, backend.block(grid.size() * static_cast<std::size_t>(M::n_mode)).size(),
+                    quiet);
   o.progress = &progress;
   return assemble_transfer<M>(grid, par, o);
 }
@@ -380,6 +385,92 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   return r;
 }
 
+/// The escape rate of an open system and its conditionally invariant density (escape.hpp):
+/// the leading eigenpair of the transfer operator on the grid, and λ₁ on the halved grid for
+/// the rate's error; one frame (`times` unused; the operator's step is `step`, else `dt`). A
+/// closed system (λ₁ within its error of 1) is told so in a warning.
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_by_escape(const TensorGrid<state_dim_v<M>>& grid,
+                                             std::span<const double>, double dt, const double* par,
+                                             const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  const TransferOptions o = detail::transfer_options(s, dt);
+  const auto t0 = detail::MethodClock::now();
+  const TransferOperator<N> op = detail::assemble<M>(grid, par, o, s.quiet);
+  if (detail::assembly_failed(op, r, t0)) return r;
+  InvariantOptions io;
+  io.n_eigen = std::max(2, static_cast<int>(s.settings.integer<"eigenvalues">()));
+  const InvariantResult inv = invariant_density(op, io);
+  // The halved grid's operator, for its λ₁ only (freed at the end of the block).
+  InvariantResult coarse;
+  std::size_t coarse_rows = 0;
+  {
+    const TransferOperator<N> op2h = detail::assemble<M>(
+        halved_grid(grid), par, o, s.quiet, "transfer operator: assembly (halved grid)");
+    if (detail::assembly_failed(op2h, r, t0)) return r;
+    coarse = invariant_density(op2h, io);
+    coarse_rows = op2h.size();
+  }
+  r.solve_s = detail::seconds_since(t0);
+  const double lam1 = inv.eigenvalues.front().real();
+  const double lam1_2h = coarse.eigenvalues.front().real();
+  if (!(lam1 > 0.0) || !(lam1_2h > 0.0)) {
+    char b[512];
+    std::snprintf(b, sizeof b,
+                  "(escape) the transfer operator's leading eigenvalue is %g (%g on the halved "
+                  "grid): every sample leaves the box within finitely many steps of %g, so no "
+                  "density is conditionally invariant and the escape rate is infinite",
+                  lam1, lam1_2h, o.step);
+    r.failure = b;
+    return r;
+  }
+  const EscapeRate e = escape_rate(inv, coarse, o.step, io.tol);
+  r.solution.n_time = 1;
+  r.solution.n_mode = op.n_mode;
+  r.solution.n_point = op.n_node;
+  r.solution.u = inv.density;
+  if (op.distributed) r.solution.distributed = true, r.solution.owned = inv.owned;
+  const std::string frame(method_spec(Method::escape).frame);
+  r.frame_names = {frame};
+  nlohmann::json eig = nlohmann::json::array();
+  for (const auto& l : inv.eigenvalues)
+    eig.push_back({{"re", l.real()}, {"im", l.imag()}, {"abs", std::abs(l)}});
+  nlohmann::json j = detail::operator_summary(o, op);
+  j["file"] = frame + ".npy";
+  j["rate"] = e.rate;
+  j["rate_error"] = e.rate_error;
+  j["lambda1"] = e.lambda1;
+  j["closed"] = e.closed;
+  j["coarse_rate"] = e.coarse_rate;
+  j["coarse_lambda1"] = e.coarse_lambda1;
+  j["coarse_rows"] = coarse_rows;
+  j["solver_error"] = e.solver_error;
+  j["eigenvalues"] = eig;
+  j["min_value"] = inv.min_value;
+  j["residual"] = inv.residual;
+  j["solver"] = inv.method;
+  j["iterations"] = inv.iterations;
+  j["converged"] = inv.converged && coarse.converged;
+  j["note"] =
+      "rate = -ln(lambda1)/step per unit time; rate_error = |rate - coarse_rate| (the grid with "
+      "(n+1)/2 nodes per axis) + the eigen-solver's tolerance/step (escape.hpp)";
+  r.summary[summary_key::escape] = j;
+  if (e.closed) {
+    char b[512];
+    std::snprintf(b, sizeof b,
+                  "the system is closed: lambda1 = %.12g is within its error of 1 (escape rate "
+                  "%.3g +/- %.2g per unit time), so nothing escapes and the density is invariant, "
+                  "not conditionally invariant; use method=invariant",
+                  e.lambda1, e.rate, e.rate_error);
+    r.warnings.push_back(b);
+  }
+  if (!inv.converged || !coarse.converged)
+    r.warnings.push_back("the eigen-solver (" + inv.method +
+                         ") did not meet its tolerance; see escape.residual in summary.json");
+  return r;
+}
+
 /// The particle method (`dt` unused).
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>& grid,
@@ -434,6 +525,7 @@ inline constexpr std::array<SolveFunction<M>, kMethods.size()> solvers = {
     &solve_by_transfer<M>,         // Method::transfer
     &solve_by_invariant<M>,        // Method::invariant
     &solve_by_particles<M>,        // Method::particles
+    &solve_by_escape<M>,           // Method::escape
 };
 
 /// Dispatch on the setting `method` through the methods table; throws std::invalid_argument
