@@ -14,6 +14,7 @@
 #include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/emit.hpp"
 #include "hybgen/gen/tex.hpp"
+#include "hybgen/rt/method_table.hpp"
 
 namespace hybgen::gen {
 
@@ -271,8 +272,8 @@ std::string derive_text(const HybridSystem& sys) {
       os << "  inverse reset    Delta^-1" << tuple_text(pr, m.state_symbols) << " = "
          << tuple_text(pr, g.reset_inverse) << "\n";
     else if (g.inverse_on_guard_only)
-      os << "  inverse reset    none: locally injective on the guard only (methods transfer, "
-            "invariant, particles)\n";
+      os << "  inverse reset    none: locally injective on the guard only (methods "
+         << rt::forward_methods() << ")\n";
     else
       os << "  inverse reset    numeric (Newton at run time)\n";
     os << "  hybrid Jacobian  J = " << pr.ginac(g.hybrid_jacobian_on_surface) << "   (on s = 0)\n";

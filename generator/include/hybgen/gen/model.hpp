@@ -145,7 +145,7 @@ struct IrGuard {
   std::vector<GiNaC::ex> reset_jacobian;        ///< DΔ(x), row-major N×N.
   bool has_inverse = false;                     ///< Whether `reset_inverse` is symbolic.
   /// No inverse at all: DΔ is singular everywhere, but Δ is injective on the guard (a
-  /// constant component). Only the forward methods (transfer, invariant, particles) apply.
+  /// constant component). Only the forward methods (rt::forward_methods()) apply.
   bool inverse_on_guard_only = false;
   std::vector<GiNaC::ex> reset_inverse;  ///< Δ⁻¹(y) in the state symbols.
   GiNaC::ex hybrid_jacobian;             ///< J(x) for x ∈ S (general formula).

@@ -22,6 +22,7 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace hybgen::rt {
 
@@ -111,6 +112,23 @@ constexpr const MethodSpec* find_method(std::string_view name) {
 inline const MethodSpec& method_named(std::string_view name) {
   if (const MethodSpec* m = find_method(name)) return *m;
   throw std::invalid_argument("unknown method '" + std::string(name) + "'");
+}
+
+/// "a, b or c".
+inline std::string or_list(const std::vector<std::string_view>& words) {
+  std::string out;
+  for (std::size_t i = 0; i < words.size(); ++i)
+    out += (i == 0 ? "" : i + 1 == words.size() ? " or " : ", ") + std::string(words[i]);
+  return out;
+}
+
+/// The methods that never invert a reset (they push mass forward), "a, b or c": what the
+/// messages about a reset without an inverse name.
+inline std::string forward_methods() {
+  std::vector<std::string_view> names;
+  for (const MethodSpec& m : kMethods)
+    if (!m.inverts_resets) names.push_back(m.name);
+  return or_list(names);
 }
 
 namespace detail {

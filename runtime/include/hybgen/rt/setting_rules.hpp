@@ -57,14 +57,6 @@ inline int run_ranks(const Settings& s, const RunFacts& facts) {
   return s.word<"backend">() == "mpi" ? static_cast<int>(s.integer<"ranks">()) : 1;
 }
 
-/// "a, b or c".
-inline std::string or_list(const std::vector<std::string_view>& words) {
-  std::string out;
-  for (std::size_t i = 0; i < words.size(); ++i)
-    out += (i == 0 ? "" : i + 1 == words.size() ? " or " : ", ") + std::string(words[i]);
-  return out;
-}
-
 /// Most output times a run may have: a loud cap, before anything is allocated (t_end = 1e15
 /// with dt = 1e-9 asked for 1e24 frames).
 inline constexpr double kMaxFrames = 1e6;
@@ -106,13 +98,10 @@ inline std::string ranks_rule(const Settings& s) {
 /// A method that inverts the resets needs every reset's inverse off its guard too.
 inline std::string inverse_rule(const Settings& s, const std::string& guard) {
   if (!method_named(s.word<"method">()).inverts_resets) return "";
-  std::vector<std::string_view> others;
-  for (const MethodSpec& m : kMethods)
-    if (!m.inverts_resets) others.push_back(m.name);
   return "the reset of guard '" + guard +
          "' has no inverse in the whole state space (it is locally injective on its guard "
          "only), which the " +
-         s.word<"method">() + " method needs; use --set method=" + or_list(others);
+         s.word<"method">() + " method needs; use --set method=" + forward_methods();
 }
 
 /// density=marginals is what a method that deposits marginals keeps.
@@ -163,8 +152,8 @@ inline std::string figure_axes_rule(const Settings& s, const std::vector<std::st
 inline std::string memory_rule(const Settings& s, const RunFacts& f) {
   if (f.grid.empty() || f.modes <= 0 || !(f.memory_bytes > 0.0)) return "";
   if (s.word<"density">() == "marginals") return "";
-  const double series = f.frames > 0 ? static_cast<double>(f.frames)
-                                     : frame_count(s.real<"t_end">(), s.real<"dt">());
+  const double series =
+      f.frames > 0 ? static_cast<double>(f.frames) : frame_count(s.real<"t_end">(), s.real<"dt">());
   const double frames = method_named(s.word<"method">()).one_frame ? 1.0 : series;
   double nodes = 1.0;
   for (const long n : f.grid) nodes *= static_cast<double>(n);

@@ -120,7 +120,8 @@ struct PreflightOptions {
   /// The method inverts resets (the backward characteristics): check that a numeric inverse
   /// converges at every crossing and count its pre-images (`check_preimages`: the tracer
   /// follows ONE pre-image, so a second one is a failure). The forward methods (transfer,
-  /// invariant, particles) need no inverse and skip both.
+  /// invariant, particles, escape: method_table.hpp, forward_methods) need no inverse and skip
+  /// both.
   bool backward = true;
   /// Crossing points per guard used by `check_preimages` (evenly spaced among those found):
   /// the starts of the pre-image search, and the tracer's seeds.
@@ -594,8 +595,8 @@ std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
       point(f.other);
       os << ", which a multi-start from " << PreflightOptions{}.preimage_points
          << " points of the guard misses, so the characteristics method cannot sum over all "
-            "pre-images; use method=transfer, invariant or particles (they push mass forward "
-            "and need no inverse)";
+            "pre-images; use method="
+         << forward_methods() << " (they push mass forward and need no inverse)";
       break;
     case PreflightError::reset_retriggers: {
       const auto to = detail::guard_info<M>(static_cast<std::size_t>(f.guard)).to;
