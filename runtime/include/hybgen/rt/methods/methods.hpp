@@ -204,6 +204,27 @@ TransferOperator<state_dim_v<M>> assemble(const TensorGrid<state_dim_v<M>>& grid
   return assemble_transfer<M>(grid, par, o);
 }
 
+/// The one frame of a method that answers with the leading eigenvector of `op` (invariant,
+/// escape): `inv`'s density as frame `method.frame`, distributed as the operator is.
+template <std::size_t N>
+void set_eigenvector_frame(MethodResult<N>& r, const TransferOperator<N>& op,
+                           const InvariantResult& inv, const MethodSpec& method) {
+  r.solution.n_time = 1;
+  r.solution.n_mode = op.n_mode;
+  r.solution.n_point = op.n_node;
+  r.solution.u = inv.density;
+  if (op.distributed) r.solution.distributed = true, r.solution.owned = inv.owned;
+  r.frame_names = {std::string(method.frame)};
+}
+
+/// The eigenvalues of `inv` as summary.json lists them: re, im, abs.
+inline nlohmann::json eigenvalues_json(const InvariantResult& inv) {
+  nlohmann::json eig = nlohmann::json::array();
+  for (const auto& l : inv.eigenvalues)
+    eig.push_back({{"re", l.real()}, {"im", l.imag()}, {"abs", std::abs(l)}});
+  return eig;
+}
+
 }  // namespace detail
 
 /// The characteristics method and its adaptive mass budget (`dt` unused).
@@ -358,18 +379,10 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   io.n_eigen = std::max(2, static_cast<int>(s.settings.integer<"eigenvalues">()));
   const InvariantResult inv = invariant_density(op, io);
   r.solve_s = detail::seconds_since(t0);
-  r.solution.n_time = 1;
-  r.solution.n_mode = op.n_mode;
-  r.solution.n_point = op.n_node;
-  r.solution.u = inv.density;
-  if (op.distributed) r.solution.distributed = true, r.solution.owned = inv.owned;
-  r.frame_names = {std::string(method_spec(Method::invariant).frame)};
-  nlohmann::json eig = nlohmann::json::array();
-  for (const auto& l : inv.eigenvalues)
-    eig.push_back({{"re", l.real()}, {"im", l.imag()}, {"abs", std::abs(l)}});
+  detail::set_eigenvector_frame(r, op, inv, method_spec(Method::invariant));
   nlohmann::json j = detail::operator_summary(o, op);
-  j["file"] = "invariant.npy";
-  j["eigenvalues"] = eig;
+  j["file"] = r.frame_names.front() + ".npy";
+  j["eigenvalues"] = detail::eigenvalues_json(inv);
   j["spectral_gap"] = inv.gap;
   j["decay_rate"] = inv.decay_rate;
   j["leak_rate"] = inv.leak_rate;
@@ -426,18 +439,9 @@ MethodResult<state_dim_v<M>> solve_by_escape(const TensorGrid<state_dim_v<M>>& g
     return r;
   }
   const EscapeRate e = escape_rate(inv, coarse, o.step, io.tol);
-  r.solution.n_time = 1;
-  r.solution.n_mode = op.n_mode;
-  r.solution.n_point = op.n_node;
-  r.solution.u = inv.density;
-  if (op.distributed) r.solution.distributed = true, r.solution.owned = inv.owned;
-  const std::string frame(method_spec(Method::escape).frame);
-  r.frame_names = {frame};
-  nlohmann::json eig = nlohmann::json::array();
-  for (const auto& l : inv.eigenvalues)
-    eig.push_back({{"re", l.real()}, {"im", l.imag()}, {"abs", std::abs(l)}});
+  detail::set_eigenvector_frame(r, op, inv, method_spec(Method::escape));
   nlohmann::json j = detail::operator_summary(o, op);
-  j["file"] = frame + ".npy";
+  j["file"] = r.frame_names.front() + ".npy";
   j["rate"] = e.rate;
   j["rate_error"] = e.rate_error;
   j["lambda1"] = e.lambda1;
@@ -446,15 +450,15 @@ MethodResult<state_dim_v<M>> solve_by_escape(const TensorGrid<state_dim_v<M>>& g
   j["coarse_lambda1"] = e.coarse_lambda1;
   j["coarse_rows"] = coarse_rows;
   j["solver_error"] = e.solver_error;
-  j["eigenvalues"] = eig;
+  j["eigenvalues"] = detail::eigenvalues_json(inv);
   j["min_value"] = inv.min_value;
   j["residual"] = inv.residual;
   j["solver"] = inv.method;
   j["iterations"] = inv.iterations;
   j["converged"] = inv.converged && coarse.converged;
   j["note"] =
-      "rate = -ln(lambda1)/step per unit time; rate_error = |rate - coarse_rate| (the grid with "
-      "(n+1)/2 nodes per axis) + the eigen-solver's tolerance/step (escape.hpp)";
+      "rate = -ln(lambda1)/step per unit time; rate_error = 2 |rate - coarse_rate| (the grid "
+      "with (n+1)/2 nodes per axis) + the eigen-solver's tolerance/step (escape.hpp)";
   r.summary[summary_key::escape] = j;
   if (e.closed) {
     char b[512];
