@@ -30,6 +30,7 @@
 #include <cmath>
 #include <cstddef>
 #include <span>
+#include <string>
 #include <utility>
 
 #include "hybgen/rt/core/grid.hpp"
@@ -95,14 +96,31 @@ BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M
   mb.atom_error = az.error;
   // The time integral's tolerance is relative to max|u| along each face characteristic:
   // ≤ time_tol·scale over the run (scale ≥ the mass that can cross).
+  // The time integrals' own share beyond that: what their work cap left unresolved and the
+  // most their floor can change (budget/faces.hpp).
   for (std::size_t k = 0; k < times.size(); ++k)
-    mb.outflow_error[k] = ao.error[k] + time_tol * scale;
+    mb.outflow_error[k] = ao.error[k] + time_tol * scale + ao.time_error[k];
   if (info != nullptr) {
     info->volume = std::move(am);
     info->surface = std::move(ao);
     info->atom = std::move(az);
   }
   return res;
+}
+
+/// The bounds that stopped `adaptive_mass_budget` short of its tolerance, in words for the
+/// run's warning ("" if none did): a cubature's point cap (budget/cubature.hpp), the work cap
+/// of the faces' time integrals (budget/faces.hpp). Either way the error estimates are
+/// widened by what was left (`error`, `outflow_error`), not the run prolonged.
+inline std::string budget_bounds_reached(const AdaptiveBudgetInfo& info) {
+  std::string s;
+  if (info.volume.capped || info.surface.capped || info.atom.capped) s = "its point cap";
+  if (info.surface.time_capped > 0) {
+    if (!s.empty()) s += " and ";
+    s += "the work cap of the time integral on " + std::to_string(info.surface.time_capped) +
+         " face characteristics (their unresolved part is in outflow_error)";
+  }
+  return s;
 }
 
 }  // namespace hybgen::rt

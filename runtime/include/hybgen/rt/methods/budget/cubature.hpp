@@ -43,7 +43,14 @@
 ///    halves' nodes traced in one `evaluate` call (OpenMP over the points). Stop when
 ///    E_k ≤ rel_tol·scale_k for every slot, or when `max_points` would be exceeded
 ///    (`converged` = false; E_k is still the estimate).
-///  * Bounded work: leaves with e ≤ rel_tol·scale/(max cells) can never be marked before the
+///  * Bounded work: at most `max_points` integrand points in all, whatever the integrand —
+///    the initial cells take at most a quarter of them (fewer per root if needed), and no
+///    batch is traced that would exceed the cap. A point's cost is its integrand's: one
+///    backward characteristic (volume; bounded by the ODE's step limit and `max_events`),
+///    one with a time integral under its own work cap (faces: Tracer::accumulate in
+///    characteristics.hpp), or one forward flow (atom; `max_events`). A cubature stopped by
+///    the cap says so (`converged` = false) and widens its estimate (`error`).
+///  * Frozen leaves: leaves with e ≤ rel_tol·scale/(max cells) can never be marked before the
 ///    stop test holds (all of them together are below the target), so they are frozen:
 ///    their values stay in the sums, their storage is freed. Cells where the integrand is 0
 ///    (outside the support) freeze at once. Cells narrower than 2⁻⁴⁰ of the box are frozen
@@ -82,6 +89,7 @@ struct CubatureStats {
   std::size_t cells = 0;        ///< Leaf cells of the final partition.
   int iterations = 0;           ///< Refinement batches.
   bool converged = false;       ///< Whether the rel_tol target was met within max_points.
+  bool capped = false;          ///< Whether the cubature stopped at its point cap.
 };
 
 namespace detail {
@@ -102,6 +110,7 @@ void collect(const Cubature& cub, bool ok, std::size_t first, std::size_t n,
   stats.cells = cub.cells();
   stats.iterations = cub.iterations();
   stats.converged = ok && cub.converged();
+  stats.capped = ok && !cub.converged();
   // Stopped by the point cap: a feature no node has seen yet at one time (the Zeno basin at
   // early times) has no estimate of its own, so every time gets the largest estimate of any.
   if (!stats.converged)
@@ -137,12 +146,16 @@ class AdaptiveCubature {
   /// Integrals over `roots` (roots[i].tag = i) of K slots; `values_per_point` (≥ K) sizes the
   /// batches; the target is rel_tol·scale if scale > 0, else rel_tol·max(|I_0|, |I_k|) per slot k.
   /// `checks` (may be null; must outlive the cubature): known values inside the roots.
+  /// `targeted` (0: all K): only the slots k < targeted steer the refinement (split axes,
+  /// indicators) and the stop test; the others are integrated on the same cells, passively
+  /// (the faces' unresolved time-integral errors, budget/faces.hpp).
   AdaptiveCubature(std::vector<Box> roots, std::size_t K, std::size_t values_per_point,
                    const AdaptiveOptions& aopt, double scale, Values& values,
-                   const CheckPoints<D>* checks = nullptr)
+                   const CheckPoints<D>* checks = nullptr, std::size_t targeted = 0)
       : rule_(aopt.order),
         roots_(std::move(roots)),
         K_(K),
+        KT_(targeted > 0 && targeted < K ? targeted : K),
         aopt_(aopt),
         scale_(scale),
         values_(values),
@@ -297,7 +310,7 @@ class AdaptiveCubature {
   /// max_k E_k / (rel_tol·scale_k) (∞ if a target is 0 and E_k is not).
   double worst_excess() const {
     double w = 0.0;
-    for (std::size_t k = 0; k < K_; ++k) {
+    for (std::size_t k = 0; k < KT_; ++k) {
       const double s = scale_ > 0.0 ? scale_ : std::max(std::fabs(total_[0]), std::fabs(total_[k]));
       const double target = aopt_.rel_tol * s, e = error(k);
       if (e > target)
@@ -411,7 +424,7 @@ class AdaptiveCubature {
             for (std::size_t k = 0; k < K; ++k) t[k] += wl * std::fabs(line_[k]);
           }
         }
-        an.T[a] = *std::max_element(t.begin(), t.end());
+        an.T[a] = *std::max_element(t.begin(), t.begin() + static_cast<std::ptrdiff_t>(KT_));
         step *= q;
       }
       const Box& root = roots_[cell.tag];
@@ -441,7 +454,7 @@ class AdaptiveCubature {
   void store(std::size_t c, const Analysis& an, bool force) {
     const Box& cell = batch_[c];
     double e = 0.0;
-    for (std::size_t k = 0; k < K_; ++k) e = std::max(e, std::fabs(d_[k]) + o_[k]);
+    for (std::size_t k = 0; k < KT_; ++k) e = std::max(e, std::fabs(d_[k]) + o_[k]);
     const Box& root = roots_[cell.tag];
     bool narrow = false;
     for (std::size_t a = 0; a < D; ++a)
@@ -516,7 +529,7 @@ class AdaptiveCubature {
       for (std::size_t h = 0; h < 2; ++h) {
         analyse(2 * b + h, an_[h]);
         double m = 0.0;
-        for (std::size_t k = 0; k < K; ++k)
+        for (std::size_t k = 0; k < KT_; ++k)
           m = std::max(m, std::fabs(an_[h].I[k] - parent_[h * K + k]));
         dsum += m;
       }
@@ -554,6 +567,7 @@ class AdaptiveCubature {
   CubatureRule<D> rule_;
   std::vector<Box> roots_;
   std::size_t K_;
+  std::size_t KT_;  // the targeted slots: k < KT_
   AdaptiveOptions aopt_;
   double scale_;
   Values& values_;

@@ -10,6 +10,16 @@
 /// Gauss–Legendre on the ODE's dense output (CharacteristicsOptions::cumulative_tol), so a
 /// flux that starts or stops inside an output interval costs a few more panels, not accuracy.
 /// A face point costs one characteristic for all times, so the faces are cheap.
+///
+/// Bounded work in time too: each face characteristic's time integral halves at most a fixed
+/// number of panels per branch (Tracer::accumulate, characteristics.hpp), and below the
+/// density c_ref = kFluxFloorFraction·scale/|box| it accepts any panel, so an integrand that
+/// is rounding noise where u0 is 0 in exact arithmetic (a compactly supported u0 written with
+/// abs or max, expanded into cancelling terms) costs no more than one that is 0. What a
+/// capped time integral leaves unresolved, and the most the floor can change, are
+/// integrated over the faces on the same cells as the outflow (passive slots of the
+/// cubature) into `AdaptiveOutflow::time_error`; the points capped are counted, and a
+/// capped outflow is not `converged`.
 
 #include <algorithm>
 #include <array>
@@ -30,7 +40,18 @@ namespace hybgen::rt {
 /// (`error[k]`: the space part of outflow[k]'s error; points are face points).
 struct AdaptiveOutflow : CubatureStats {
   std::vector<double> outflow;  ///< ∫₀^{t_k} Σ_modes ∮_∂box u X·n_out, per output time.
+  /// The time integrals' share of outflow[k]'s error beyond their tolerance: what their work
+  /// cap left unresolved plus the most their floor can change (empty for the atom).
+  std::vector<double> time_error;
+  std::size_t time_capped = 0;  ///< Face (point, mode) pairs whose time integral was capped.
 };
+
+/// The time integrals of the faces accept any panel below c_ref = kFluxFloorFraction times
+/// the box's mean density at the budget's scale (`adaptive_outflow`): far above the rounding
+/// noise of a u0 that is 0 by cancellation, far below the densities whose flux the budget
+/// measures (its share of the outflow's error is ≤ time_tol·kFluxFloorFraction·scale·t_k·
+/// (flux through the faces per unit density)/|box|, and is added to the error).
+inline constexpr double kFluxFloorFraction = 1e-3;
 
 namespace detail {
 
@@ -56,13 +77,16 @@ struct FaceValues {
   CharacteristicsOptions opt{};                     ///< Options, cumulative_tol > 0.
   TraceFailure<N> failure{};                        ///< First failure.
   std::vector<std::size_t> face;                    ///< Face 2a + side of each root box.
-  std::vector<std::array<double, N>> y;             ///< Work: the points in ℝᴺ.
-  std::vector<FaceContext<N>> ctx;                  ///< Work: their faces.
+  std::size_t capped = 0;  ///< (point, mode) pairs whose time integral reached its work cap.
+  std::vector<std::array<double, N>> y;  ///< Work: the points in ℝᴺ.
+  std::vector<FaceContext<N>> ctx;       ///< Work: their faces.
 
-  /// U[i·K + k] = g_k(point i) for the face of each point's cell.
+  /// U[i·2K + k] = g_k(point i) for the face of each point's cell, and in the passive slots
+  /// U[i·2K + K + k] = Σ_m |fw_m|·(the time integral's unresolved error + tol·c_ref·t_k), the
+  /// most its error exceeds the relative tolerance by (opt.cumulative_errors is set).
   bool operator()(std::span<const Cell<D>> cells, std::span<const std::array<double, D>> pts,
                   std::size_t per_cell, std::vector<double>& U) {
-    const std::size_t P = pts.size(), K = times.size();
+    const std::size_t P = pts.size(), K = times.size(), KS = 2 * K;
     y.resize(P);
     ctx.resize(P);
     for (std::size_t i = 0; i < P; ++i) {
@@ -91,7 +115,12 @@ struct FaceValues {
       for (std::size_t m = 0; m < sol.n_mode; ++m) {
         const double xn = face_flux<M>(static_cast<int>(m), yi, a, sign, lo, hi, diam, par);
         if (xn == 0.0) continue;
-        for (std::size_t k = 0; k < K; ++k) U[i * K + k] += xn * sol.at(k, m, i);
+        if (sol.at(KS - 1, m, i) > 0.0) ++capped;  // cumulative: t_K's error is the largest
+        for (std::size_t k = 0; k < K; ++k) {
+          U[i * KS + k] += xn * sol.at(k, m, i);
+          const double floor = opt.cumulative_tol * opt.cumulative_floor * times[k];
+          U[i * KS + K + k] += std::fabs(xn) * (sol.at(K + k, m, i) + floor);
+        }
       }
     }
     return true;
@@ -102,9 +131,10 @@ struct FaceValues {
 
 /// Adaptive cubature of the cumulative net outflow through the faces of `box` (the rule of
 /// `detail::outflow`, see `detail::FaceValues`), all faces in one cubature; in time the
-/// integral along each face point's characteristic to the relative tolerance `time_tol`. The
-/// target is rel_tol·scale per output time (scale: e.g. the box mass; ≤ 0: the largest
-/// |outflow|).
+/// integral along each face point's characteristic to the relative tolerance `time_tol`,
+/// with the floor c_ref = kFluxFloorFraction·scale/|box| (none if scale ≤ 0) and its work
+/// cap (file comment; `time_error`, `time_capped`). The target is rel_tol·scale per output
+/// time (scale: e.g. the box mass; ≤ 0: the largest |outflow|).
 template <HybridModel M>
 AdaptiveOutflow adaptive_outflow(const TensorGrid<state_dim_v<M>>& box,
                                  std::span<const double> times, const double* par,
@@ -122,16 +152,21 @@ AdaptiveOutflow adaptive_outflow(const TensorGrid<state_dim_v<M>>& box,
   values.par = par;
   values.opt = opt;
   values.opt.cumulative_tol = time_tol > 0.0 ? time_tol : detail::kFluxTimeTol;
+  values.opt.cumulative_errors = true;
+  res.time_error.assign(times.size(), 0.0);
   if (times.empty() || times.back() <= 0.0) {
     res.converged = true;
     return res;
   }
   std::vector<detail::Cell<D>> faces;
+  double volume = 1.0;  // |box| over its axes of positive width
   for (std::size_t a = 0; a < N; ++a) {
     values.lo[a] = box.axes[a].min;
     values.hi[a] = box.axes[a].max;
     values.diam = std::max(values.diam, values.hi[a] - values.lo[a]);
+    if (values.hi[a] > values.lo[a]) volume *= values.hi[a] - values.lo[a];
   }
+  values.opt.cumulative_floor = scale > 0.0 ? kFluxFloorFraction * scale / volume : 0.0;
   for (std::size_t a = 0; a < N; ++a) {
     for (std::size_t side = 0; side < 2; ++side) {
       if (side == 1 && values.hi[a] == values.lo[a]) continue;
@@ -147,12 +182,17 @@ AdaptiveOutflow adaptive_outflow(const TensorGrid<state_dim_v<M>>& box,
       values.face.push_back(2 * a + side);
     }
   }
-  const std::size_t per_point = times.size() * (1 + static_cast<std::size_t>(M::n_mode));
-  detail::AdaptiveCubature<D, detail::FaceValues<M>> cub(faces, times.size(), per_point, aopt,
-                                                         scale, values);
+  // Slots: the outflow at the K times (targeted), then their time errors (passive).
+  const std::size_t K = times.size();
+  const std::size_t per_point = 2 * K * (1 + static_cast<std::size_t>(M::n_mode));
+  detail::AdaptiveCubature<D, detail::FaceValues<M>> cub(faces, 2 * K, per_point, aopt, scale,
+                                                         values, nullptr, K);
   const bool ok = cub.run();
   if (!ok) failure = values.failure;
-  detail::collect(cub, ok, 0, times.size(), res.outflow, res);
+  detail::collect(cub, ok, 0, K, res.outflow, res);
+  for (std::size_t k = 0; k < K; ++k) res.time_error[k] = std::max(cub.integral(K + k), 0.0);
+  res.time_capped = values.capped;
+  if (res.time_capped > 0) res.converged = false;  // stopped by a bound: say so
   return res;
 }
 
