@@ -83,6 +83,16 @@ struct CharacteristicsOptions {
   /// this relative tolerance (adaptive Gauss–Legendre in time along every branch; see
   /// `detail::Tracer::accumulate`). The boundary flux of the mass budget uses it.
   double cumulative_tol = 0.0;
+  /// Cumulative mode: a density scale c_ref below which the time integral need not resolve
+  /// u: a panel is also accepted when its error estimate is ≤ cumulative_tol·c_ref·(its
+  /// length), so each output's error from it is ≤ cumulative_tol·c_ref·t_k. Without it (0)
+  /// an integrand that is rounding noise (a compactly supported u0 whose zero is computed
+  /// with cancellation) meets a purely relative test nowhere.
+  double cumulative_floor = 0.0;
+  /// Cumulative mode: out holds 2K values, out[K + k] the part of out[k]'s error that the
+  /// time integral's work cap left unresolved (`detail::Tracer::accumulate`; 0 where the cap
+  /// was not reached). `evaluate`'s solution then has 2K times.
+  bool cumulative_errors = false;
   /// Guards whose reset has SEVERAL pre-images on the guard (the pre-flight's
   /// `find_preimage_seeds`): (*preimage_seeds)[g] holds start points on S_g, N doubles each,
   /// from which every incoming crossing enumerates all pre-images by Newton (each spawns a
@@ -126,7 +136,8 @@ class Tracer {
       : par_(par), opt_(opt), ode_(opt.ode) {}
 
   /// u(t_k, mode, y) into out[k] (see `trace`), or ∫₀^{t_k} u(t, mode, y) dt when
-  /// opt.cumulative_tol > 0; `times` is assumed valid.
+  /// opt.cumulative_tol > 0 (and its unresolved error into out[K + k] with
+  /// opt.cumulative_errors); `times` is assumed valid.
   TraceStatus<N> run(const State& y, int mode, std::span<const double> times, std::span<double> out,
                      const FaceContext<N>* face) {
     std::fill(out.begin(), out.end(), 0.0);
@@ -464,14 +475,26 @@ class Tracer {
   /// acc_ += ∫_{cursor_}^{b} c(σ) dσ, cursor_ ← b, for b inside the current step. Panels of
   /// at most 1/kMinPanels of the horizon (a flux pulse narrower than all panels' nodes could
   /// otherwise be missed); each is accepted when its two halves' rules agree with the
-  /// whole's, |I_L + I_R − I| ≤ tol·max(|I_L + I_R|, cmax·(panel length)), else halved (to
-  /// depth kMaxDepth: a jump of u0 along the path converges linearly). cmax is the largest
-  /// |c| seen on this characteristic, so the error per unit time is ≲ tol·max|u|.
+  /// whole's, |I_L + I_R − I| ≤ tol·max(|I_L + I_R|, cmax·h, c_ref·h) (h: the panel's
+  /// length; c_ref: `cumulative_floor`), else halved (to depth kMaxDepth: a jump of u0 along
+  /// the path converges linearly). cmax is the largest |c| seen on this characteristic, so
+  /// the error per unit time is ≲ tol·max(max|u|, c_ref).
+  ///
+  /// Bounded work, whatever c is: a branch halves at most kMaxSplits panels in all. A jump
+  /// costs kMaxDepth halvings, a kink a few, so that allows several of each per branch; an
+  /// integrand that fails the test almost everywhere (rounding noise without a floor, an
+  /// oscillation finer than the panels) would otherwise halve every panel kMaxDepth times,
+  /// 2^kMaxDepth pieces each. Beyond the cap a failing piece is accepted (I_L + I_R) and
+  /// |I_L + I_R − I| added to unres_, the branch's unresolved error, which the outputs
+  /// report with `cumulative_errors`. A base panel costs 3 panel rules (the whole and its
+  /// halves), a halving 4 more (its two pieces' halves), so a branch costs at most
+  /// 3·(its base panels) + 4·kMaxSplits rules of kPanelOrder evaluations of u0: with the
+  /// horizon's kMinPanels base panels, about 6.3 times an integrand that needs no halving.
   void accumulate(double b) {
     const double a0 = cursor_;
     cursor_ = std::max(cursor_, b);
     if (!(b > a0)) return;
-    const double tol = opt_.cumulative_tol;
+    const double tol = opt_.cumulative_tol, floor = opt_.cumulative_floor;
     const double hmax = times_.back() / kMinPanels;
     const int n = std::max(1, static_cast<int>(std::ceil((b - a0) / hmax)));
     for (int j = 0; j < n && status_.ok(); ++j) {
@@ -487,20 +510,33 @@ class Tracer {
         const Piece p = stack[--top];
         const double m = 0.5 * (p.a + p.b);
         const double L = panel(p.a, m), R = panel(m, p.b);
-        const double err = std::fabs(L + R - p.whole);
-        if (p.depth >= kMaxDepth || err <= tol * std::max(std::fabs(L + R), cmax_ * (p.b - p.a))) {
+        const double err = std::fabs(L + R - p.whole), h = p.b - p.a;
+        if (p.depth >= kMaxDepth ||
+            err <= tol * std::max({std::fabs(L + R), cmax_ * h, floor * h})) {
           acc_ += L + R;
           continue;
         }
+        if (splits_ >= kMaxSplits) {  // the work cap: accepted, its error booked
+          acc_ += L + R;
+          unres_ += err;
+          continue;
+        }
+        ++splits_;
         stack[top++] = Piece{m, p.b, R, p.depth + 1};
         stack[top++] = Piece{p.a, m, L, p.depth + 1};
       }
     }
   }
 
+  /// Cumulative mode: output k gets the branch's integral so far (and its unresolved error).
+  void add_cumulative(std::size_t k) {
+    out_[k] += acc_;
+    if (opt_.cumulative_errors) out_[times_.size() + k] += unres_;
+  }
+
   /// Cumulative mode: the branch ends at σ; every later output gets its whole integral.
   void finish_cumulative(std::size_t k) {
-    for (; k < times_.size(); ++k) out_[k] += acc_;
+    for (; k < times_.size(); ++k) add_cumulative(k);
   }
 
   void process(const Branch& b, const FaceContext<N>* face) {
@@ -515,6 +551,8 @@ class Tracer {
       ++k;
     }
     acc_ = 0.0;
+    unres_ = 0.0;
+    splits_ = 0;
     cursor_ = b.tau;
     if (k >= K) return;
     mode_ = b.mode;
@@ -587,7 +625,7 @@ class Tracer {
       while (k < K && times_[k] <= t_stop) {
         if (cumulative) {
           accumulate(times_[k]);
-          out_[k] += acc_;
+          add_cumulative(k);
         } else {
           Vec x;
           dense_at(k, x);
@@ -631,10 +669,13 @@ class Tracer {
   std::size_t npend_ = 0;
   // Cumulative mode (opt_.cumulative_tol > 0): the current branch's ∫ c dσ from its start to
   // cursor_, and the largest |c| met on this characteristic.
-  static constexpr int kPanelOrder = 5;  // Gauss–Legendre nodes per panel
-  static constexpr int kMinPanels = 64;  // panels per horizon, at least
-  static constexpr int kMaxDepth = 40;   // halvings of a panel
+  static constexpr int kPanelOrder = 5;              // Gauss–Legendre nodes per panel
+  static constexpr int kMinPanels = 64;              // panels per horizon, at least
+  static constexpr int kMaxDepth = 40;               // halvings of a panel
+  static constexpr int kMaxSplits = 4 * kMinPanels;  // halvings per branch (accumulate)
   double acc_ = 0.0;
+  double unres_ = 0.0;  // the part of acc_'s error left unresolved by the work cap
+  int splits_ = 0;      // halvings on the current branch
   double cursor_ = 0.0;
   double cmax_ = 0.0;
 };
@@ -642,16 +683,18 @@ class Tracer {
 }  // namespace detail
 
 /// u(t_k, y) in `mode` for the sorted output times `times` (all ≥ 0) into out[k]
-/// (out.size() == times.size()), by one backward characteristic from y to τ = times.back().
-/// y outside `M::in_support` gives 0. With `face` (y on a face of a box), the value is the
-/// limit from inside that box (see `FaceContext`). Returns the failure, if any.
+/// (out.size() == times.size(), twice that with opt.cumulative_errors in cumulative mode), by
+/// one backward characteristic from y to τ = times.back(). y outside `M::in_support` gives 0.
+/// With `face` (y on a face of a box), the value is the limit from inside that box (see
+/// `FaceContext`). Returns the failure, if any.
 template <HybridModel M>
 TraceStatus<state_dim_v<M>> trace(const std::array<double, state_dim_v<M>>& y, int mode,
                                   std::span<const double> times, const double* par,
                                   const CharacteristicsOptions& opt, std::span<double> out,
                                   const FaceContext<state_dim_v<M>>* face = nullptr) {
   detail::validate_times(times);
-  if (out.size() != times.size())
+  const bool with_errors = opt.cumulative_tol > 0.0 && opt.cumulative_errors;
+  if (out.size() != times.size() * (with_errors ? 2 : 1))
     throw std::invalid_argument("characteristics: out.size() != times.size()");
   detail::Tracer<M> tracer(par, opt);
   return tracer.run(y, mode, times, out, face);
@@ -670,7 +713,9 @@ Solution<state_dim_v<M>> solve_points(std::size_t n_point, PointFn&& point, Face
   constexpr std::size_t N = state_dim_v<M>;
   validate_times(times);
   Solution<N> sol;
-  sol.n_time = times.size();
+  // Cumulative outputs with their unresolved errors: out[K + k] (CharacteristicsOptions).
+  const bool with_errors = opt.cumulative_tol > 0.0 && opt.cumulative_errors;
+  sol.n_time = times.size() * (with_errors ? 2 : 1);
   sol.n_mode = static_cast<std::size_t>(M::n_mode);
   sol.n_point = n_point;
   const auto total = static_cast<long long>(sol.n_mode * n_point);
@@ -741,7 +786,8 @@ Solution<state_dim_v<M>> solve_grid(const TensorGrid<state_dim_v<M>>& grid,
       [](std::size_t) -> Face { return nullptr; }, times, par, opt, true);
 }
 
-/// u at arbitrary points (all modes, all output times), same layout as `solve_grid`.
+/// u at arbitrary points (all modes, all output times), same layout as `solve_grid` (2K
+/// times with cumulative errors: CharacteristicsOptions::cumulative_errors).
 /// `faces`, if not empty, gives per point the box face it lies on (boundary flux).
 template <HybridModel M>
 Solution<state_dim_v<M>> evaluate(std::span<const std::array<double, state_dim_v<M>>> points,

@@ -278,11 +278,11 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   r.budget = budget.budget;
   const bool converged = info.volume.converged && info.surface.converged && info.atom.converged;
   if (!converged) {
-    char b[240];
+    char b[400];
     std::snprintf(b, sizeof b,
-                  "the mass budget's cubature reached its point cap before its tolerance %.1e; "
+                  "the mass budget reached %s before its tolerance %.1e; "
                   "the error estimates in summary.json say how far it got",
-                  aopt.rel_tol);
+                  budget_bounds_reached(info).c_str(), aopt.rel_tol);
     r.warnings.push_back(b);
   }
   const MassBudget& mb = r.budget;
@@ -317,6 +317,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
                                     {"face_points", info.surface.points},
                                     {"atom_points", info.atom.points},
                                     {"converged", converged},
+                                    {"time_capped", info.surface.time_capped},
                                     {"defect", defect},
                                     {"defect_error", bar},
                                     {"closes", worst_ratio <= 1.0},
