@@ -64,6 +64,10 @@
 /// Failures (a trajectory hitting the event cap without the Zeno signature, or a numerical
 /// failure) are reported for the particle with the smallest index, with its start and the
 /// place; the other results are then partial.
+///
+/// Size: the proposal and its sampling, the counter-based streams, the deposit on the grid or
+/// on the marginals, and the integer bookkeeping that keeps mass + outflow + atom exact, over
+/// threads and ranks: one method whose parts share the sample's life.
 
 #include <algorithm>
 #include <array>
