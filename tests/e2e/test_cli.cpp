@@ -3,7 +3,6 @@
 // a small grid, and the bouncing ball against its closed-form density.
 
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <array>
 #include <chrono>
@@ -19,38 +18,25 @@
 #include "hybgen/rt/io/npy.hpp"
 #include "hybgen/rt/settings.hpp"
 #include "support/ball_closed_form.hpp"
-#include "support/shell.hpp"
+#include "support/e2e.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
+using hybgen::testing::e2e_dir;
+using hybgen::testing::read_json_file;
+using hybgen::testing::run_hybgen;
+using hybgen::testing::write_model_file;
 using nlohmann::json;
 
-const std::string kSrc = HYBGEN_SOURCE_DIR;
-const std::string kExe = HYBGEN_EXE;
-const fs::path kWork = fs::path(HYBGEN_BINARY_DIR) / "e2e";
-const std::string kCache = (kWork / "cache").string();
+const fs::path kWork = e2e_dir("e2e");
 
 using Result = hybgen::testing::ShellResult;  // out: stdout (+ stderr where merged)
 
-/// Run hybgen with `args` from the source directory; capture all output.
-Result hybgen(const std::string& args) {
-  fs::create_directories(kWork);
-  std::string cmd =
-      "cd '" + kSrc + "' && HYBGEN_CACHE='" + kCache + "' '" + kExe + "' " + args + " 2>&1";
-  return hybgen::testing::run_shell(cmd);
-}
-
-std::string write_model(const std::string& name, const std::string& text) {
-  fs::create_directories(kWork / "models");
-  std::string path = (kWork / "models" / name).string();
-  std::ofstream(path, std::ios::binary) << text;
-  return path;
-}
-
-json read_json(const std::string& path) {
-  return json::parse(hybgen::gen::read_file(path));
-}
+/// hybgen with this test's cache (support/e2e.hpp).
+const hybgen::testing::Hybgen hybgen{kWork / "cache"};
 
 const std::vector<std::string> kModels = {"bouncing_ball", "sir", "sir_3d", "filippov",
                                           "chaplygin_energy"};
@@ -58,7 +44,7 @@ const std::vector<std::string> kModels = {"bouncing_ball", "sir", "sir_3d", "fil
 TEST(Cli, CheckEveryShippedModel) {
   for (const auto& m : kModels) {
     Result r = hybgen("check models/" + m + ".model");
-    EXPECT_EQ(r.code, 0) << m << "\n" << r.out;
+    EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << m << "\n" << r.out;
     EXPECT_NE(r.out.find("ok"), std::string::npos) << r.out;
   }
 }
@@ -66,7 +52,7 @@ TEST(Cli, CheckEveryShippedModel) {
 TEST(Cli, DeriveJsonContract) {
   for (const auto& m : kModels) {
     Result r = hybgen("derive models/" + m + ".model --format json");
-    ASSERT_EQ(r.code, 0) << r.out;
+    ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
     json j = json::parse(r.out.substr(0, r.out.rfind('}') + 1));
     EXPECT_EQ(j["model"], m);
     EXPECT_EQ(j["kind"], "hybrid");
@@ -99,11 +85,11 @@ TEST(Cli, DeriveJsonContract) {
 
 TEST(Cli, DeriveTextAndLatex) {
   Result t = hybgen("derive models/sir.model");
-  ASSERT_EQ(t.code, 0) << t.out;
+  ASSERT_EQ(t.code, exit_status(ExitCode::Success)) << t.out;
   EXPECT_NE(t.out.find("hybrid Jacobian"), std::string::npos);
   EXPECT_NE(t.out.find("Frobenius-Perron"), std::string::npos);
   Result l = hybgen("derive models/bouncing_ball.model --format latex");
-  ASSERT_EQ(l.code, 0) << l.out;
+  ASSERT_EQ(l.code, exit_status(ExitCode::Success)) << l.out;
   EXPECT_NE(l.out.find("\\begin{cases}"), std::string::npos);
   EXPECT_NE(l.out.find("\\frac{\\partial u}{\\partial t}"), std::string::npos);
 }
@@ -125,9 +111,9 @@ TEST(Cli, BrokenModelsExitOneWithLocation) {
   };
   int k = 0;
   for (const auto& c : cases) {
-    std::string path = write_model("bad" + std::to_string(k++) + ".model", c.text);
+    std::string path = write_model_file(kWork, "bad" + std::to_string(k++) + ".model", c.text);
     Result r = hybgen("check '" + path + "'");
-    EXPECT_EQ(r.code, 1) << r.out;
+    EXPECT_EQ(r.code, exit_status(ExitCode::ModelError)) << r.out;
     EXPECT_NE(r.out.find(path + c.where), std::string::npos) << r.out;
     EXPECT_NE(r.out.find(c.fragment), std::string::npos) << r.out;
   }
@@ -153,11 +139,11 @@ TEST(Cli, DenseTenDimensionalInverseEndsAtTheWatchdog) {
     for (int j = 0; j < n; ++j) m << (j ? "+" : "") << 'a' << i << '_' << j << "*x" << j;
   }
   m << ")\n}\n";
-  const std::string path = write_model("dense10.model", m.str());
+  const std::string path = write_model_file(kWork, "dense10.model", m.str());
   const auto t0 = std::chrono::steady_clock::now();
   const Result r = hybgen("derive '" + path + "' --set derive_seconds=1");
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  EXPECT_EQ(r.code, 1) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::ModelError)) << r.out;
   EXPECT_NE(r.out.find(path + ":" + std::to_string(n * n + n + 6) +
                        ":3: error: deriving the inverse reset of guard 'g' took longer than "
                        "6.5 s, inside one symbolic operation (derive_seconds = 1 s"),
@@ -167,15 +153,16 @@ TEST(Cli, DenseTenDimensionalInverseEndsAtTheWatchdog) {
 }
 
 TEST(Cli, BadCommandLinesExitTwo) {
-  EXPECT_EQ(hybgen("").code, 2);
-  EXPECT_EQ(hybgen("frobnicate models/sir.model").code, 2);
-  EXPECT_EQ(hybgen("check").code, 2);
-  EXPECT_EQ(hybgen("check no/such/file.model").code, 2);
-  EXPECT_EQ(hybgen("derive models/sir.model --format yaml").code, 2);
-  EXPECT_EQ(hybgen("run models/sir.model --set nosuch=1").code, 2);
-  EXPECT_EQ(hybgen("run models/sir.model --set grid=3").code, 2);
-  EXPECT_EQ(hybgen("run models/sir.model --set beta=abc").code, 2);
-  EXPECT_EQ(hybgen("--help").code, 0);
+  EXPECT_EQ(hybgen("").code, exit_status(ExitCode::UsageError));
+  EXPECT_EQ(hybgen("frobnicate models/sir.model").code, exit_status(ExitCode::UsageError));
+  EXPECT_EQ(hybgen("check").code, exit_status(ExitCode::UsageError));
+  EXPECT_EQ(hybgen("check no/such/file.model").code, exit_status(ExitCode::UsageError));
+  EXPECT_EQ(hybgen("derive models/sir.model --format yaml").code,
+            exit_status(ExitCode::UsageError));
+  EXPECT_EQ(hybgen("run models/sir.model --set nosuch=1").code, exit_status(ExitCode::UsageError));
+  EXPECT_EQ(hybgen("run models/sir.model --set grid=3").code, exit_status(ExitCode::UsageError));
+  EXPECT_EQ(hybgen("run models/sir.model --set beta=abc").code, exit_status(ExitCode::UsageError));
+  EXPECT_EQ(hybgen("--help").code, exit_status(ExitCode::Success));
 }
 
 fs::path run_dir(const std::string& name) {
@@ -192,8 +179,8 @@ json run(const std::string& model, const std::string& tag, const std::string& se
   fs::remove_all(out);
   Result r = hybgen("run models/" + model + ".model --quiet --out '" + out.string() + "' " + sets +
                     kWithArrays);
-  EXPECT_EQ(r.code, 0) << r.out;
-  return read_json((out / "summary.json").string());
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  return read_json_file(out / "summary.json");
 }
 
 void check_run_outputs(const json& s, const fs::path& out, std::size_t dims) {
@@ -320,9 +307,9 @@ TEST(Cli, ParameterValuesReuseTheRunner) {
   // compile a new runner: the header the runner is built from carries the file's defaults.
   // Before, --set e=… put the value into the header and so into the cache key.
   const Result a = hybgen("build models/bouncing_ball.model --set e=0.55");
-  ASSERT_EQ(a.code, 0) << a.out;
+  ASSERT_EQ(a.code, exit_status(ExitCode::Success)) << a.out;
   const Result b = hybgen("build models/bouncing_ball.model --set e=0.8 --set g=2");
-  ASSERT_EQ(b.code, 0) << b.out;
+  ASSERT_EQ(b.code, exit_status(ExitCode::Success)) << b.out;
   EXPECT_EQ(built_runner(a), built_runner(b));
   EXPECT_NE(b.out.find("runner (cached)"), std::string::npos) << b.out;
   // ... and the run uses the values it was given, not the header's (RestitutionMassBudget
@@ -342,20 +329,19 @@ TEST(Cli, OneRunnerForEveryMethodAndValue) {
   auto go = [&](const std::string& sets) {
     const fs::path out = run_dir("one_runner");
     fs::remove_all(out);
-    return hybgen::testing::run_shell("cd '" + kSrc + "' && HYBGEN_CACHE='" + cache.string() +
-                                      "' '" + kExe + "' run models/bouncing_ball.model --out '" +
-                                      out.string() + "' --set grid=21x21 --set t_end=1 " + sets +
-                                      " 2>&1");
+    return run_hybgen("run models/bouncing_ball.model --out '" + out.string() +
+                          "' --set grid=21x21 --set t_end=1 " + sets,
+                      cache);
   };
   const Result first = go("--set e=0.55");
-  ASSERT_EQ(first.code, 0) << first.out;
+  ASSERT_EQ(first.code, exit_status(ExitCode::Success)) << first.out;
   EXPECT_NE(first.out.find("runner (built in"), std::string::npos) << first.out;
   for (const char* sets : {"--set e=0.8", "--set method=transfer",
                            "--set method=particles "
                            "--set particles=20000",
                            "--set method=invariant --set scheme=cell"}) {
     const Result r = go(sets);
-    ASSERT_EQ(r.code, 0) << sets << "\n" << r.out;
+    ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << sets << "\n" << r.out;
     EXPECT_NE(r.out.find("runner (cached)"), std::string::npos) << sets << "\n" << r.out;
   }
   std::size_t entries = 0;
@@ -391,7 +377,7 @@ TEST(Cli, InlineRuntimeAgreesWithTheLibrary) {
 
 TEST(Cli, RunHelpListsEverySetting) {
   const Result r = hybgen("run --help");
-  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   for (const auto& s : hybgen::rt::kSettings)
     EXPECT_NE(r.out.find("  " + std::string(s.name) + " "), std::string::npos) << s.name;
 }
@@ -419,7 +405,7 @@ TEST(Cli, TransferNeverCreatesMassThroughTheCommandLine) {
   // The withdrawn schemes are refused with the reason, before anything is built.
   for (const char* old : {"interpolate", "conservative"}) {
     Result r = hybgen(std::string("check models/bouncing_ball.model --set scheme=") + old);
-    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
     EXPECT_NE(r.out.find("was withdrawn"), std::string::npos) << r.out;
   }
 }
@@ -430,7 +416,7 @@ TEST(Cli, ThermostatInvariantDensityThroughTheCommandLine) {
   // x = 1; the invariant density is u_m = (1/P)/|f_m| with P = ln(3/2) + ln(2)/1.5. Through
   // `hybgen run … method=invariant` on 401 nodes: λ₁ within 1e-9 of 1 (a closed system) and
   // the density per mode (invariant_on.npy, invariant_off.npy) within 1 % in relative L1.
-  const std::string path = write_model("thermostat.model", R"(model thermostat
+  const std::string path = write_model_file(kWork, "thermostat.model", R"(model thermostat
 state x
 mode on  { x' = 4 - x }
 mode off { x' = -1.5*x }
@@ -441,8 +427,8 @@ simulation { domain x in [1, 2]; grid 401; initial on: 1; t_end 1; dt 0.05; meth
   fs::path out = run_dir("thermostat");
   fs::remove_all(out);
   Result r = hybgen("run '" + path + "' --quiet --out '" + out.string() + "'" + kWithArrays);
-  ASSERT_EQ(r.code, 0) << r.out;
-  json s = read_json((out / "summary.json").string());
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  json s = read_json_file(out / "summary.json");
   const double lam = s["invariant"]["eigenvalues"][0]["re"];
   EXPECT_NEAR(lam, 1.0, 1e-9);
   const double P = std::log(1.5) + std::log(2.0) / 1.5;
@@ -470,14 +456,14 @@ TEST(Cli, SawtoothHasNoInverseAndRunsForward) {
   // method is refused at the reset, located; the invariant density on 401 nodes is the closed
   // form u = 1/(ln 2 (1 + x)) (the flux u·x' is constant) within 1 % in relative L1, λ₁ = 1.
   Result d = hybgen("derive models/sawtooth.model --format json");
-  ASSERT_EQ(d.code, 0) << d.out;
+  ASSERT_EQ(d.code, exit_status(ExitCode::Success)) << d.out;
   json j = json::parse(d.out.substr(0, d.out.rfind('}') + 1));
   EXPECT_EQ(j["guards"][0]["reset_inverse_kind"], "none");
   EXPECT_TRUE(j["guards"][0]["reset_inverse"].is_null());
   EXPECT_EQ(j["guards"][0]["hybrid_jacobian"], "1/2");
   Result c = hybgen("run models/sawtooth.model --quiet --set method=characteristics --out '" +
                     run_dir("sawtooth_char").string() + "'");
-  EXPECT_EQ(c.code, 1) << c.out;
+  EXPECT_EQ(c.code, exit_status(ExitCode::ModelError)) << c.out;
   EXPECT_NE(c.out.find("models/sawtooth.model:17:3: error: the reset of guard 'fire' has no "
                        "inverse in the whole state space"),
             std::string::npos)
@@ -599,18 +585,19 @@ TEST(Cli, IntegrateAndFireInvariantDensityFollowsTheSpikingCycle) {
 // default e it passes. Before, check passed both and only `run` refused.
 TEST(Cli, CheckPreflightAgreesWithRun) {
   Result ok = hybgen("check models/bouncing_ball.model --preflight -q");
-  EXPECT_EQ(ok.code, 0) << ok.out;
+  EXPECT_EQ(ok.code, exit_status(ExitCode::Success)) << ok.out;
   EXPECT_NE(ok.out.find("pre-flight scan (t = 0, characteristics, grid of 5625 nodes): ok"),
             std::string::npos)
       << ok.out;
   Result bad = hybgen("check models/bouncing_ball.model --preflight -q --set e=3/2");
-  EXPECT_EQ(bad.code, 3) << bad.out;
+  EXPECT_EQ(bad.code, exit_status(ExitCode::Numerical)) << bad.out;
   EXPECT_NE(bad.out.find("the reset lands outside the domain (the grid box) at the point (x = 0, "
                          "p = -2)"),
             std::string::npos)
       << bad.out;
   Result plain = hybgen("check models/bouncing_ball.model --set e=3/2");
-  EXPECT_EQ(plain.code, 0) << plain.out;  // without --preflight: no runner, no scan
+  EXPECT_EQ(plain.code, exit_status(ExitCode::Success))
+      << plain.out;  // without --preflight: no runner, no scan
 }
 
 TEST(Cli, NumericalFailureExitsThree) {
@@ -622,7 +609,7 @@ TEST(Cli, NumericalFailureExitsThree) {
       "run models/chaplygin_energy.model --quiet --set domain.v=[-2,2] "
       "--set grid=11x11 --out '" +
       out.string() + "'");
-  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::Numerical)) << r.out;
   EXPECT_NE(r.out.find("numerical failure"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("non-finite vector field"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("v = -2"), std::string::npos) << r.out;
@@ -631,15 +618,15 @@ TEST(Cli, NumericalFailureExitsThree) {
 TEST(Cli, DegenerateParameterIsAModelError) {
   // e = 0: every impact ends at p = 0, J = e² = 0 at every crossing.
   Result r = hybgen("check models/bouncing_ball.model --set e=0");
-  EXPECT_EQ(r.code, 1) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::ModelError)) << r.out;
   EXPECT_NE(r.out.find("models/bouncing_ball.model:20:3: error: the hybrid Jacobian"),
             std::string::npos)
       << r.out;
 }
 
 TEST(Cli, OneDimensionalModelGivesLinePlots) {
-  std::string path =
-      write_model("decay.model", R"(# x' = -x on [0, 2]; at x = 1/2 the state jumps up by 1.
+  std::string path = write_model_file(kWork, "decay.model",
+                                      R"(# x' = -x on [0, 2]; at x = 1/2 the state jumps up by 1.
 state x
 mode m { x' = -x }
 guard kick { when x = 0.5 decreasing; reset (x + 1) }
@@ -648,8 +635,8 @@ simulation { domain x in [0, 2]; grid 101; initial exp(-(x - 1)^2); t_end 1; dt 
   fs::path out = run_dir("decay");
   fs::remove_all(out);
   Result r = hybgen("run '" + path + "' --quiet --out '" + out.string() + "'" + kWithArrays);
-  ASSERT_EQ(r.code, 0) << r.out;
-  json s = read_json((out / "summary.json").string());
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  json s = read_json_file(out / "summary.json");
   check_run_outputs(s, out, 1);
   auto arr = hybgen::rt::read_npy((out / "u_0002.npy").string());  // t = 1
   auto u0 = [](double x) { return std::exp(-(x - 1) * (x - 1)); };
@@ -671,18 +658,16 @@ TEST(Cli, TwoConcurrentRunsBothSucceed) {
   fs::remove_all(cache);
   auto one = [&](int k, int* code) {
     std::string out = run_dir("concurrent" + std::to_string(k)).string();
-    std::string cmd = "cd '" + kSrc + "' && HYBGEN_CACHE='" + cache + "' '" + kExe +
-                      "' run models/filippov.model --quiet --set grid=15x15 --out '" + out +
-                      "' > /dev/null 2>&1";
-    int st = std::system(cmd.c_str());
-    *code = WIFEXITED(st) ? WEXITSTATUS(st) : 128;
+    *code =
+        run_hybgen("run models/filippov.model --quiet --set grid=15x15 --out '" + out + "'", cache)
+            .code;
   };
   int a = -1, b = -1;
   std::thread ta(one, 1, &a), tb(one, 2, &b);
   ta.join();
   tb.join();
-  EXPECT_EQ(a, 0);
-  EXPECT_EQ(b, 0);
+  EXPECT_EQ(a, exit_status(ExitCode::Success));
+  EXPECT_EQ(b, exit_status(ExitCode::Success));
 }
 
 }  // namespace

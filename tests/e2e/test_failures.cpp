@@ -23,29 +23,26 @@
 #include <vector>
 
 #include "hybgen/gen/fs.hpp"
-#include "support/shell.hpp"
+#include "support/e2e.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
+using hybgen::testing::e2e_dir;
+using hybgen::testing::read_json_file;
+using hybgen::testing::run_hybgen;
 using nlohmann::json;
 
 const std::string kSrc = HYBGEN_SOURCE_DIR;
-const std::string kExe = HYBGEN_EXE;
-const fs::path kWork = fs::path(HYBGEN_BINARY_DIR) / "e2e_failures";
-const std::string kCache = (kWork / "cache").string();
+const fs::path kWork = e2e_dir("e2e_failures");
 
 using Result = hybgen::testing::ShellResult;  // out: stdout (+ stderr where merged)
 
-/// Run `prefix hybgen args` (prefix: environment assignments or shell set-up ending in
-/// "&&" or a space) from the source directory with HYBGEN_CACHE = `cache`.
-Result hybgen(const std::string& args, const std::string& prefix = "",
-              const std::string& cache = kCache) {
-  fs::create_directories(kWork);
-  const std::string cmd = "cd '" + kSrc + "' && " + prefix + " HYBGEN_CACHE='" + cache + "' '" +
-                          kExe + "' " + args + " 2>&1";
-  return hybgen::testing::run_shell(cmd);
-}
+/// `prefix hybgen args` (prefix: environment assignments or shell set-up ending in "&&") from
+/// the source directory with this test's cache (support/e2e.hpp).
+const hybgen::testing::Hybgen hybgen{kWork / "cache"};
 
 /// Names in the directory of `out` that begin with out's name followed by `.partial-` or
 /// `.old-` (a staging or old directory left behind).
@@ -88,7 +85,7 @@ std::string expect_failure(const std::string& model, const std::vector<std::stri
   const fs::path out = fresh_out("fail_" + model);
   const Result r = hybgen("run tests/data/failures/" + model + ".model --quiet --out '" +
                           out.string() + "' " + sets);
-  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::Numerical)) << r.out;
   EXPECT_NE(r.out.find("hybgen: numerical failure: "), std::string::npos) << r.out;
   for (const auto& f : fragments) EXPECT_NE(r.out.find(f), std::string::npos) << f << "\n" << r.out;
   EXPECT_FALSE(fs::exists(out)) << "a failed first run must not create its output directory";
@@ -228,7 +225,7 @@ TEST(NumericalFailure, EventCapWithTheStateWhereItHappened) {
       "run tests/data/failures/zeno_cap.model --quiet --set max_events=100 "
       "--set t_end=1 --out '" +
       out.string() + "'");
-  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
 }
 
 // ---------------------------------------------------------------------------------------
@@ -239,21 +236,20 @@ TEST(NothingLost, FailedRunLeavesThePreviousOutputsAndASuccessReplacesThemWhole)
   const std::string run = "run models/bouncing_ball.model --quiet --out '" + out.string() +
                           "' --set outputs=netcdf+npy ";
   Result r = hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.25");
-  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   const std::string summary = hybgen::gen::read_file((out / "summary.json").string());
   ASSERT_TRUE(fs::exists(out / "u_0004.npy"));
   ASSERT_TRUE(fs::exists(out / "config.json"));
-  EXPECT_EQ(json::parse(hybgen::gen::read_file((out / "config.json").string()))["out_dir"],
-            out.string());
+  EXPECT_EQ(read_json_file(out / "config.json")["out_dir"], out.string());
   // A failing run (the reset leaves the box with e = 1.5) into the same directory.
   r = hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5 --set e=1.5");
-  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::Numerical)) << r.out;
   expect_previous_outputs_kept(r, out, summary);
   EXPECT_TRUE(fs::exists(out / "u_0004.npy"));
   // A successful run replaces the directory as a whole: no stale frame survives.
   r = hybgen(run + "--set grid=11x11 --set t_end=1 --set dt=0.5");
-  ASSERT_EQ(r.code, 0) << r.out;
-  const json s = json::parse(hybgen::gen::read_file((out / "summary.json").string()));
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  const json s = read_json_file(out / "summary.json");
   EXPECT_EQ(s["grid"]["axes"][0]["n"], 11);
   EXPECT_EQ(s["files"], json({"u_0000.npy", "u_0001.npy", "u_0002.npy"}));
   EXPECT_FALSE(fs::exists(out / "u_0004.npy"));
@@ -269,14 +265,14 @@ TEST(NothingLost, OutputsOfARunKilledMidSwapAreRestored) {
   const fs::path out = fresh_out("killed_mid_swap");
   const std::string run = "run models/bouncing_ball.model --quiet --out '" + out.string() + "' ";
   Result r = hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5");
-  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   const std::string summary = hybgen::gen::read_file((out / "summary.json").string());
   const fs::path old = out.string() + ".old-4242", staging = out.string() + ".partial-4242";
   fs::rename(out, old);
   fs::create_directories(staging);
   std::ofstream(staging / "summary.json") << "{}\n";
   r = hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5 --set e=1.5");
-  EXPECT_EQ(r.code, 3) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::Numerical)) << r.out;
   EXPECT_NE(r.out.find("hybgen: restored the outputs of an interrupted run from '" + old.string() +
                        "' to '" + out.string() + "'"),
             std::string::npos)
@@ -292,7 +288,7 @@ TEST(NothingLost, ADirectoryWithOtherFilesIsNotReplaced) {
       "run models/bouncing_ball.model --quiet --set grid=11x11 --set t_end=1 "
       "--out '" +
       out.string() + "'");
-  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("refusing to replace '" + out.string() + "': it holds 'notes.txt'"),
             std::string::npos)
       << r.out;
@@ -303,7 +299,7 @@ TEST(NothingLost, ADirectoryWithOtherFilesIsNotReplaced) {
   const Result here =
       hybgen("run '" + kSrc + "/models/bouncing_ball.model' --quiet --set grid=11x11 --out .",
              "cd '" + out.string() + "' &&");
-  EXPECT_EQ(here.code, 2) << here.out;
+  EXPECT_EQ(here.code, exit_status(ExitCode::UsageError)) << here.out;
   EXPECT_NE(here.out.find("refusing to replace '.': it is (or contains) the current directory"),
             std::string::npos)
       << here.out;
@@ -321,14 +317,14 @@ TEST(NothingLost, ARunIntoALockedDirectoryIsRefused) {
       "--out '" +
       out.string() + "'";
   Result r = hybgen(run);
-  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("hybgen: error: another hybgen run is writing to '" + out.string() + "'"),
             std::string::npos)
       << r.out;
   EXPECT_FALSE(fs::exists(out));
   ::close(fd);  // releases the lock
   r = hybgen(run);
-  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
 }
 
 TEST(NothingLost, TwoConcurrentRunsIntoOneDirectoryDoNotInterleave) {
@@ -336,21 +332,23 @@ TEST(NothingLost, TwoConcurrentRunsIntoOneDirectoryDoNotInterleave) {
   const fs::path out = fresh_out("race");
   const std::string run =
       "run models/bouncing_ball.model --quiet --set grid=151x151 --out '" + out.string() + "'";
-  ASSERT_EQ(hybgen(run).code, 0);
+  ASSERT_EQ(hybgen(run).code, exit_status(ExitCode::Success));
   Result a, b;
   std::thread ta([&] { a = hybgen(run); }), tb([&] { b = hybgen(run); });
   ta.join();
   tb.join();
   // Each run either completed or was refused with the lock's message; at least one completed.
   for (const Result* r : {&a, &b}) {
-    EXPECT_TRUE(r->code == 0 || r->code == 2) << r->out;
-    if (r->code == 2) {
+    EXPECT_TRUE(r->code == exit_status(ExitCode::Success) ||
+                r->code == exit_status(ExitCode::UsageError))
+        << r->out;
+    if (r->code == exit_status(ExitCode::UsageError)) {
       EXPECT_NE(r->out.find("another hybgen run is writing to"), std::string::npos) << r->out;
     }
   }
-  EXPECT_TRUE(a.code == 0 || b.code == 0);
+  EXPECT_TRUE(a.code == exit_status(ExitCode::Success) || b.code == exit_status(ExitCode::Success));
   std::printf("[ race ] exit codes %d and %d\n", a.code, b.code);
-  const json s = json::parse(hybgen::gen::read_file((out / "summary.json").string()));
+  const json s = read_json_file(out / "summary.json");
   for (const auto& f : s["files"]) EXPECT_TRUE(fs::exists(out / f.get<std::string>())) << f;
   EXPECT_TRUE(leftovers(out).empty());
 }
@@ -363,7 +361,8 @@ TEST(NothingLost, AnInterruptedRunRemovesItsStagingAndKeepsThePreviousOutputs) {
   // that ran it exits 128 + 15).
   const fs::path out = fresh_out("interrupted");
   const std::string run = "run models/bouncing_ball.model --quiet --out '" + out.string() + "' ";
-  ASSERT_EQ(hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5").code, 0);
+  ASSERT_EQ(hybgen(run + "--set grid=21x21 --set t_end=1 --set dt=0.5").code,
+            exit_status(ExitCode::Success));
   const std::string summary = hybgen::gen::read_file((out / "summary.json").string());
   Result r;
   std::thread t([&] { r = hybgen(run + "--set grid=2049x2049 --set t_end=10 --set dt=5"); });
@@ -399,10 +398,11 @@ TEST(NothingLost, AFullDiskIsAClearErrorAndKeepsThePreviousOutputs) {
       "run models/bouncing_ball.model --quiet --set grid=101x101 --set "
       "t_end=1 --set dt=0.5 --out '" +
       out.string() + "'";
-  ASSERT_EQ(hybgen(run).code, 0);
+  ASSERT_EQ(hybgen(run).code, exit_status(ExitCode::Success));
   const std::string summary = hybgen::gen::read_file((out / "summary.json").string());
   const Result r = hybgen(run + " --set outputs=npy", "trap '' XFSZ && ulimit -f 40 &&");
-  EXPECT_EQ(r.code, 70) << r.out;  // runner.hpp: I/O failures exit 70, naming the file
+  EXPECT_EQ(r.code, exit_status(ExitCode::Internal))
+      << r.out;  // runner.hpp: I/O failures exit 70, naming the file
   EXPECT_NE(r.out.find("cannot write '"), std::string::npos) << r.out;
   // Frames are written in parallel: whichever crosses the limit first is named.
   EXPECT_NE(r.out.find(".npy': File too large"), std::string::npos) << r.out;
@@ -410,7 +410,7 @@ TEST(NothingLost, AFullDiskIsAClearErrorAndKeepsThePreviousOutputs) {
   std::printf("[ message ] %s\n", r.out.c_str());
   // run.nc (HDF5 underneath) fails the same way: exit 70 naming the file, nothing kept.
   const Result nc = hybgen(run + " --set outputs=netcdf", "trap '' XFSZ && ulimit -f 40 &&");
-  EXPECT_EQ(nc.code, 70) << nc.out;
+  EXPECT_EQ(nc.code, exit_status(ExitCode::Internal)) << nc.out;
   EXPECT_NE(nc.out.find("/run.nc': "), std::string::npos) << nc.out;
   EXPECT_EQ(nc.out.find("killed by signal"), std::string::npos) << nc.out;
   expect_previous_outputs_kept(nc, out, summary);
@@ -421,18 +421,18 @@ TEST(NothingLost, ACorruptedBuildCacheEntryIsRebuilt) {
   const std::string cache = (kWork / "cache_corrupt").string();
   fs::remove_all(cache);
   const std::string build = "build models/bouncing_ball.model";
-  Result r = hybgen(build, "", cache);
-  ASSERT_EQ(r.code, 0) << r.out;
+  Result r = run_hybgen(build, cache);
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   const std::string exe = r.out.substr(r.out.rfind('\n', r.out.size() - 2) + 1,
                                        r.out.size() - r.out.rfind('\n', r.out.size() - 2) - 2);
   ASSERT_TRUE(fs::exists(exe)) << exe;
   const auto size = fs::file_size(exe);
-  r = hybgen(build, "", cache);
+  r = run_hybgen(build, cache);
   EXPECT_NE(r.out.find("(cached)"), std::string::npos) << r.out;
   // Truncated: rebuilt, not run.
   fs::resize_file(exe, size / 2);
-  r = hybgen(build, "", cache);
-  ASSERT_EQ(r.code, 0) << r.out;
+  r = run_hybgen(build, cache);
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_EQ(r.out.find("(cached)"), std::string::npos) << r.out;
   EXPECT_EQ(fs::file_size(exe), size);
   // Corrupted in place (same size, one byte changed): rebuilt too.
@@ -445,15 +445,15 @@ TEST(NothingLost, ACorruptedBuildCacheEntryIsRebuilt) {
     f.seekp(static_cast<std::streamoff>(size / 2));
     f.put(static_cast<char>(c ^ 0x5a));
   }
-  r = hybgen(build, "", cache);
-  ASSERT_EQ(r.code, 0) << r.out;
+  r = run_hybgen(build, cache);
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_EQ(r.out.find("(cached)"), std::string::npos) << r.out;
   // The rebuilt runner works.
   const fs::path out = fresh_out("after_corrupt");
-  r = hybgen("run models/bouncing_ball.model --quiet --set grid=11x11 --set t_end=1 --out '" +
-                 out.string() + "'",
-             "", cache);
-  EXPECT_EQ(r.code, 0) << r.out;
+  r = run_hybgen("run models/bouncing_ball.model --quiet --set grid=11x11 --set t_end=1 --out '" +
+                     out.string() + "'",
+                 cache);
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
 }
 
 TEST(NothingLost, AFailedCompileExitsFourWithTheLogPath) {
@@ -463,7 +463,7 @@ TEST(NothingLost, AFailedCompileExitsFourWithTheLogPath) {
   const Result r =
       hybgen("run models/bouncing_ball.model --quiet --set grid=11x11 --out '" + out.string() + "'",
              "HYBGEN_CXX=/bin/false");
-  EXPECT_EQ(r.code, 4) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::BuildFailed)) << r.out;
   const std::string key = "compiler log: ";
   const std::size_t at = r.out.find(key);
   ASSERT_NE(at, std::string::npos) << r.out;

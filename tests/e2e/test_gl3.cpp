@@ -28,8 +28,11 @@
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
 using hybgen::testing::e2e_dir;
 using hybgen::testing::read_json_file;
+using hybgen::testing::run_hybgen;
 
 /// A variable of a NetCDF file, as doubles (empty when it is not there).
 std::vector<double> nc_values(const fs::path& file, const std::string& name) {
@@ -80,13 +83,9 @@ std::pair<double, double> closed_form(double t) {
 nlohmann::json run_gl3(const std::string& name, const std::string& extra) {
   const fs::path dir = e2e_dir("gl3") / name;
   fs::remove_all(dir);
-  const auto r = hybgen::testing::run_shell(
-      "cd '" + std::string(HYBGEN_SOURCE_DIR) +
-      "' && OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
-      "HYBGEN_MPIEXEC='mpiexec --oversubscribe' HYBGEN_CACHE='" +
-      (e2e_dir("gl3") / "cache").string() + "' '" + HYBGEN_EXE + "' run models/gl3.model -q " +
-      extra + " --out '" + dir.string() + "' 2>&1");
-  EXPECT_EQ(r.code, 0) << r.out;
+  const auto r = run_hybgen("run models/gl3.model -q " + extra + " --out '" + dir.string() + "'",
+                            e2e_dir("gl3") / "cache", hybgen::testing::kMpiEnv);
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   return fs::exists(dir / "summary.json") ? read_json_file(dir / "summary.json")
                                           : nlohmann::json::object();
 }
@@ -156,12 +155,11 @@ TEST(Gl3, ParticlesKeepMarginalsAndMomentsThatMatchTheClosedForm) {
 
 TEST(Gl3, FullDensitiesOfTenDimensionsAreRefusedWithTheWayOut) {
   const fs::path dir = e2e_dir("gl3") / "refused";
-  const auto r = hybgen::testing::run_shell(
-      "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && HYBGEN_CACHE='" +
-      (e2e_dir("gl3") / "cache").string() + "' '" + HYBGEN_EXE +
-      "' run models/gl3.model -q --set density=grid --out '" + dir.string() + "' 2>&1");
+  const auto r =
+      run_hybgen("run models/gl3.model -q --set density=grid --out '" + dir.string() + "'",
+                 e2e_dir("gl3") / "cache");
   // Refused by the checker, before anything is built: the way out is named.
-  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("density marginals"), std::string::npos) << r.out;
   EXPECT_FALSE(fs::exists(dir));
 }

@@ -14,45 +14,41 @@
 
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/rt/io/npy.hpp"
-#include "support/shell.hpp"
+#include "support/e2e.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
+using hybgen::testing::e2e_dir;
+using hybgen::testing::read_json_file;
 using nlohmann::json;
 
-const std::string kSrc = HYBGEN_SOURCE_DIR;
-const std::string kExe = HYBGEN_EXE;
-const fs::path kWork = fs::path(HYBGEN_BINARY_DIR) / "e2e_lie";
-const std::string kCache = (kWork / "cache").string();
+const fs::path kWork = e2e_dir("e2e_lie");
 
 using Result = hybgen::testing::ShellResult;  // out: stdout (+ stderr where merged)
 
-/// Run hybgen with `args` from the source directory, with this test's own cache.
-Result hybgen(const std::string& args, bool merge = true) {
-  fs::create_directories(kWork);
-  const std::string cmd = "cd '" + kSrc + "' && HYBGEN_CACHE='" + kCache + "' '" + kExe + "' " +
-                          args + (merge ? " 2>&1" : " 2>/dev/null");
-  return hybgen::testing::run_shell(cmd);
-}
+/// hybgen from the source directory with this test's own cache (support/e2e.hpp).
+const hybgen::testing::Hybgen hybgen{kWork / "cache"};
 
 TEST(LieCli, CheckShippedLieModels) {
   for (const char* m :
        {"gl2", "gl3", "matrix_groups_impacts", "heisenberg", "heisenberg_algebra", "chaplygin"}) {
     const Result r = hybgen(std::string("check models/") + m + ".model");
-    EXPECT_EQ(r.code, 0) << m << "\n" << r.out;
+    EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << m << "\n" << r.out;
     EXPECT_NE(r.out.find(": ok: model '" + std::string(m) + "'"), std::string::npos) << r.out;
   }
 }
 
 TEST(LieCli, RejectedModelsNameTheHypothesis) {
   const Result so3 = hybgen("check models/so3_rigid_body.model");
-  EXPECT_EQ(so3.code, 1) << so3.out;
+  EXPECT_EQ(so3.code, exit_status(ExitCode::ModelError)) << so3.out;
   EXPECT_EQ(so3.out.rfind("models/so3_rigid_body.model:12:1: error: hypothesis 'codim1' fails", 0),
             0u)
       << so3.out;
   const Result aff = hybgen("check models/aff1.model");
-  EXPECT_EQ(aff.code, 1) << aff.out;
+  EXPECT_EQ(aff.code, exit_status(ExitCode::ModelError)) << aff.out;
   EXPECT_EQ(aff.out.rfind("models/aff1.model:12:1: error: hypothesis 'normal' fails", 0), 0u)
       << aff.out;
   EXPECT_NE(aff.out.find("[E_b, E_a] = -E_b"), std::string::npos) << aff.out;
@@ -60,8 +56,8 @@ TEST(LieCli, RejectedModelsNameTheHypothesis) {
 }
 
 TEST(LieCli, DeriveJsonHasTheReductionBlock) {
-  const Result r = hybgen("derive models/gl2.model --format json", false);
-  ASSERT_EQ(r.code, 0) << r.out;
+  const Result r = hybgen.stdout_only("derive models/gl2.model --format json");
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   const json j = json::parse(r.out);
   EXPECT_EQ(j["model"], "gl2");
   EXPECT_EQ(j["kind"], "lie");
@@ -90,8 +86,8 @@ TEST(LieCli, DeriveJsonHasTheReductionBlock) {
   ASSERT_EQ(j["guards"].size(), 1u);
   EXPECT_EQ(j["guards"][0]["hybrid_jacobian"], "e^2");  // +1 for e = 1; the paper prints −1
   // General models keep "kind": "hybrid" and a null reduction.
-  const Result g = hybgen("derive models/matrix_groups_impacts.model --format json", false);
-  ASSERT_EQ(g.code, 0);
+  const Result g = hybgen.stdout_only("derive models/matrix_groups_impacts.model --format json");
+  ASSERT_EQ(g.code, exit_status(ExitCode::Success));
   const json jg = json::parse(g.out);
   EXPECT_EQ(jg["kind"], "hybrid");
   EXPECT_TRUE(jg["reduction"].is_null());
@@ -99,7 +95,7 @@ TEST(LieCli, DeriveJsonHasTheReductionBlock) {
 
 TEST(LieCli, DeriveTextAndLatexShowTheReduction) {
   const Result t = hybgen("derive models/gl2.model");
-  ASSERT_EQ(t.code, 0) << t.out;
+  ASSERT_EQ(t.code, exit_status(ExitCode::Success)) << t.out;
   for (const char* part :
        {"Lie-group reduction", "ad*_{dh}", "[0, -zeta2, zeta3, 0]",
         "q'           = (q+1)*(zeta1+zeta4)", "Delta zeta",
@@ -107,14 +103,14 @@ TEST(LieCli, DeriveTextAndLatexShowTheReduction) {
         "hybrid Frobenius-Perron PDE"})
     EXPECT_NE(t.out.find(part), std::string::npos) << part << "\n" << t.out;
   const Result l = hybgen("derive models/gl2.model --format latex");
-  ASSERT_EQ(l.code, 0) << l.out;
+  ASSERT_EQ(l.code, exit_status(ExitCode::Success)) << l.out;
   EXPECT_NE(l.out.find("\\mathrm{ad}^*_{\\partial h/\\partial\\zeta} = \\begin{pmatrix}"),
             std::string::npos)
       << l.out;
   EXPECT_NE(l.out.find("\\Delta\\zeta_{"), std::string::npos) << l.out;
   // A group given by structure constants has no coordinates and no formula for φ.
   const Result a = hybgen("derive models/heisenberg_algebra.model");
-  ASSERT_EQ(a.code, 0) << a.out;
+  ASSERT_EQ(a.code, exit_status(ExitCode::Success)) << a.out;
   for (const char* part :
        {"H3, given by structure constants on the basis (E_x, E_y, E_z)", "[E_x, E_y] = E_z",
         "q            = phi(g)  (a homomorphism to R or "
@@ -125,10 +121,10 @@ TEST(LieCli, DeriveTextAndLatexShowTheReduction) {
 
 TEST(LieCli, Gl3DerivesWithinFiveSeconds) {
   const auto t0 = std::chrono::steady_clock::now();
-  const Result r = hybgen("derive models/gl3.model --format json", false);
+  const Result r = hybgen.stdout_only("derive models/gl3.model --format json");
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("[ hybgen derive models/gl3.model ] %.3f s\n", secs);
-  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_LT(secs, 5.0);
   const json j = json::parse(r.out);
   EXPECT_EQ(j["reduction"]["algebra_dim"], 9);
@@ -137,27 +133,28 @@ TEST(LieCli, Gl3DerivesWithinFiveSeconds) {
 }
 
 TEST(LieCli, UnreducedTwin) {
-  const Result r = hybgen("derive models/gl2.model --unreduced --format json", false);
-  ASSERT_EQ(r.code, 0) << r.out;
+  const Result r = hybgen.stdout_only("derive models/gl2.model --unreduced --format json");
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   const json j = json::parse(r.out);
   EXPECT_EQ(j["model"], "gl2_unreduced");
   EXPECT_EQ(j["kind"], "hybrid");
   EXPECT_EQ(j["state"].size(), 8u);
   EXPECT_EQ(j["guards"][0]["surface"], "a11*a22-a12*a21-1");
-  EXPECT_EQ(hybgen("check models/gl2.model --unreduced").code, 0);
+  EXPECT_EQ(hybgen("check models/gl2.model --unreduced").code, exit_status(ExitCode::Success));
   // The constrained (nonholonomic) twin: the Chaplygin sleigh on TG, state
   // (c, ċ), its resets explicit (impulsive Lagrange–d'Alembert).
-  const Result c = hybgen("derive --unreduced models/chaplygin.model --format json", false);
-  ASSERT_EQ(c.code, 0) << c.out;
+  const Result c = hybgen.stdout_only("derive --unreduced models/chaplygin.model --format json");
+  ASSERT_EQ(c.code, exit_status(ExitCode::Success)) << c.out;
   const json jc = json::parse(c.out);
   EXPECT_EQ(jc["model"], "chaplygin_unreduced");
   EXPECT_EQ(jc["state"].size(), 6u);
   EXPECT_EQ(jc["guards"].size(), 2u);
   EXPECT_EQ(jc["guards"][0]["surface"], "th-theta0");
-  EXPECT_EQ(hybgen("check models/chaplygin.model --unreduced").code, 0);
+  EXPECT_EQ(hybgen("check models/chaplygin.model --unreduced").code,
+            exit_status(ExitCode::Success));
   // --unreduced on a general model is a usage error.
   const Result bad = hybgen("check models/bouncing_ball.model --unreduced");
-  EXPECT_EQ(bad.code, 2) << bad.out;
+  EXPECT_EQ(bad.code, exit_status(ExitCode::UsageError)) << bad.out;
 }
 
 /// Run a shipped model into a fresh directory; return its summary.
@@ -167,8 +164,8 @@ json run(const std::string& model, const std::string& tag, const std::string& se
   const Result r =
       hybgen("run models/" + model + ".model --quiet --out '" + out.string() + "' " + sets +
              " --set outputs=netcdf+png+npy");  // run.nc, pictures and the .npy frames read here
-  EXPECT_EQ(r.code, 0) << r.out;
-  return json::parse(hybgen::gen::read_file((out / "summary.json").string()));
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  return read_json_file(out / "summary.json");
 }
 
 TEST(LieCli, RunGl2OnATinyGrid) {

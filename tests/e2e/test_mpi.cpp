@@ -26,16 +26,14 @@
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
 using hybgen::testing::e2e_dir;
+using hybgen::testing::kMpiEnv;
 using hybgen::testing::read_json_file;
 using hybgen::testing::run_hybgen;
 
 #ifdef HYBGEN_WITH_MPI
-
-/// MPI as root (CI), and more ranks than cores allowed (a 1-core machine still tests 2).
-const std::string kMpiEnv =
-    "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
-    "HYBGEN_MPIEXEC='mpiexec --oversubscribe' ";
 
 /// A finished run: its directory and summary.
 struct RunDir {
@@ -52,10 +50,8 @@ RunDir run_model(const std::string& model, const std::string& sets, const std::s
   const std::string args = "run " + model + " " + sets + " --set outputs=" + outputs +
                            " -q --out '" + dir.string() + "'" +
                            (ranks > 0 ? " --ranks " + std::to_string(ranks) : std::string());
-  const auto r = hybgen::testing::run_shell(
-      "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + kMpiEnv + "HYBGEN_CACHE='" +
-      (e2e_dir("mpi") / "cache").string() + "' '" + HYBGEN_EXE + "' " + args + " 2>&1");
-  EXPECT_EQ(r.code, 0) << args << "\n" << r.out;
+  const auto r = run_hybgen(args, e2e_dir("mpi") / "cache", kMpiEnv);
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << args << "\n" << r.out;
   return {dir, fs::exists(dir / "summary.json") ? read_json_file(dir / "summary.json")
                                                 : nlohmann::json::object()};
 }
@@ -278,12 +274,10 @@ TEST(Mpi, AFailureIsFoundOnceWhicheverRankHitIt) {
   std::string messages[2];
   for (int ranks : {0, 2}) {
     const fs::path dir = e2e_dir("mpi") / ("fail_" + std::to_string(ranks));
-    const auto r = hybgen::testing::run_shell(
-        "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + kMpiEnv + "HYBGEN_CACHE='" +
-        (e2e_dir("mpi") / "cache").string() + "' '" + HYBGEN_EXE +
-        "' run models/bouncing_ball.model " + sets + " -q --out '" + dir.string() + "'" +
-        (ranks ? " --ranks 2" : "") + " 2>&1");
-    EXPECT_EQ(r.code, 3) << r.out;
+    const auto r = run_hybgen("run models/bouncing_ball.model " + sets + " -q --out '" +
+                                  dir.string() + "'" + (ranks ? " --ranks 2" : ""),
+                              e2e_dir("mpi") / "cache", kMpiEnv);
+    EXPECT_EQ(r.code, exit_status(ExitCode::Numerical)) << r.out;
     const auto at = r.out.find("hybgen: numerical failure:");
     ASSERT_NE(at, std::string::npos) << r.out;
     EXPECT_EQ(r.out.find("hybgen: numerical failure:", at + 1), std::string::npos) << r.out;
@@ -337,24 +331,21 @@ TEST(Mpi, AFrameLargerThanAChunkIsWrittenInSlabsByEveryRank) {
 
 TEST(Mpi, VtiOverSeveralRanksIsRefusedWithTheWayOut) {
   const fs::path dir = e2e_dir("mpi") / "vti";
-  const auto r = hybgen::testing::run_shell(
-      "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + kMpiEnv + "HYBGEN_CACHE='" +
-      (e2e_dir("mpi") / "cache").string() + "' '" + HYBGEN_EXE +
-      "' run models/bouncing_ball.model --set grid=21x21 --set t_end=1 --set outputs=vti "
+  const auto r = run_hybgen(
+      "run models/bouncing_ball.model --set grid=21x21 --set t_end=1 --set outputs=vti "
       "--ranks 2 -q --out '" +
-      dir.string() + "' 2>&1");
-  EXPECT_EQ(r.code, 2) << r.out;
+          dir.string() + "'",
+      e2e_dir("mpi") / "cache", kMpiEnv);
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("run.nc has the same arrays"), std::string::npos) << r.out;
   EXPECT_FALSE(fs::exists(dir));
 }
 
 TEST(Mpi, AMissingLauncherIsAClearError) {
-  const auto r = hybgen::testing::run_shell(
-      "cd '" + std::string(HYBGEN_SOURCE_DIR) +
-      "' && HYBGEN_MPIEXEC=no-such-mpiexec HYBGEN_CACHE='" + (e2e_dir("mpi") / "cache").string() +
-      "' '" + HYBGEN_EXE + "' run models/bouncing_ball.model --ranks 2 -q --out '" +
-      (e2e_dir("mpi") / "nolauncher").string() + "' 2>&1");
-  EXPECT_EQ(r.code, 2) << r.out;
+  const auto r = run_hybgen("run models/bouncing_ball.model --ranks 2 -q --out '" +
+                                (e2e_dir("mpi") / "nolauncher").string() + "'",
+                            e2e_dir("mpi") / "cache", "HYBGEN_MPIEXEC=no-such-mpiexec");
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("the MPI launcher 'no-such-mpiexec' is not on PATH"), std::string::npos)
       << r.out;
 }
@@ -365,7 +356,7 @@ TEST(Mpi, WithoutTheBackendRanksAreABuildErrorThatSaysWhatToInstall) {
   const auto r = run_hybgen("run models/bouncing_ball.model --ranks 2 -q --out '" +
                                 (e2e_dir("mpi") / "none").string() + "'",
                             e2e_dir("mpi") / "cache");
-  EXPECT_EQ(r.code, 4) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::BuildFailed)) << r.out;
   EXPECT_NE(r.out.find("scripts/setup.sh --mpi"), std::string::npos) << r.out;
 }
 
@@ -375,7 +366,7 @@ TEST(Mpi, RanksWithoutTheMpiBackendAreRefused) {
   const auto r = run_hybgen("run models/bouncing_ball.model --set ranks=2 -q --out '" +
                                 (e2e_dir("mpi") / "refused").string() + "'",
                             e2e_dir("mpi") / "cache");
-  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("needs backend=mpi"), std::string::npos) << r.out;
 }
 

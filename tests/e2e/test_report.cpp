@@ -15,11 +15,15 @@
 #include <string>
 
 #include "support/e2e.hpp"
+#include "support/files.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
 using hybgen::testing::read_json_file;
+using hybgen::testing::read_text;
 using hybgen::testing::run_hybgen;
 using hybgen::testing::run_shell;
 
@@ -43,13 +47,6 @@ std::string headless(const std::string& browser, const std::string& args) {
          profile.string() + "' --virtual-time-budget=10000 " + args + " 2>/dev/null";
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 const std::string kRun =
     "run models/bouncing_ball.model --set grid=31x31 --set t_end=2 --set dt=0.5 --quiet ";
 
@@ -57,19 +54,19 @@ TEST(Report, RendersItsEquationsAndItsSliderMovesTheFrames) {
   const fs::path out = kWork / "ball";
   fs::remove_all(out);
   const auto r = run_hybgen(kRun + "--out '" + out.string() + "'", kWork / "cache");
-  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   for (const char* f : {"report.html", "katex/katex.min.js", "katex/katex.min.css", "animation.gif",
                         "density.pdf", "budget.png", "u_0004.png"})
     EXPECT_TRUE(fs::exists(out / f)) << f;
   const auto s = read_json_file(out / "summary.json");
   EXPECT_EQ(s["outputs"]["report"], "report.html");
   // What derive checked is on the page: the ball's reset has a closed-form inverse.
-  const std::string page = slurp(out / "report.html");
+  const std::string page = read_text(out / "report.html");
   EXPECT_NE(page.find("<h2>Hypotheses and checks</h2>"), std::string::npos);
   EXPECT_NE(page.find("guard <code>ground</code>: the reset has a closed-form inverse"),
             std::string::npos);
   // The animation: GIF89a, one graphic control block per frame (5 frames).
-  const std::string gif = slurp(out / "animation.gif");
+  const std::string gif = read_text(out / "animation.gif");
   EXPECT_EQ(gif.rfind("GIF89a", 0), 0u);
   std::size_t frames = 0;
   for (auto p = gif.find("\x21\xF9\x04"); p != std::string::npos;
@@ -102,15 +99,13 @@ TEST(Report, WithoutKatexTheEquationsAreSourceAndTheRunSaysWhy) {
   const fs::path out = kWork / "no_katex";
   fs::remove_all(out);
   // HYBGEN_KATEX_DIR points the runner at a directory without KaTeX.
-  const auto r2 = run_shell("cd '" + std::string(HYBGEN_SOURCE_DIR) +
-                            "' && HYBGEN_KATEX_DIR=/nonexistent HYBGEN_CACHE='" +
-                            (kWork / "cache").string() + "' '" + HYBGEN_EXE + "' " + kRun +
-                            "--set outputs=png+html --out '" + out.string() + "' 2>&1");
-  ASSERT_EQ(r2.code, 0) << r2.out;
+  const auto r2 = run_hybgen(kRun + "--set outputs=png+html --out '" + out.string() + "'",
+                             kWork / "cache", "HYBGEN_KATEX_DIR=/nonexistent");
+  ASSERT_EQ(r2.code, exit_status(ExitCode::Success)) << r2.out;
   EXPECT_NE(r2.out.find("warning: report.html shows the equations as LaTeX source"),
             std::string::npos)
       << r2.out;
-  const std::string page = slurp(out / "report.html");
+  const std::string page = read_text(out / "report.html");
   EXPECT_NE(page.find("<pre>  \\text{mode } \\mathrm{flight}"), std::string::npos);
   EXPECT_FALSE(fs::exists(out / "katex"));
 }
@@ -118,11 +113,13 @@ TEST(Report, WithoutKatexTheEquationsAreSourceAndTheRunSaysWhy) {
 TEST(Report, TheNextRunReplacesTheReportButNotAUsersFile) {
   const fs::path out = kWork / "replace";
   fs::remove_all(out);
-  ASSERT_EQ(run_hybgen(kRun + "--out '" + out.string() + "'", kWork / "cache").code, 0);
-  ASSERT_EQ(run_hybgen(kRun + "--out '" + out.string() + "'", kWork / "cache").code, 0);
+  ASSERT_EQ(run_hybgen(kRun + "--out '" + out.string() + "'", kWork / "cache").code,
+            exit_status(ExitCode::Success));
+  ASSERT_EQ(run_hybgen(kRun + "--out '" + out.string() + "'", kWork / "cache").code,
+            exit_status(ExitCode::Success));
   std::ofstream(out / "katex" / "notes.txt") << "mine";
   const auto r = run_hybgen(kRun + "--out '" + out.string() + "'", kWork / "cache");
-  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("katex/notes.txt"), std::string::npos) << r.out;
   EXPECT_TRUE(fs::exists(out / "katex" / "notes.txt"));
 }

@@ -17,6 +17,8 @@
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
 using hybgen::testing::python_with;
 using hybgen::testing::read_json_file;
 using hybgen::testing::run_hybgen;
@@ -39,8 +41,8 @@ fs::path run_made_up(const std::string& name, const std::string& text, std::stri
   const fs::path out = kWork / name;
   fs::remove_all(out);
   const auto r = run_hybgen("run '" + model + "' --out '" + out.string() + "'", kWork / "cache");
-  EXPECT_EQ(r.code, 0) << r.out;
-  return r.code == 0 ? out : fs::path();
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  return r.code == exit_status(ExitCode::Success) ? out : fs::path();
 }
 
 // Mode L (x < 0) drifts right, x' = 1; mode R (x > 0) also contracts y, y' = -c y, so that
@@ -223,7 +225,7 @@ TEST(RunOutputs, AConcentratingFlowIsFlaggedAsUnderResolved) {
   const fs::path out = kWork / "sink";
   fs::remove_all(out);
   auto r = run_hybgen("run '" + model + "' --out '" + out.string() + "'", kWork / "cache");
-  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_NE(r.out.find("warning: the grid under-resolves the density: at t = 1 "),
             std::string::npos)
       << r.out;
@@ -234,7 +236,7 @@ TEST(RunOutputs, AConcentratingFlowIsFlaggedAsUnderResolved) {
   r = run_hybgen(
       "run '" + model + "' --set method=transfer --set scheme=cell --out '" + out.string() + "'",
       kWork / "cache");
-  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_EQ(r.out.find("under-resolves"), std::string::npos) << r.out;
 }
 

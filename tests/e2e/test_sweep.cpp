@@ -13,34 +13,20 @@
 
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/rt/io/npy.hpp"
-#include "support/shell.hpp"
+#include "support/e2e.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
+using hybgen::testing::e2e_dir;
+using hybgen::testing::read_json_file;
+using hybgen::testing::run_hybgen;
+using hybgen::testing::write_model_file;
 using nlohmann::json;
 
-const std::string kSrc = HYBGEN_SOURCE_DIR;
-const std::string kExe = HYBGEN_EXE;
-const fs::path kWork = fs::path(HYBGEN_BINARY_DIR) / "e2e_sweep";
-
-/// Run hybgen with `args` from the source directory with the cache `cache`; all output.
-hybgen::testing::ShellResult hybgen(const std::string& args, const fs::path& cache) {
-  fs::create_directories(kWork);
-  return hybgen::testing::run_shell("cd '" + kSrc + "' && HYBGEN_CACHE='" + cache.string() + "' '" +
-                                    kExe + "' " + args + " 2>&1");
-}
-
-std::string write_model(const std::string& name, const std::string& text) {
-  fs::create_directories(kWork / "models");
-  const std::string path = (kWork / "models" / name).string();
-  std::ofstream(path, std::ios::binary) << text;
-  return path;
-}
-
-json read_json(const fs::path& p) {
-  return json::parse(hybgen::gen::read_file(p.string()));
-}
+const fs::path kWork = e2e_dir("e2e_sweep");
 
 std::size_t count(const std::string& text, const std::string& what) {
   std::size_t n = 0;
@@ -62,19 +48,19 @@ TEST(Sweep, SixValuesOfEShareOneRunner) {
   const fs::path out = kWork / "six";
   fs::remove_all(cache);
   fs::remove_all(out);
-  const auto r = hybgen(
+  const auto r = run_hybgen(
       "sweep models/bouncing_ball.model --set e=0.5:1.0:6 --set grid=21x21 "
       "--set t_end=2 --set dt=0.5 --set outputs=netcdf+npy --out '" +
           out.string() + "'",
       cache);
-  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_EQ(count(r.out, "runner (built in"), 1u) << r.out;
   EXPECT_EQ(count(r.out, ": ok"), 6u) << r.out;
   std::size_t entries = 0;
   for (const auto& e : fs::directory_iterator(cache)) entries += e.is_directory() ? 1 : 0;
   EXPECT_EQ(entries, 1u);
 
-  const json table = read_json(out / "sweep.json");
+  const json table = read_json_file(out / "sweep.json");
   EXPECT_EQ(table["model"], "bouncing_ball");
   ASSERT_EQ(table["rows"].size(), 6u);
   EXPECT_EQ(lines(out / "sweep.csv"), 7u);  // header + 6 rows
@@ -85,7 +71,7 @@ TEST(Sweep, SixValuesOfEShareOneRunner) {
     EXPECT_EQ(row["status"], "ok") << i;
     EXPECT_EQ(row["t"], 2.0);
     // The point's own outputs, run with that value.
-    const json s = read_json(out / row["dir"].get<std::string>() / "summary.json");
+    const json s = read_json_file(out / row["dir"].get<std::string>() / "summary.json");
     EXPECT_EQ(s["parameters"]["e"], row["e"]) << i;
     EXPECT_EQ(s["mass"].back(), row["mass"]) << i;
     EXPECT_TRUE(fs::exists(out / row["dir"].get<std::string>() / "u_0004.npy")) << i;
@@ -100,14 +86,14 @@ TEST(Sweep, SixValuesOfEShareOneRunner) {
   // A separate run of one value: the same runner (cached) and the same numbers.
   const fs::path one = kWork / "six_one";
   fs::remove_all(one);
-  const auto single = hybgen(
+  const auto single = run_hybgen(
       "run models/bouncing_ball.model --set e=0.7 --set grid=21x21 "
       "--set t_end=2 --set dt=0.5 --out '" +
           one.string() + "'",
       cache);
-  ASSERT_EQ(single.code, 0) << single.out;
+  ASSERT_EQ(single.code, exit_status(ExitCode::Success)) << single.out;
   EXPECT_NE(single.out.find("runner (cached)"), std::string::npos) << single.out;
-  const json s = read_json(one / "summary.json");
+  const json s = read_json_file(one / "summary.json");
   const json& row = table["rows"][2];
   for (const char* k : {"mass", "outflow", "atom"})
     EXPECT_NEAR(s[k].back().get<double>(), row[k].get<double>(),
@@ -126,7 +112,7 @@ double bump_integral(double a, double b) {
 }
 
 TEST(Sweep, TableAgreesWithTheClosedFormsOfADrift) {
-  const std::string model = write_model("drift.model", R"(model drift
+  const std::string model = write_model_file(kWork, "drift.model", R"(model drift
 state x
 parameter k = 0.5
 mode go {
@@ -144,10 +130,10 @@ simulation {
   fs::remove_all(out);
   // 1 - kT = 0.5, 0.4, 0.3, 0.2, 0.1: none, a tail, half, nearly all and all of the bump out.
   const auto r =
-      hybgen("sweep '" + model + "' --set k=0.5:0.9:5 --jobs 2 --out '" + out.string() + "'",
-             kWork / "cache_drift");
-  ASSERT_EQ(r.code, 0) << r.out;
-  const json table = read_json(out / "sweep.json");
+      run_hybgen("sweep '" + model + "' --set k=0.5:0.9:5 --jobs 2 --out '" + out.string() + "'",
+                 kWork / "cache_drift");
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  const json table = read_json_file(out / "sweep.json");
   ASSERT_EQ(table["rows"].size(), 5u);
   for (const json& row : table["rows"]) {
     const double k = row["k"].get<double>(), edge = 1 - k * 1.0;
@@ -175,7 +161,7 @@ TEST(Sweep, AFailedPointKeepsItsRowAndTheExitCode) {
   // k = 0 makes the flow 1/k infinite: that point's runner stops with a numerical failure
   // (exit 3) at its pre-flight scan; the other point runs, the table says which failed, and
   // the sweep exits 3.
-  const std::string model = write_model("inverse_speed.model", R"(model inverse_speed
+  const std::string model = write_model_file(kWork, "inverse_speed.model", R"(model inverse_speed
 state x
 parameter k = 1
 mode go {
@@ -191,16 +177,16 @@ simulation {
 )");
   const fs::path out = kWork / "failed";
   fs::remove_all(out);
-  const auto r = hybgen("sweep '" + model + "' --set k=1,0 --out '" + out.string() + "'",
-                        kWork / "cache_failed");
-  EXPECT_EQ(r.code, 3) << r.out;
+  const auto r = run_hybgen("sweep '" + model + "' --set k=1,0 --out '" + out.string() + "'",
+                            kWork / "cache_failed");
+  EXPECT_EQ(r.code, exit_status(ExitCode::Numerical)) << r.out;
   EXPECT_NE(r.out.find("1 failed"), std::string::npos) << r.out;
-  const json table = read_json(out / "sweep.json");
+  const json table = read_json_file(out / "sweep.json");
   ASSERT_EQ(table["rows"].size(), 2u);
   EXPECT_EQ(table["rows"][0]["status"], "ok");
   EXPECT_TRUE(fs::exists(out / table["rows"][0]["dir"].get<std::string>() / "summary.json"));
   EXPECT_EQ(table["rows"][1]["status"], "failed");
-  EXPECT_EQ(table["rows"][1]["exit"], 3);
+  EXPECT_EQ(table["rows"][1]["exit"], exit_status(ExitCode::Numerical));
   EXPECT_FALSE(table["rows"][1].contains("mass"));
   EXPECT_FALSE(fs::exists(out / table["rows"][1]["dir"].get<std::string>()));  // half-written
 }
@@ -209,17 +195,17 @@ TEST(Sweep, AValueTheModelRefusesStopsItBeforeAnythingRuns) {
   const fs::path out = kWork / "refused";
   fs::remove_all(out);
   const auto r =
-      hybgen("sweep models/bouncing_ball.model --set tol=1e-6,0.5 --out '" + out.string() + "'",
-             kWork / "cache_refused");
-  EXPECT_EQ(r.code, 2) << r.out;
+      run_hybgen("sweep models/bouncing_ball.model --set tol=1e-6,0.5 --out '" + out.string() + "'",
+                 kWork / "cache_refused");
+  EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("sweep point 1_tol=0.5"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("tol"), std::string::npos) << r.out;
   EXPECT_FALSE(fs::exists(out));
   EXPECT_FALSE(fs::exists(kWork / "cache_refused"));  // not even a build
 
   const auto bad =
-      hybgen("sweep models/bouncing_ball.model --set e=0.5:1", kWork / "cache_refused");
-  EXPECT_EQ(bad.code, 2) << bad.out;
+      run_hybgen("sweep models/bouncing_ball.model --set e=0.5:1", kWork / "cache_refused");
+  EXPECT_EQ(bad.code, exit_status(ExitCode::UsageError)) << bad.out;
   EXPECT_NE(bad.out.find("A:B:N"), std::string::npos) << bad.out;
 }
 
@@ -230,18 +216,19 @@ TEST(Sweep, AnInterruptedSweepLeavesTheEarlierOutputsAsTheyWere) {
   const fs::path cache = kWork / "cache_interrupt";
   const fs::path out = kWork / "interrupted";
   fs::remove_all(out);
-  const auto first = hybgen(
+  const auto first = run_hybgen(
       "sweep models/bouncing_ball.model --set e=0.8,0.9 --set grid=11x11 "
       "--set t_end=1 --out '" +
           out.string() + "'",
       cache);
-  ASSERT_EQ(first.code, 0) << first.out;
+  ASSERT_EQ(first.code, exit_status(ExitCode::Success)) << first.out;
   const std::string before = hybgen::gen::read_file((out / "sweep.csv").string());
   // Stopped once its runners run (their configurations are in the staging directory), not
   // after a fixed delay: on a loaded machine the derivation and build can take seconds.
   const std::string staging_glob = (kWork / "interrupted.partial-").string() + "*/*/config.json";
   const std::string cmd =
-      "cd '" + kSrc + "' && HYBGEN_CACHE='" + cache.string() + "' '" + kExe +
+      "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && HYBGEN_CACHE='" + cache.string() + "' '" +
+      HYBGEN_EXE +
       "' sweep models/bouncing_ball.model --set e=0.8,0.9 --set method=particles "
       "--set particles=1e7 --set t_end=5 --out '" +
       out.string() + "' 2>&1 & pid=$!; for i in $(seq 600); do ls " + staging_glob +
@@ -268,22 +255,22 @@ TEST(Sweep, TheThreadCountDoesNotChangeTheDensities) {
   // particle) are bit-identical on 1 and 2 threads.
   const fs::path out = kWork / "threads";
   fs::remove_all(out);
-  const auto r = hybgen(
+  const auto r = run_hybgen(
       "sweep models/bouncing_ball.model --set method=characteristics,particles "
       "--set threads=1,2 --set particles=20000 --set grid=21x21 --set t_end=2 "
       "--set dt=1 --set outputs=npy --jobs 1 --out '" +
           out.string() + "'",
       kWork / "cache_threads");
-  ASSERT_EQ(r.code, 0) << r.out;
-  const json table = read_json(out / "sweep.json");
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  const json table = read_json_file(out / "sweep.json");
   ASSERT_EQ(table["rows"].size(), 4u);  // (characteristics, 1), (characteristics, 2), ...
   for (std::size_t m = 0; m < 2; ++m) {
     const std::string one = table["rows"][2 * m]["dir"], two = table["rows"][2 * m + 1]["dir"];
     EXPECT_EQ(table["rows"][2 * m]["threads"], 1.0);
     EXPECT_EQ(table["rows"][2 * m + 1]["threads"], 2.0);
     // The runs had the threads they were given (summary.json records them).
-    EXPECT_EQ(read_json(out / one / "summary.json")["threads"], 1);
-    EXPECT_EQ(read_json(out / two / "summary.json")["threads"], 2);
+    EXPECT_EQ(read_json_file(out / one / "summary.json")["threads"], 1);
+    EXPECT_EQ(read_json_file(out / two / "summary.json")["threads"], 2);
     for (const char* frame : {"u_0001.npy", "u_0002.npy"}) {
       const auto a = hybgen::rt::read_npy((out / one / frame).string());
       const auto b = hybgen::rt::read_npy((out / two / frame).string());

@@ -14,6 +14,7 @@
 #include <set>
 #include <thread>
 
+#include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/fs.hpp"
 
 namespace {
@@ -45,9 +46,11 @@ TEST(Process, ExitCodeAndEnvironment) {
 
 TEST(Process, AChildKilledBySignalIsSeventy) {
   const InterruptGuard guard;
-  EXPECT_EQ(run_process("/bin/sh", script("kill.sh", "kill -KILL $$\n"), guard), 70);
+  EXPECT_EQ(run_process("/bin/sh", script("kill.sh", "kill -KILL $$\n"), guard),
+            hybgen::rt::exit_status(ExitCode::Internal));
   // A runner that cannot be executed at all: the child says so and exits 70.
-  EXPECT_EQ(run_process("/nonexistent/runner", "x", guard), 70);
+  EXPECT_EQ(run_process("/nonexistent/runner", "x", guard),
+            hybgen::rt::exit_status(ExitCode::Internal));
 }
 
 TEST(Process, SeveralChildrenAreWaitedForInAnyOrder) {

@@ -26,9 +26,11 @@
 #include "hybgen/rt/io/atomic_file.hpp"
 #include "hybgen/rt/io/npy.hpp"
 #include "hybgen/rt/io/vti.hpp"
+#include "support/files.hpp"
 
 namespace fs = std::filesystem;
 using namespace hybgen::rt;
+using hybgen::testing::read_text;
 
 namespace {
 
@@ -57,13 +59,6 @@ class OutputTest : public ::testing::Test {
   fs::path dir_;
 };
 
-std::string slurp(const std::string& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 bool same_bits(double a, double b) {
   return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b);
 }
@@ -79,7 +74,7 @@ void expect_npy_round_trip(const std::string& file, const std::vector<std::size_
   if (n > 2) data[1] = std::numeric_limits<double>::quiet_NaN();
   write_npy(file, data.data(), shape);
 
-  const std::string bytes = slurp(file);
+  const std::string bytes = read_text(file);
   ASSERT_GE(bytes.size(), 10u);
   EXPECT_EQ(bytes.substr(0, 6), std::string("\x93NUMPY", 6));
   EXPECT_EQ(bytes[6], '\x01');
@@ -133,7 +128,7 @@ TEST_F(OutputTest, NpyReaderRejectsTruncatedAndMalformedFiles) {
   const std::string p = path("t.npy");
   std::vector<double> data(100, 2.0);
   write_npy(p, data.data(), {10, 10});
-  const std::string good = slurp(p);
+  const std::string good = read_text(p);
 
   fs::resize_file(p, good.size() - 3);  // truncated data
   EXPECT_THROW(
@@ -203,7 +198,7 @@ TEST_F(OutputTest, AtomicWriteReplacesFileAndLeavesNoTemporaries) {
   const std::string p = path("f.txt");
   write_file_atomic(p, "first");
   write_file_atomic(p, std::string_view("second"));
-  EXPECT_EQ(slurp(p), "second");
+  EXPECT_EQ(read_text(p), "second");
   EXPECT_EQ(listing(), std::vector<std::string>{"f.txt"});
 }
 
@@ -230,7 +225,7 @@ TEST_F(OutputTest, AbandonedAtomicFileKeepsPreviousContents) {
     EXPECT_NE(f.temp_path().find(p + ".tmp." + std::to_string(::getpid()) + "."),
               std::string::npos);
   }
-  EXPECT_EQ(slurp(p), "old contents");
+  EXPECT_EQ(read_text(p), "old contents");
   EXPECT_EQ(listing(), std::vector<std::string>{"keep.txt"});
 }
 
@@ -257,7 +252,7 @@ TEST_F(OutputTest, FailedWriteThrowsAndKeepsPreviousFile) {
   std::signal(SIGXFSZ, old_handler);
   EXPECT_NE(message.find("cannot write '" + p + "'"), std::string::npos) << message;
   EXPECT_NE(message.find("File too large"), std::string::npos) << message;
-  EXPECT_EQ(slurp(p), "previous");
+  EXPECT_EQ(read_text(p), "previous");
   EXPECT_EQ(listing(), std::vector<std::string>{"u_0001.npy"});
 }
 
@@ -282,7 +277,7 @@ TEST_F(OutputTest, AtomicTemporariesAreUnique) {
   b.commit();
   a.write("a");
   a.commit();
-  EXPECT_EQ(slurp(path("same")), "a");
+  EXPECT_EQ(read_text(path("same")), "a");
   EXPECT_EQ(listing(), std::vector<std::string>{"same"});
 }
 
@@ -443,7 +438,7 @@ void check_vti(const std::string& p, const std::vector<std::size_t>& dims,
   }
   write_vti(p, data.data(), dims, origins, spacings, names, "density u&\"1\"");
 
-  const std::vector<XmlElement> doc = parse_xml(slurp(p));
+  const std::vector<XmlElement> doc = parse_xml(read_text(p));
   const XmlElement& root = find_element(doc, "VTKFile");
   EXPECT_EQ(root.depth, 0);
   EXPECT_EQ(root.attrs.at("type"), "ImageData");
@@ -484,7 +479,7 @@ TEST_F(OutputTest, VtiIsWellFormedWithExtentsAndTransposedValues) {
   check_vti(path("a.vti"), {5}, "0 4 0 0 0 0");
   check_vti(path("b.vti"), {3, 2}, "0 2 0 1 0 0");
   check_vti(path("c.vti"), {2, 3, 4}, "0 1 0 2 0 3");
-  EXPECT_NE(slurp(path("c.vti")).find("VTK x/y/z = x- -<&>, v1, v2"), std::string::npos);
+  EXPECT_NE(read_text(path("c.vti")).find("VTK x/y/z = x- -<&>, v1, v2"), std::string::npos);
 }
 
 TEST_F(OutputTest, VtiRejectsBadArguments) {

@@ -16,6 +16,7 @@
 #include "hybgen/rt/io/atomic_file.hpp"
 #include "hybgen/rt/io/npy.hpp"
 #include "hybgen/rt/io/run_outputs.hpp"
+#include "support/files.hpp"
 
 namespace {
 
@@ -57,10 +58,7 @@ class RunOutputs : public ::testing::Test {
   void TearDown() override { fs::remove_all(dir_); }
 
   std::string slurp(const std::string& name) const {
-    std::ifstream in(dir_ / name);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return ss.str();
+    return hybgen::testing::read_text(dir_ / name);
   }
 
   fs::path dir_;

@@ -1,8 +1,9 @@
 #pragma once
 /// \file e2e.hpp
 /// What the end-to-end tests share: running the built `hybgen` from the source directory
-/// with a private cache, writing a model they made up, reading JSON, and finding Debian's
-/// python3 with the modules an independent reader needs.
+/// with a private cache (its exit codes: hybgen/rt/exit_codes.hpp, included), writing a
+/// model they made up, reading JSON, and finding Debian's python3 with the modules an
+/// independent reader needs.
 
 #include <gtest/gtest.h>
 
@@ -14,6 +15,7 @@
 #include <vector>
 
 #include "hybgen/gen/fs.hpp"
+#include "hybgen/rt/exit_codes.hpp"
 #include "support/shell.hpp"
 
 namespace hybgen::testing {
@@ -25,11 +27,41 @@ inline std::filesystem::path e2e_dir(const std::string& name) {
   return d;
 }
 
-/// Run hybgen with `args` from the source directory with the cache `cache`; all output.
-inline ShellResult run_hybgen(const std::string& args, const std::filesystem::path& cache) {
-  return run_shell("cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && HYBGEN_CACHE='" +
-                   cache.string() + "' '" + std::string(HYBGEN_EXE) + "' " + args + " 2>&1");
+/// Where run_hybgen sends hybgen's standard error.
+enum class Stderr {
+  Merged,     ///< Into the captured output, after standard output.
+  Discarded,  ///< To /dev/null: the output is standard output alone (e.g. JSON to parse).
+};
+
+/// Run hybgen with `args` from the source directory with the cache `cache`; all output (or
+/// standard output alone: `err`). `prefix` goes before the command in the shell: environment
+/// assignments, or set-up ending in "&&" (`cd DIR &&`, `ulimit -f 40 &&`).
+inline ShellResult run_hybgen(const std::string& args, const std::filesystem::path& cache,
+                              const std::string& prefix = "", Stderr err = Stderr::Merged) {
+  return run_shell("cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + prefix +
+                   (prefix.empty() ? "" : " ") + "HYBGEN_CACHE='" + cache.string() + "' '" +
+                   std::string(HYBGEN_EXE) + "' " + args +
+                   (err == Stderr::Merged ? " 2>&1" : " 2>/dev/null"));
 }
+
+/// run_hybgen's prefix for runs on MPI ranks (`--ranks N`): as root (CI), and more ranks than
+/// cores allowed (a 1-core machine still tests 2).
+inline constexpr const char* kMpiEnv =
+    "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
+    "HYBGEN_MPIEXEC='mpiexec --oversubscribe'";
+
+/// A test's `hybgen`: run_hybgen with the test's own cache, called like the executable.
+struct Hybgen {
+  std::filesystem::path cache;  ///< HYBGEN_CACHE of every run.
+  /// Run with `args` after `prefix` (as run_hybgen's); all output.
+  ShellResult operator()(const std::string& args, const std::string& prefix = "") const {
+    return run_hybgen(args, cache, prefix);
+  }
+  /// Run with `args`; standard output alone (standard error discarded).
+  ShellResult stdout_only(const std::string& args) const {
+    return run_hybgen(args, cache, "", Stderr::Discarded);
+  }
+};
 
 /// Write `text` to `dir`/models/`name`; returns the path.
 inline std::string write_model_file(const std::filesystem::path& dir, const std::string& name,

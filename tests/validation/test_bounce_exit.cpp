@@ -62,6 +62,7 @@
 #include "hybgen/rt/methods/methods.hpp"
 #include "hybgen/rt/methods/particles.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
+#include "support/hand_models.hpp"
 
 namespace {
 
@@ -99,20 +100,13 @@ double b_of(double p) {
   return 15.0 / (16.0 * kPw) * q * q;
 }
 
-/// The particle with drag at an inelastic wall.
-struct DragWall {
-  static constexpr int n_state = 2;                                   ///< x, p
-  static constexpr int n_param = 0;                                   ///< none
-  static constexpr int n_mode = 1;                                    ///< one mode
-  static constexpr int n_guard = 1;                                   ///< wall
+/// The particle with drag at an inelastic wall x = 0 (support/hand_models.hpp: the wall).
+struct DragWall : hybgen::testing::PlanarWall<DragWall, -1> {
+  static constexpr double wall = 0.0;                                 ///< x = 0
+  static constexpr double restitution = kE;                           ///< e
   static constexpr const char* name = "drag_wall";                    ///< Model name.
   static constexpr std::array<const char*, 2> state_names{"x", "p"};  ///< State names.
-  static constexpr std::array<const char*, 0> param_names{};          ///< No parameters.
-  static constexpr std::array<double, 0> param_defaults{};            ///< No parameters.
   static constexpr std::array<const char*, 1> mode_names{"fly"};      ///< Mode names.
-  static constexpr std::array<const char*, 1> guard_names{"wall"};    ///< Guard names.
-  /// wall: decreasing, closed-form inverse.
-  static constexpr std::array<rt::GuardInfo, 1> guards{rt::GuardInfo{0, 0, -1, true}};
   /// X = (p, −γp).
   static void flow(int, const double* x, const double*, double* out) {
     out[0] = x[1];
@@ -120,32 +114,6 @@ struct DragWall {
   }
   /// div X = −γ.
   static double divergence(int, const double*, const double*) { return -kGamma; }
-  /// s = x.
-  static double guard_surface(int, const double* x, const double*) { return x[0]; }
-  /// ∇s = (1, 0).
-  static void guard_gradient(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-  }
-  /// Δ(x, p) = (x, −e p).
-  static void reset(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = -kE * x[1];
-  }
-  /// Δ⁻¹(x, p) = (x, −p/e).
-  static void reset_inverse(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = -x[1] / kE;
-  }
-  /// DΔ = diag(1, −e).
-  static void reset_jacobian(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-    out[2] = 0.0;
-    out[3] = -kE;
-  }
-  /// J = e².
-  static double hybrid_jacobian(int, const double*, const double*) { return kE * kE; }
   /// u0 = a(x) b(p) (0 outside the support x ≥ 0: a vanishes there).
   static double initial_density(int, const double* x, const double*) {
     return a_of(x[0]) * b_of(x[1]);

@@ -25,6 +25,7 @@
 #include "hybgen/rt/methods/invariant.hpp"
 #include "hybgen/rt/methods/preflight.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
+#include "support/hand_models.hpp"
 
 namespace {
 
@@ -32,56 +33,13 @@ namespace rt = hybgen::rt;
 
 /// The fold (Fold = true: y ↦ 2y² − 1) or a monotone reset (y ↦ (y + y³)/2, injective).
 template <bool Fold>
-struct Wrap {
-  static constexpr int n_state = 2;                                   ///< x, y
-  static constexpr int n_param = 0;                                   ///< none
-  static constexpr int n_mode = 1;                                    ///< one mode
-  static constexpr int n_guard = 1;                                   ///< wrap
-  static constexpr const char* name = "wrap";                         ///< Model name.
-  static constexpr std::array<const char*, 2> state_names{"x", "y"};  ///< State names.
-  static constexpr std::array<const char*, 0> param_names{};          ///< No parameters.
-  static constexpr std::array<double, 0> param_defaults{};            ///< No parameters.
-  static constexpr std::array<const char*, 1> mode_names{"run"};      ///< Mode names.
-  static constexpr std::array<const char*, 1> guard_names{"wrap"};    ///< Guard names.
-  /// Numeric inverse, as hybgen derives for a reset that is not affine.
-  static constexpr std::array<rt::GuardInfo, 1> guards{rt::GuardInfo{0, 0, +1, false}};
-  /// X = (1, 0).
-  static void flow(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-  }
-  /// div X = 0.
-  static double divergence(int, const double*, const double*) { return 0.0; }
-  /// s = x − 1.
-  static double guard_surface(int, const double* x, const double*) { return x[0] - 1.0; }
-  /// ∇s = (1, 0).
-  static void guard_gradient(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-  }
+struct Wrap : hybgen::testing::ClockMap<Wrap<Fold>> {  // support/hand_models.hpp: the clock
+  static constexpr const char* name = "wrap";          ///< Model name.
+  static constexpr std::array<const char*, 1> guard_names{"wrap"};  ///< Guard names.
   /// T(y).
   static double T(double y) { return Fold ? 2.0 * y * y - 1.0 : 0.5 * (y + y * y * y); }
   /// T'(y).
   static double dT(double y) { return Fold ? 4.0 * y : 0.5 * (1.0 + 3.0 * y * y); }
-  /// Δ = (x − 1, T(y)).
-  static void reset(int, const double* x, const double*, double* out) {
-    out[0] = x[0] - 1.0;
-    out[1] = T(x[1]);
-  }
-  /// Unused (numeric inverse).
-  static void reset_inverse(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = x[1];
-  }
-  /// DΔ = diag(1, T').
-  static void reset_jacobian(int, const double* x, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-    out[2] = 0.0;
-    out[3] = dT(x[1]);
-  }
-  /// J = T'(y) (X⁺ = X⁻ = (1, 0)).
-  static double hybrid_jacobian(int, const double* x, const double*) { return dT(x[1]); }
   /// u0 = 1/2 + 0.4·y·(x − 1/2) on the box (≥ 0.3; not uniform, so that every branch's
   /// foot point matters), 0 outside it (the model contract: 0 outside the support).
   static double initial_density(int, const double* x, const double*) {

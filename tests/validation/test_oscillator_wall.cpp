@@ -49,6 +49,7 @@
 #include "hybgen/rt/methods/invariant.hpp"
 #include "hybgen/rt/methods/particles.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
+#include "support/hand_models.hpp"
 
 namespace {
 
@@ -67,20 +68,13 @@ double bump(double x, double p) {
   return c * c;
 }
 
-/// The oscillator with a wall.
-struct Oscillator {
-  static constexpr int n_state = 2;                                   ///< x, p
-  static constexpr int n_param = 0;                                   ///< none
-  static constexpr int n_mode = 1;                                    ///< one mode
-  static constexpr int n_guard = 1;                                   ///< wall
-  static constexpr const char* name = "oscillator_wall";              ///< Model name.
+/// The oscillator with an elastic wall x = 0 (support/hand_models.hpp: the wall).
+struct Oscillator : hybgen::testing::PlanarWall<Oscillator, -1> {
+  static constexpr double wall = 0.0;                     ///< x = 0
+  static constexpr double restitution = 1.0;              ///< elastic: Δ = Δ⁻¹, J = 1
+  static constexpr const char* name = "oscillator_wall";  ///< Model name.
   static constexpr std::array<const char*, 2> state_names{"x", "p"};  ///< State names.
-  static constexpr std::array<const char*, 0> param_names{};          ///< No parameters.
-  static constexpr std::array<double, 0> param_defaults{};            ///< No parameters.
   static constexpr std::array<const char*, 1> mode_names{"swing"};    ///< Mode names.
-  static constexpr std::array<const char*, 1> guard_names{"wall"};    ///< Guard names.
-  /// wall: decreasing, closed-form inverse.
-  static constexpr std::array<rt::GuardInfo, 1> guards{rt::GuardInfo{0, 0, -1, true}};
   /// X = (p, −x).
   static void flow(int, const double* x, const double*, double* out) {
     out[0] = x[1];
@@ -88,32 +82,6 @@ struct Oscillator {
   }
   /// div X = 0.
   static double divergence(int, const double*, const double*) { return 0.0; }
-  /// s = x.
-  static double guard_surface(int, const double* x, const double*) { return x[0]; }
-  /// ∇s = (1, 0).
-  static void guard_gradient(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-  }
-  /// Δ(x, p) = (x, −p).
-  static void reset(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = -x[1];
-  }
-  /// Δ⁻¹ = Δ.
-  static void reset_inverse(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = -x[1];
-  }
-  /// DΔ = diag(1, −1).
-  static void reset_jacobian(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-    out[2] = 0.0;
-    out[3] = -1.0;
-  }
-  /// J = 1.
-  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
   /// Set per test: u0(x, p); default the bump.
   static inline double (*u0)(double x, double p) = bump;
   /// u0 on the support.

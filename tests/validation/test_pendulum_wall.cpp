@@ -44,6 +44,7 @@
 #include "hybgen/rt/methods/invariant.hpp"
 #include "hybgen/rt/methods/particles.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
+#include "support/hand_models.hpp"
 
 namespace {
 
@@ -77,20 +78,13 @@ double cubic(const P2& z) {
   return q > 0.0 ? q * q * q : 0.0;
 }
 
-/// The pendulum at the wall.
-struct PendulumWall {
-  static constexpr int n_state = 2;                                           ///< θ, ω
-  static constexpr int n_param = 0;                                           ///< none
-  static constexpr int n_mode = 1;                                            ///< one mode
-  static constexpr int n_guard = 1;                                           ///< wall
+/// The pendulum at the elastic wall θ = w (support/hand_models.hpp: the wall).
+struct PendulumWall : hybgen::testing::PlanarWall<PendulumWall, +1> {
+  static constexpr double wall = kWall;       ///< θ = w
+  static constexpr double restitution = 1.0;  ///< elastic: Δ(θ, ω) = (θ, −ω) = Δ⁻¹, J = 1
   static constexpr const char* name = "pendulum_wall";                        ///< Model name.
   static constexpr std::array<const char*, 2> state_names{"theta", "omega"};  ///< State names.
-  static constexpr std::array<const char*, 0> param_names{};                  ///< No parameters.
-  static constexpr std::array<double, 0> param_defaults{};                    ///< No parameters.
   static constexpr std::array<const char*, 1> mode_names{"swing"};            ///< Mode names.
-  static constexpr std::array<const char*, 1> guard_names{"wall"};            ///< Guard names.
-  /// wall: increasing, closed-form inverse.
-  static constexpr std::array<rt::GuardInfo, 1> guards{rt::GuardInfo{0, 0, +1, true}};
   /// X = (ω, −sin θ).
   static void flow(int, const double* x, const double*, double* out) {
     out[0] = x[1];
@@ -98,32 +92,6 @@ struct PendulumWall {
   }
   /// div X = 0.
   static double divergence(int, const double*, const double*) { return 0.0; }
-  /// s = θ − w.
-  static double guard_surface(int, const double* x, const double*) { return x[0] - kWall; }
-  /// ∇s = (1, 0).
-  static void guard_gradient(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-  }
-  /// Δ(θ, ω) = (θ, −ω).
-  static void reset(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = -x[1];
-  }
-  /// Δ⁻¹ = Δ.
-  static void reset_inverse(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = -x[1];
-  }
-  /// DΔ = diag(1, −1).
-  static void reset_jacobian(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-    out[2] = 0.0;
-    out[3] = -1.0;
-  }
-  /// J = 1.
-  static double hybrid_jacobian(int, const double*, const double*) { return 1.0; }
   /// Set per test: u0 on the state space; default the bump.
   static inline double (*u0)(const P2& z) = bump;
   /// u0 on the state space, 0 outside it.

@@ -58,10 +58,14 @@
 
 #include "chaplygin/chaplygin.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
+#include "support/validation_harness.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
+// From support/validation_harness.hpp.
+using hybgen::testing::validation::close;
+using hybgen::testing::validation::HandGuard;
 /// The generated kernels under test (generated/).
 using M = hybgen_model::chaplygin;
 /// The state dimension.
@@ -70,13 +74,6 @@ constexpr std::size_t N = 3;
 using State = std::array<double, N>;  // (v, ω, θ)
 /// A 3 × 3 matrix.
 using Mat3 = std::array<std::array<double, 3>, 3>;
-
-/// A guard of the hand model: source and target mode, direction (+1 increasing, −1 decreasing).
-struct HandGuard {
-  int from;  ///< source mode
-  int to;    ///< target mode
-  int dir;   ///< firing direction of s_g
-};
 
 /// se(2) from the matrices of the model file: C[i][j] = coordinates of [E_i, E_j] in
 /// (E_x, E_y, E_th), read off the entries (1,3), (2,3), (2,1) of the commutator.
@@ -155,12 +152,6 @@ struct Hand {
     return in_support(x) ? std::exp(-x[0] * x[0] - x[1] * x[1] - x[2] * x[2]) : 0.0;
   }
 };
-
-/// |a − b| ≤ tol·max(1, |b|): relative, with an absolute floor for values near 0.
-::testing::AssertionResult close(double a, double b, double tol = 1e-12) {
-  if (std::fabs(a - b) <= tol * std::max(1.0, std::fabs(b))) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << "kernel " << a << " vs hand " << b;
-}
 
 // ---------------------------------------------------------------------------------------------
 // The weak-form reference: the hand model's RK4 push-forward of a quadrature of u0.

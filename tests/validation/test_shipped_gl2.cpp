@@ -65,10 +65,13 @@
 
 #include "gl2/gl2.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
+#include "support/validation_harness.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
+// From support/validation_harness.hpp.
+using hybgen::testing::validation::close;
 /// The generated kernels under test (generated/).
 using M = hybgen_model::gl2;
 /// The state dimension.
@@ -151,12 +154,6 @@ struct Hand {
     return std::exp(-2.0 * z2 - 4.0 * b * b);
   }
 };
-
-/// |a − b| ≤ tol·max(1, |b|): relative, with an absolute floor for values near 0.
-::testing::AssertionResult close(double a, double b, double tol = 1e-12) {
-  if (std::fabs(a - b) <= tol * std::max(1.0, std::fabs(b))) return ::testing::AssertionSuccess();
-  return ::testing::AssertionFailure() << "kernel " << a << " vs hand " << b;
-}
 
 /// One classical RK4 step of the hand flow (dt < 0: backward).
 State rk4(const Hand& hand, const State& y, double dt) {

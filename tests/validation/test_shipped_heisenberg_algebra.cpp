@@ -37,23 +37,20 @@
 #include "heisenberg/heisenberg.hpp"
 #include "heisenberg_algebra/heisenberg_algebra.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
+#include "support/validation_harness.hpp"
 
 namespace {
 
 namespace rt = hybgen::rt;
+// From support/validation_harness.hpp.
+using hybgen::testing::validation::close;
+using hybgen::testing::validation::HandGuard;
 /// The generated kernels under test (generated/).
 using M = hybgen_model::heisenberg_algebra;
 /// The state dimension.
 constexpr std::size_t N = 4;
 /// A state.
 using State = std::array<double, N>;  // (ζx, ζy, ζz, q)
-
-/// A guard of the hand model: source and target mode, direction (+1 increasing, −1 decreasing).
-struct HandGuard {
-  int from;  ///< source mode
-  int to;    ///< target mode
-  int dir;   ///< firing direction of s_g
-};
 
 /// h3 as the model file gives it: C[i][j] = coordinates of [E_i, E_j] in (E_x, E_y, E_z);
 /// [E_x, E_y] = E_z, antisymmetry, the others 0.
@@ -95,100 +92,14 @@ TEST(ShippedHeisenbergAlgebra, KernelMatchesTheHandDerivation) {
   expect_kernel_matches(hand);
 }
 
-/// The weak-form difference at restitution e on the rule `spec`; `share` gets the share of
-/// the mass that has met a wall by the last time.
-double weak_form_difference(double e, const std::vector<double>& times, const RuleSpec& spec,
-                            double& share) {
-  Hand hand;
-  hand.e = e;
-  const Rule rule = cylinder_rule(spec);
-  double zeno = 0.0;
-  const Moments ref = reference(hand, times, rule, 0.02, share, zeno);
-  std::printf(
-      "[ shipped ] e = %.2f, %zu nodes: %.3f of the mass has met a wall, %.1e reached a Zeno "
-      "point\n",
-      e, rule.x.size(), share, zeno);
-  EXPECT_LT(zeno, 1e-3);
-  const auto par = hand.par();
-  return compare(characteristics(times, par.data(), rule), ref, times);
-}
-
 TEST(ShippedHeisenbergAlgebra, ElasticWallsInWeakForm) {
   double share = 0.0;
   EXPECT_LT(weak_form_difference(1.0, {1.0, 2.0}, {2.5, 1, 3, 96, -0.5, 1.5, 3, 12}, share), 1e-3);
   EXPECT_GT(share, 0.4);
 }
 
-/// u(t, y) by an independent backward tracer of the hand model: RK4 on y' = −X (step h), and
-/// where the backward path reaches a wall (in the forward flow: it left the wall) the reversed
-/// reset ζx ↦ −ζx/e with the weight 1/|J| = 1/e²; the straight continuation leaves the support
-/// and has no history. `resets` gets the number of reversed resets.
-double backward_density(const Hand& hand, State x, double t, double h, int& resets) {
-  resets = 0;
-  double weight = 1.0;
-  const auto steps = std::max<long>(1, std::lround(std::ceil(t / h - 1e-9)));
-  const double dt = t / static_cast<double>(steps);
-  for (long n = 0; n < steps; ++n) {
-    double left = dt;
-    for (int hop = 0; hop < 64 && left > 0.0; ++hop) {
-      const State y = rk4(hand, x, -left);
-      const double wall = y[3] >= 1.0 ? 1.0 : y[3] <= -1.0 ? -1.0 : 0.0;
-      if (wall == 0.0) {
-        x = y;
-        left = 0.0;
-        continue;
-      }
-      double a = 0.0, b = left;  // |q| < 1 at a, ≥ 1 at b
-      for (int it = 0; it < 60; ++it) {
-        const double c = 0.5 * (a + b);
-        (std::fabs(rk4(hand, x, -c)[3]) < 1.0 ? a : b) = c;
-      }
-      x = rk4(hand, x, -a);
-      x[0] = -x[0] / hand.e;
-      weight /= hand.e * hand.e;
-      ++resets;
-      left -= a;
-    }
-  }
-  return weight * hand.initial(0, x);
-}
-
 TEST(ShippedHeisenbergAlgebra, InelasticWallsPointwise) {
-  // e = 0.7 at 2000 random states of [−1.5, 1.5]² × [−1, 2] × [−1, 1] at t = 1 and 2: the
-  // characteristics against `backward_density` (step 1e-3), relative 1e-6.
-  Hand hand;
-  hand.e = 0.7;
-  const auto par = hand.par();
-  std::mt19937_64 rng(8);
-  std::uniform_real_distribution<double> zeta(-1.5, 1.5), q(-1.0, 1.0);
-  std::vector<State> pts;
-  for (int i = 0; i < 2000; ++i) pts.push_back({zeta(rng), zeta(rng), zeta(rng) + 0.5, q(rng)});
-  const std::vector<double> times{1.0, 2.0};
-  rt::CharacteristicsOptions co;
-  co.ode.rtol = 1e-11;
-  co.ode.atol = 1e-13;
-  const auto sol = rt::evaluate<M>(pts, times, par.data(), co);
-  ASSERT_TRUE(sol.ok()) << rt::describe<M>(sol.failure);
-  for (std::size_t k = 0; k < times.size(); ++k) {
-    double worst = 0.0;
-    int reset = 0, most = 0;
-    for (std::size_t i = 0; i < pts.size(); ++i) {
-      int n = 0;
-      const double want = backward_density(hand, pts[i], times[k], 1e-3, n);
-      const double got = sol.at(k, 0, i);
-      const double err = std::fabs(got - want) / std::max(want, 1e-3);
-      worst = std::max(worst, err);
-      EXPECT_LT(err, 1e-6) << "t = " << times[k] << ", point " << i << ": " << got << " vs " << want
-                           << " (" << n << " backward resets)";
-      reset += n > 0;
-      most = std::max(most, n);
-    }
-    std::printf(
-        "[ shipped ] t = %.0f: %d of %zu points have a reset in their history (up to %d); "
-        "worst relative difference %.2e\n",
-        times[k], reset, pts.size(), most, worst);
-    EXPECT_GT(reset, 400);
-  }
+  expect_inelastic_walls_pointwise();
 }
 
 }  // namespace

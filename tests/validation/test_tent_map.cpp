@@ -50,6 +50,7 @@
 #include "hybgen/rt/methods/particles.hpp"
 #include "hybgen/rt/methods/preflight.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
+#include "support/hand_models.hpp"
 
 namespace {
 
@@ -66,55 +67,14 @@ double u0(double x, double y) {
   return 3.0 * y * y * (1.0 + 0.5 * std::sin(2.0 * std::numbers::pi * x));
 }
 
-/// The tent map on a clock.
-struct TentClock {
-  static constexpr int n_state = 2;                                   ///< x, y
-  static constexpr int n_param = 0;                                   ///< none
-  static constexpr int n_mode = 1;                                    ///< one mode
-  static constexpr int n_guard = 1;                                   ///< tick
-  static constexpr const char* name = "tent_clock";                   ///< Model name.
-  static constexpr std::array<const char*, 2> state_names{"x", "y"};  ///< State names.
-  static constexpr std::array<const char*, 0> param_names{};          ///< No parameters.
-  static constexpr std::array<double, 0> param_defaults{};            ///< No parameters.
-  static constexpr std::array<const char*, 1> mode_names{"run"};      ///< Mode names.
-  static constexpr std::array<const char*, 1> guard_names{"tick"};    ///< Guard names.
-  /// Numeric inverse, as hybgen derives for a reset that is not affine.
-  static constexpr std::array<rt::GuardInfo, 1> guards{rt::GuardInfo{0, 0, +1, false}};
-  /// X = (1, 0).
-  static void flow(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-  }
-  /// div X = 0.
-  static double divergence(int, const double*, const double*) { return 0.0; }
-  /// s = x − 1.
-  static double guard_surface(int, const double* x, const double*) { return x[0] - 1.0; }
-  /// ∇s = (1, 0).
-  static void guard_gradient(int, const double*, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-  }
+/// The tent map on a clock (support/hand_models.hpp: the clock).
+struct TentClock : hybgen::testing::ClockMap<TentClock> {
+  static constexpr const char* name = "tent_clock";                 ///< Model name.
+  static constexpr std::array<const char*, 1> guard_names{"tick"};  ///< Guard names.
+  /// T(y).
+  static double T(double y) { return tent(y); }
   /// T′(y) (−2 at the kink y = 1/2).
-  static double slope(double y) { return y < 0.5 ? 2.0 : -2.0; }
-  /// Δ = (x − 1, T(y)).
-  static void reset(int, const double* x, const double*, double* out) {
-    out[0] = x[0] - 1.0;
-    out[1] = tent(x[1]);
-  }
-  /// Unused (numeric inverse).
-  static void reset_inverse(int, const double* x, const double*, double* out) {
-    out[0] = x[0];
-    out[1] = x[1];
-  }
-  /// DΔ = diag(1, T′).
-  static void reset_jacobian(int, const double* x, const double*, double* out) {
-    out[0] = 1.0;
-    out[1] = 0.0;
-    out[2] = 0.0;
-    out[3] = slope(x[1]);
-  }
-  /// J = T′(y).
-  static double hybrid_jacobian(int, const double* x, const double*) { return slope(x[1]); }
+  static double dT(double y) { return y < 0.5 ? 2.0 : -2.0; }
   /// u0 on the square, 0 outside it.
   static double initial_density(int, const double* x, const double*) {
     return in_support(x, nullptr) ? u0(x[0], x[1]) : 0.0;
