@@ -1,5 +1,8 @@
 // Differential test of `derive` on random models (docs/hardening.md).
 //
+// Size: one differential test, whose checks (flows, guards, inverses, J from first principles,
+// the error bounds that decide a disagreement) share the evaluation of one random model.
+//
 // tests/support/random_model.hpp draws well-formed general models (1–4 states, 1–3 modes,
 // 1–3 guards; polynomial/trigonometric flows, affine and mildly nonlinear surfaces, affine,
 // nonlinear and constant-component resets) and keeps them as expression trees that it

@@ -1,4 +1,7 @@
 // Tests of stage 1 (parse): .model text -> AST.
+//
+// Size: one test file per source file (generator/src/parse.cpp), and the grammar of
+// docs/model-language.md has a rule for every statement; each test names the rule it covers.
 
 #include "hybgen/gen/parse.hpp"
 

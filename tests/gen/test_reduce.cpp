@@ -1,6 +1,9 @@
 // The reduce stage (reduce.hpp): Lie-group models -> general models, through
 // check_lie and reduce, then the ordinary derive.
 //
+// Size: one test file per source file (generator/src/reduce.cpp); every derived object of
+// the reduction has its independent computation here.
+//
 // Every derived object is compared with an independent computation: matrix
 // commutators for the structure constants and ad*, closed-form matrix
 // expressions for ζ', Jacobi's formula for q', the energy/annihilator

@@ -1,5 +1,7 @@
 #pragma once
 /// \file random_model.hpp
+/// Size: the model generator and its three evaluators (double, dual numbers, error bounds)
+/// share one expression tree; splitting them would split that tree's definition.
 /// Random well-formed general (non-Lie) hybrid models for the differential test of `derive`
 /// (tests/gen/test_derive_random.cpp), and everything the test needs to evaluate them
 /// WITHOUT hybgen: the model is kept as small expression trees (TreeNode) that this header
