@@ -16,8 +16,8 @@
 namespace {
 
 namespace fs = std::filesystem;
-using hybgen::rt::ExitCode;
 using hybgen::rt::exit_status;
+using hybgen::rt::ExitCode;
 using hybgen::testing::e2e_dir;
 using hybgen::testing::Hybgen;
 
@@ -33,8 +33,8 @@ TEST(Newcomer, DomainValuesNeedTheirBrackets) {
        {std::pair{"[0,3", "does not end with ']'"}, std::pair{"0.5,2.5", "does not start with '['"},
         std::pair{"[0.5,2.5]]", "two numbers separated by one comma"},
         std::pair{"[2,1]", "empty interval"}}) {
-    const auto r = hybgen(std::string("check models/bouncing_ball.model --set 'domain.x=") + value +
-                          "'");
+    const auto r =
+        hybgen(std::string("check models/bouncing_ball.model --set 'domain.x=") + value + "'");
     EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << value << "\n" << r.out;
     EXPECT_TRUE(has(r.out, why)) << value << "\n" << r.out;
   }

@@ -27,6 +27,7 @@
 #include "hybgen/rt/io/npy.hpp"
 #include "hybgen/rt/io/vti.hpp"
 #include "support/files.hpp"
+#include "support/python.hpp"
 
 namespace fs = std::filesystem;
 using namespace hybgen::rt;
@@ -175,13 +176,8 @@ TEST_F(OutputTest, NpyReaderRejectsTruncatedAndMalformedFiles) {
 // numpy is an independent reader of the format. scripts/setup.sh installs Debian's
 // python3-numpy for /usr/bin/python3 (a python3 earlier on PATH may lack it).
 TEST_F(OutputTest, NpyLoadsInNumpyIfAvailable) {
-  std::string python;
-  for (const char* candidate : {"/usr/bin/python3", "python3"})
-    if (std::system((std::string(candidate) + " -c 'import numpy' >/dev/null 2>&1").c_str()) == 0) {
-      python = candidate;
-      break;
-    }
-  if (python.empty()) GTEST_SKIP() << "python3 with numpy not available";
+  const std::string python = hybgen::testing::python_with("numpy");
+  HYBGEN_REQUIRE_PYTHON(python, "numpy");
   const std::string p = path("np.npy");
   std::vector<double> data(24);
   for (std::size_t i = 0; i < data.size(); ++i) data[i] = static_cast<double>(i) * 0.5;
