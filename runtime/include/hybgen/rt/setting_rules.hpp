@@ -102,6 +102,24 @@ inline std::string marginals_rule(const Settings& s) {
   return "";
 }
 
+/// scheme=fv discretises the generator: its null vector is a stationary answer, which the
+/// one-frame methods (method_table.hpp) take; nothing steps it in time yet.
+inline std::string fv_scheme_rule(const Settings& s) {
+  constexpr std::size_t kScheme = setting_index("scheme");
+  static_assert(kScheme < kSettings.size(), "the setting scheme");
+  if (s.word<"scheme">() != "fv") return "";
+  const MethodSpec& m = method_named(s.word<"method">());
+  if (m.one_frame || !method_reads(m, kSettings[kScheme])) return "";
+  std::vector<std::string_view> stationary;
+  for (const MethodSpec& k : kMethods)
+    if (k.one_frame && method_reads(k, kSettings[kScheme])) stationary.push_back(k.name);
+  return "scheme=fv is the finite-volume generator, whose null vector is the invariant density; "
+         "method " +
+         s.word<"method">() +
+         " would step it in time, which is not built yet: use method=" + or_list(stationary) +
+         ", or scheme=hat or cell";
+}
+
 /// A VTK image is one process's whole grid.
 inline std::string vti_rule(const Settings& s, int ranks) {
   if (ranks > 1 && s.includes<"outputs">("vti"))
@@ -155,6 +173,7 @@ inline std::vector<SettingConflict> setting_conflicts(const Settings& s, const R
     for (const auto& [g, name] : *facts.guards_without_inverse)
       add("method", inverse_rule(s, name), static_cast<long>(g));
   add("density", marginals_rule(s));
+  add("scheme", fv_scheme_rule(s));
   add("grid", memory_rule(s, facts));
   add("outputs", vti_rule(s, run_ranks(s, facts)));
   if (!facts.states.empty()) add("figure_axes", figure_axes_rule(s, facts.states));
