@@ -44,7 +44,7 @@ const fs::path kCache = kWork / "cache";
 const std::string kModels = std::string(HYBGEN_SOURCE_DIR) + "/tests/validation/models/";
 
 /// One run: its summary.json and its directory.
-struct Run {
+struct FvRun {
   int code = -1;    ///< hybgen's exit status.
   std::string out;  ///< What it printed.
   json summary;     ///< summary.json (when it succeeded).
@@ -52,9 +52,9 @@ struct Run {
 };
 
 /// `hybgen run MODEL --set method=METHOD --set scheme=fv EXTRA` into its own directory.
-Run run(const std::string& model, const std::string& tag, const std::string& extra,
-        const std::string& method = "invariant") {
-  Run r;
+FvRun run(const std::string& model, const std::string& tag, const std::string& extra,
+          const std::string& method = "invariant") {
+  FvRun r;
   r.dir = kWork / tag;
   fs::remove_all(r.dir);
   const auto res =
@@ -68,7 +68,7 @@ Run run(const std::string& model, const std::string& tag, const std::string& ext
 }
 
 /// A mode's density as written (`invariant_<mode>.npy`, or `invariant.npy` for one mode).
-std::vector<double> density(const Run& r, const std::string& mode) {
+std::vector<double> density(const FvRun& r, const std::string& mode) {
   const fs::path p = r.dir / (mode.empty() ? "invariant.npy" : "invariant_" + mode + ".npy");
   return hybgen::rt::read_npy(p.string()).data;
 }
@@ -100,7 +100,7 @@ double trap(int n, int i) {
 }
 
 /// Relative L1 error per thermostat mode on n nodes of [0.8, 2.2], jumps excluded.
-std::vector<double> thermostat_errors(const Run& r, int n) {
+std::vector<double> thermostat_errors(const FvRun& r, int n) {
   std::vector<double> out;
   const char* modes[] = {"heat", "cool"};
   for (int m = 0; m < 2; ++m) {
@@ -119,7 +119,7 @@ std::vector<double> thermostat_errors(const Run& r, int n) {
 }
 
 /// Relative L1 error of the sawtooth on n nodes of [0, 1].
-double sawtooth_error(const Run& r, int n) {
+double sawtooth_error(const FvRun& r, int n) {
   const std::vector<double> u = density(r, "");
   EXPECT_EQ(u.size(), static_cast<std::size_t>(n));
   double num = 0.0, den = 0.0;
@@ -132,12 +132,12 @@ double sawtooth_error(const Run& r, int n) {
 }
 
 /// |λ₁| of a run.
-double lambda1(const Run& r) {
+double lambda1(const FvRun& r) {
   return r.summary["invariant"]["eigenvalues"][0]["abs"].get<double>();
 }
 
 /// The estimated error covers the true one and is at most 10 times it.
-void expect_calibrated(const Run& r, double truth, const char* what) {
+void expect_calibrated(const FvRun& r, double truth, const char* what) {
   const double est = r.summary["invariant"]["error"].get<double>();
   std::printf("%s: true error %.3e, estimated %.3e (ratio %.2f)\n", what, truth, est, est / truth);
   EXPECT_GE(est, truth) << what;
@@ -145,7 +145,7 @@ void expect_calibrated(const Run& r, double truth, const char* what) {
 }
 
 TEST(InvariantFv, ThermostatPerModeWithinTheTarget) {
-  const Run r = run(kModels + "thermostat_fv.model", "thermostat", "");
+  const FvRun r = run(kModels + "thermostat_fv.model", "thermostat", "");
   ASSERT_EQ(r.code, 0) << r.out;
   const json& inv = r.summary["invariant"];
   EXPECT_EQ(inv["scheme"], "fv");
@@ -162,7 +162,7 @@ TEST(InvariantFv, ThermostatPerModeWithinTheTarget) {
 
 TEST(InvariantFv, SawtoothDensityAndPeriodWithNoDecayClaimed) {
   const std::string model = std::string(HYBGEN_SOURCE_DIR) + "/models/sawtooth.model";
-  const Run r = run(model, "sawtooth", "--set grid=401");
+  const FvRun r = run(model, "sawtooth", "--set grid=401");
   ASSERT_EQ(r.code, 0) << r.out;
   const json& inv = r.summary["invariant"];
   const double e = sawtooth_error(r, 401);
@@ -188,7 +188,7 @@ TEST(InvariantFv, SawtoothDensityAndPeriodWithNoDecayClaimed) {
 }
 
 TEST(InvariantFv, ProductOfTwoCyclesInTwoDimensions) {
-  const Run r = run(kModels + "thermostat_sawtooth_fv.model", "product", "");
+  const FvRun r = run(kModels + "thermostat_sawtooth_fv.model", "product", "");
   ASSERT_EQ(r.code, 0) << r.out;
   const int nT = 141, nx = 101;
   double worst = 0.0;
@@ -222,8 +222,9 @@ TEST(InvariantFv, OrderOfConvergenceIsThreeAndOrderOneIsOne) {
   for (const int p : {3, 1}) {
     std::vector<double> e;
     for (const int n : {101, 201, 401}) {
-      const Run r = run(model, "order" + std::to_string(p) + "_" + std::to_string(n),
-                        "--set grid=" + std::to_string(n) + " --set fv_order=" + std::to_string(p));
+      const FvRun r =
+          run(model, "order" + std::to_string(p) + "_" + std::to_string(n),
+              "--set grid=" + std::to_string(n) + " --set fv_order=" + std::to_string(p));
       ASSERT_EQ(r.code, 0) << r.out;
       e.push_back(sawtooth_error(r, n));
     }
@@ -240,14 +241,14 @@ TEST(InvariantFv, OrderOfConvergenceIsThreeAndOrderOneIsOne) {
 }
 
 TEST(InvariantFv, CurvedGuardIsRefusedNamingTheGuard) {
-  const Run r = run(kModels + "radial_fv.model", "radial", "");
+  const FvRun r = run(kModels + "radial_fv.model", "radial", "");
   EXPECT_EQ(r.code, 2) << r.out;
   EXPECT_NE(r.out.find("guard 'rim'"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("scheme=hat"), std::string::npos) << r.out;
 }
 
 TEST(InvariantFv, TransferWithTheGeneratorIsRefused) {
-  const Run r = run(kModels + "thermostat_fv.model", "transfer", "", "transfer");
+  const FvRun r = run(kModels + "thermostat_fv.model", "transfer", "", "transfer");
   EXPECT_EQ(r.code, 2) << r.out;
   EXPECT_NE(r.out.find("scheme=fv"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("method=invariant"), std::string::npos) << r.out;
