@@ -1,7 +1,7 @@
 #pragma once
 /// \file generator.hpp
 /// The Liouville generator of a hybrid system as a conservative finite-volume operator on
-/// cut cells (`scheme=fv` of the invariant method; /work/study30/REPORT.md §2). No time step:
+/// cut cells (`scheme=fv` of the invariant method; docs/methods.md). No time step:
 /// the invariant density is its null vector and its eigenvalues μ give the transfer
 /// operator's as λ = e^{μh} (generator_solve.hpp).
 ///
@@ -28,10 +28,10 @@
 /// div X is used (the fluxes conserve mass, which does the work of 1/|J|). The generator on
 /// densities is L = diag(1/vol)·B.
 ///
-/// Accuracy (measured in tests/validation/test_invariant_fv.cpp and by the study): order p in
-/// 1-D and for products of 1-D systems (X_d depends on x_d only within a mode). Where X_d
-/// varies across a face the midpoint rule limits it to 2 (REPORT.md §2.2: 2^{N−1} Gauss
-/// points and a transverse reconstruction would keep 3; not built yet).
+/// Accuracy (measured in tests/validation/test_invariant_fv.cpp): order p in 1-D and for
+/// products of 1-D systems (X_d depends on x_d only within a mode). Where X_d varies across a
+/// face the midpoint rule limits it to 2 (2^{N−1} Gauss points and a transverse
+/// reconstruction would keep 3; not built yet).
 ///
 /// Node values (`fv_node_values`): per axis, the reconstruction of order p centred on the cell
 /// holding the node, in its segment; a node on a cut (a wall inside the box) has two one-sided

@@ -13,7 +13,8 @@
 /// sampled points of each plane must have exactly one constant coordinate d' (one
 /// hyperplane, not a set of lower dimension). Any other guard is refused
 /// (std::invalid_argument, which the run's chain turns into exit 2), naming the guard.
-/// Curved guards are the design of /work/study30/REPORT.md §2.4–2.5, not built yet.
+/// Curved guards (cut cells by quadrature on s_g, local level sets of the images) are not
+/// built yet.
 ///
 /// Cells. Per mode m and axis d, `FvAxis` is the partition of [min_d, max_d] into the dual
 /// cells of the node grid (faces half-way between nodes, the box ends as faces), cut at the

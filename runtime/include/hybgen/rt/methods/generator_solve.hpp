@@ -12,7 +12,7 @@
 ///
 /// Spectrum. The eigenvalues μ of L = diag(1/vol)·B nearest a real shift s = −kFvShift·rate
 /// (Spectra's GenEigsRealShiftSolver over a SparseLU of L − sI; a real shift on the real
-/// matrix: no complex arithmetic, the pitfall of REPORT.md §4.8 does not arise), sorted by
+/// matrix: no complex arithmetic; a complex shift would need a complex copy of L), sorted by
 /// decreasing Re μ; reported as the transfer operator's λ = exp(μh), h the setting `step`
 /// (else dt), so |λ₁| = e^{Re μ₁ h} = 1 to rounding for a closed system.
 ///
@@ -21,8 +21,8 @@
 /// D = max over modes of Σ w|u_n − u_(n+1)/2| / Σ w|u_n| over the coarse nodes (trapezoid
 /// weights w; nodes on a cut of the mode excluded: two-valued). For order p the fine error is
 /// ≈ D/(2^p − 1), so D itself covers it with a margin of ≈ 7 for p = 3 and ≈ 3 for p = 2
-/// (REPORT.md §3.3: measured 6.2–7.7 and 2.6–3.2); for p = 1 the margin is ≈ 1 and
-/// `fv_error_factor` doubles it. `error` = factor·D; each eigenvalue's `error` is
+/// (measured 6.8–7.2 for p = 3 in tests/validation/test_invariant_fv.cpp); for p = 1 the margin is
+/// ≈ 1 and `fv_error_factor` doubles it. `error` = factor·D; each eigenvalue's `error` is
 /// factor·|λ(n) − λ((n+1)/2)| for the coarse eigenvalue nearest in μ; the gap's and the decay
 /// rate's likewise. A gap within its error of 0 claims no decay (`decays` false): the cycles'
 /// eigenvalues lie on the unit circle up to the scheme's damping, which falls like n^{−p}.
