@@ -317,6 +317,9 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     nc.text(re_var, "long_name", "real part of an eigenvalue of the transfer operator");
     nc.text(im_var, "long_name", "imaginary part of an eigenvalue of the transfer operator");
     nc.text(abs_var, "long_name", "modulus of an eigenvalue of the transfer operator");
+    // scheme=fv: the density's estimated error (methods/generator_solve.hpp).
+    if (inv.contains("error") && inv["error"].is_number())
+      nc.number(NC_GLOBAL, "density_error", inv["error"].get<double>());
     for (const char* key : {"spectral_gap", "decay_rate", "step"})
       if (inv.contains(key) && inv[key].is_number())
         nc.number(NC_GLOBAL,

@@ -197,6 +197,15 @@ img { max-width: 100%; } .muted { color: #666; }
     if (has(files, "spectrum.png")) h << "<img src=\"spectrum.png\" alt=\"the spectrum\">\n";
     h << "<p>spectral gap " << number(inv.value("spectral_gap", 0.0)) << ", decay rate "
       << number(inv.value("decay_rate", 0.0)) << " per unit time</p>\n";
+    // scheme=fv: the errors estimated from a coarser grid (methods/generator_solve.hpp).
+    if (inv.contains("error") && inv["error"].is_number())
+      h << "<p>estimated error of the density " << number(inv["error"].get<double>())
+        << " (relative L1, from the grid of "
+        << html(inv.value("coarse_grid", nlohmann::json()).dump()) << " nodes)"
+        << (inv.value("decays", nlohmann::json(true)) == nlohmann::json(false)
+                ? "; the gap is within its error of 0: no decay is claimed"
+                : "")
+        << "</p>\n";
   }
 
   if (run.summary.is_object() && run.summary.contains(summary_key::escape)) {

@@ -470,11 +470,23 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
     const auto& inv = s[k::invariant];
     std::printf("leading eigenvalues of the transfer operator (step %g):\n",
                 inv["step"].get<double>());
-    for (const auto& l : inv["eigenvalues"])
-      std::printf("  %+.10f %+.10fi   |lambda| = %.10f\n", l["re"].get<double>(),
+    for (const auto& l : inv["eigenvalues"]) {
+      std::printf("  %+.10f %+.10fi   |lambda| = %.10f", l["re"].get<double>(),
                   l["im"].get<double>(), l["abs"].get<double>());
+      if (l.contains("error") && l["error"].is_number())
+        std::printf("   +/- %.1e", l["error"].get<double>());
+      std::printf("\n");
+    }
     std::printf("spectral gap %.3e, decay rate %.4g per unit time\n",
                 inv["spectral_gap"].get<double>(), inv["decay_rate"].get<double>());
+    // scheme=fv: the errors estimated from the coarse grid (methods/generator_solve.hpp).
+    if (inv.contains("error") && inv["error"].is_number())
+      std::printf(
+          "estimated error of the density %.2e (relative L1), from the grid of %s nodes%s\n",
+          inv["error"].get<double>(), inv["coarse_grid"].dump().c_str(),
+          inv.value("decays", nlohmann::json()).is_boolean() && !inv["decays"].get<bool>()
+              ? "; the gap is within its error of 0: no decay claimed"
+              : "");
   } else if (s.contains(k::escape)) {
     const auto& e = s[k::escape];
     std::printf("escape rate %.10g +/- %.2g per unit time (lambda1 = %.12f, step %g)\n",

@@ -12,7 +12,9 @@
 ///  - transfer: one step h as a sparse matrix on node masses, marched by mat-vecs
 ///    (transfer.hpp); scheme `hat` (default) or `cell`, both conserving mass column by column;
 ///  - invariant: the leading eigenvector of the transfer operator and the next eigenvalues
-///    (invariant.hpp); one frame, `invariant`, instead of the time series;
+///    (invariant.hpp); one frame, `invariant`, instead of the time series; with scheme=fv the
+///    null vector and the spectrum of the finite-volume generator instead, with their
+///    estimated errors (generator.hpp, generator_solve.hpp);
 ///  - particles: Monte-Carlo samples of u0 pushed forward and deposited (particles.hpp);
 ///  - escape: an open system's escape rate −ln λ₁/h and its conditionally invariant density,
 ///    the leading eigenpair of the transfer operator (invariant.hpp) on the grid and on the
@@ -32,6 +34,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <span>
 #include <string>
@@ -47,6 +50,7 @@
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/settings.hpp"
 
+#include "hybgen/rt/methods/generator_solve.hpp"
 #include "hybgen/rt/methods/invariant.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
 
@@ -364,13 +368,103 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   return r;
 }
 
+/// scheme=fv of the invariant method: the finite-volume generator's null vector on the grid's
+/// nodes, its eigenvalues as the transfer operator's over `step` (else dt), and their errors
+/// from the grid of (n+1)/2 nodes per axis (generator_solve.hpp). The same summary keys as the
+/// transfer operator's spectrum, and `error`, `order`, `coarse_grid`, per eigenvalue `error`
+/// and μ, `decays`.
+/// (Not inlined into solve_by_invariant: GCC 12 then misreads the sampled path's vectors,
+/// -Wfree-nonheap-object in invariant.hpp.)
+template <HybridModel M>
+[[gnu::noinline]] MethodResult<state_dim_v<M>> solve_by_invariant_fv(
+    const TensorGrid<state_dim_v<M>>& grid, double dt, const double* par, const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  FvOptions o;
+  o.order = static_cast<int>(s.settings.integer<"fv_order">());
+  o.n_eigen = std::max(2, static_cast<int>(s.settings.integer<"eigenvalues">()));
+  const double step = s.settings.real<"step">();
+  o.step = step > 0 ? step : dt;
+  const auto t0 = detail::MethodClock::now();
+  const FvInvariantResult inv = fv_invariant<M>(grid, par, o);  // throws: a guard it cannot cut
+  r.solve_s = detail::seconds_since(t0);
+  if (!inv.fine.failure.empty()) {
+    r.failure = "(the finite-volume generator) " + inv.fine.failure;
+    return r;
+  }
+  r.solution.n_time = 1;
+  r.solution.n_mode = static_cast<std::size_t>(M::n_mode);
+  r.solution.n_point = grid.size();
+  r.solution.u = inv.fine.density;
+  r.frame_names = {std::string(method_spec(Method::invariant).frame)};
+  const auto number = [](double x) {
+    return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json();
+  };
+  nlohmann::json eig = nlohmann::json::array();
+  for (std::size_t k = 0; k < inv.lambda.size(); ++k)
+    eig.push_back({{"re", inv.lambda[k].real()},
+                   {"im", inv.lambda[k].imag()},
+                   {"abs", std::abs(inv.lambda[k])},
+                   {"error", number(inv.lambda_error[k])},
+                   {"mu_re", inv.fine.mu[k].real()},
+                   {"mu_im", inv.fine.mu[k].imag()},
+                   {"mu_error", number(inv.mu_error[k])}});
+  double low = std::numeric_limits<double>::infinity();
+  for (const double u : inv.fine.density) low = std::min(low, u);
+  nlohmann::json j = {{"scheme", "fv"},
+                      {"step", o.step},
+                      {"order", o.order},
+                      {"rows", inv.fine.unknowns},
+                      {"nonzeros", inv.fine.nonzeros},
+                      {"file", "invariant.npy"},
+                      {"eigenvalues", eig},
+                      {"spectral_gap", inv.gap},
+                      {"spectral_gap_error", number(inv.gap_error)},
+                      {"decay_rate", inv.decay_rate},
+                      {"decay_rate_error", number(inv.decay_rate_error)},
+                      {"decays", inv.decays ? nlohmann::json(*inv.decays) : nlohmann::json()},
+                      {"leak_rate", inv.leak_rate},
+                      {"min_value", low},
+                      {"residual", inv.fine.residual},
+                      {"sigma", inv.fine.sigma},
+                      {"error", number(inv.error)},
+                      {"mode_errors", nlohmann::json::array()},
+                      {"observed_order", number(inv.observed_order)},
+                      {"coarse_grid", inv.coarse_nodes},
+                      {"solver", "bordered SparseLU; shift-invert Arnoldi (Spectra)"},
+                      {"iterations", inv.fine.iterations},
+                      {"converged", inv.fine.eigen_converged},
+                      {"assembly_seconds", inv.seconds_fine},
+                      {"error_seconds", inv.seconds_coarse}};
+  for (const double e : inv.mode_errors) j["mode_errors"].push_back(number(e));
+  std::string note =
+      "error: estimated relative L1 error of the density (max over modes; nodes on a cut "
+      "excluded), the difference from the grid of coarse_grid nodes" +
+      std::string(o.order <= 1 ? " times 2" : "") +
+      "; each eigenvalue's error likewise (docs/methods.md, \"invariant\")";
+  for (const std::string& n : inv.notes) note += ". " + n;
+  j["note"] = note;
+  if (inv.fine.leaks)
+    r.warnings.push_back(
+        "mass leaves the box: the density is the quasi-stationary one (the "
+        "eigenvector of the rightmost eigenvalue), decaying at leak_rate");
+  if (!inv.fine.eigen_converged)
+    r.warnings.push_back(
+        "the eigen-solver (shift-invert Arnoldi) did not converge: "
+        "invariant.eigenvalues holds what it found");
+  r.summary[summary_key::invariant] = j;
+  return r;
+}
+
 /// The invariant density (leading eigenvector of the transfer operator) and the spectrum:
-/// one frame (`times` unused; the operator's step is `step`, else `dt`).
+/// one frame (`times` unused; the operator's step is `step`, else `dt`). scheme=fv:
+/// `solve_by_invariant_fv`.
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>& grid,
                                                 std::span<const double>, double dt,
                                                 const double* par, const MethodSettings& s) {
   constexpr std::size_t N = state_dim_v<M>;
+  if (s.settings.word<"scheme">() == "fv") return solve_by_invariant_fv<M>(grid, dt, par, s);
   MethodResult<N> r;
   const TransferOptions o = detail::transfer_options(s, dt);
   const auto t0 = detail::MethodClock::now();

@@ -117,6 +117,10 @@ inline const char* scheme_name(TransferScheme s) {
 inline TransferScheme parse_scheme(const std::string& name) {
   if (name == "hat") return TransferScheme::hat;
   if (name == "cell") return TransferScheme::cell;
+  if (name == "fv")
+    throw std::invalid_argument(
+        "scheme=fv is the invariant method's finite-volume generator (methods/generator.hpp), "
+        "not a transfer operator: use method=invariant, or scheme=hat or cell");
   throw std::invalid_argument("unknown transfer scheme '" + name + "' (hat or cell)");
 }
 

@@ -1,0 +1,366 @@
+#pragma once
+/// \file generator_solve.hpp
+/// The invariant density and the spectrum of the finite-volume generator (generator.hpp), and
+/// their errors estimated from a second resolution: `scheme=fv` of the invariant method.
+///
+/// Null vector. The bordered system [[B, vol], [volᵀ, 0]] [u; σ] = [0; 1] (Eigen's SparseLU,
+/// COLAMD ordering): B u = −σ·vol and Σ vol·u = 1. Summing the rows, σ = −1ᵀBu/Σvol is the
+/// rate at which u's mass leaves the box over the box's volume: 0 (to rounding) when u is the
+/// null vector of unit mass of an invariant set inside the box. When σ > 0 and μ₁ < 0 no
+/// invariant set lies in the box, and the density is instead the eigenvector of the rightmost
+/// eigenvalue μ₁ < 0 of L (quasi-stationary; `leak_rate` = −μ₁).
+///
+/// Spectrum. The eigenvalues μ of L = diag(1/vol)·B nearest a real shift s = −kFvShift·rate
+/// (Spectra's GenEigsRealShiftSolver over a SparseLU of L − sI; a real shift on the real
+/// matrix: no complex arithmetic; a complex shift would need a complex copy of L), sorted by
+/// decreasing Re μ; reported as the transfer operator's λ = exp(μh), h the setting `step`
+/// (else dt), so |λ₁| = e^{Re μ₁ h} = 1 to rounding for a closed system.
+///
+/// Errors. The grid's nodes are solved again on the grid of (n+1)/2 nodes per axis (every
+/// coarse node is a fine one; n odd on every axis) and, when that is odd too, on (n+3)/4.
+/// D = max over modes of Σ w|u_n − u_(n+1)/2| / Σ w|u_n| over the coarse nodes (trapezoid
+/// weights w; nodes on a cut of the mode excluded: two-valued). For order p the fine error is
+/// ≈ D/(2^p − 1), so D itself covers it with a margin of ≈ 7 for p = 3 and ≈ 3 for p = 2
+/// (measured 6.8–7.2 for p = 3 in tests/validation/test_invariant_fv.cpp); for p = 1 the margin is
+/// ≈ 1 and `fv_error_factor` doubles it. `error` = factor·D; each eigenvalue's `error` is
+/// factor·|λ(n) − λ((n+1)/2)| for the coarse eigenvalue nearest in μ; the gap's and the decay
+/// rate's likewise. A gap within its error of 0 claims no decay (`decays` false): the cycles'
+/// eigenvalues lie on the unit circle up to the scheme's damping, which falls like n^{−p}.
+/// The observed order log2(D((n+3)/4 → (n+1)/2) / D) says whether the estimate is in its
+/// asymptotic regime (`error_reliable`: within 1 of p).
+
+// See transfer.hpp: GCC 12's flow-sensitive warnings misfire inside Eigen/Spectra.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wnull-dereference"
+#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuse-after-free"
+#endif
+#include <Spectra/GenEigsRealShiftSolver.h>
+#include <Spectra/MatOp/SparseGenRealShiftSolve.h>
+#include <Eigen/SparseLU>
+#pragma GCC diagnostic pop
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <complex>
+#include <cstddef>
+#include <limits>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "hybgen/rt/core/grid.hpp"
+#include "hybgen/rt/methods/generator.hpp"
+#include "hybgen/rt/model.hpp"
+
+namespace hybgen::rt {
+
+/// The shift of the eigen-solver, as a fraction of the model's rate (FvOperator::rate).
+inline constexpr double kFvShift = 1e-2;
+/// Fewest nodes per axis of a grid the error estimate solves on.
+inline constexpr int kFvMinNodes = 5;
+
+/// The factor on the two-resolution difference that makes it cover the error at order p.
+constexpr double fv_error_factor(int p) {
+  return p <= 1 ? 2.0 : 1.0;
+}
+
+/// One grid's solution.
+struct FvGridSolution {
+  std::vector<double> density;           ///< Node densities [mode][node], unit mass.
+  std::vector<char> on_jump;             ///< Per (mode, node): on a cut of the mode.
+  std::vector<std::complex<double>> mu;  ///< Eigenvalues of L, by decreasing Re μ.
+  double sigma = 0.0;                    ///< The bordered system's multiplier.
+  double residual = 0.0;         ///< ‖B u + σ vol‖₁ / (rate · Σ vol|u|) of the returned u.
+  std::size_t unknowns = 0;      ///< Cells.
+  std::size_t nonzeros = 0;      ///< Entries of B.
+  double rate = 0.0;             ///< FvOperator::rate.
+  bool leaks = false;            ///< Mass leaves the box: u is μ₁'s eigenvector.
+  bool eigen_converged = false;  ///< Whether Spectra met its tolerance.
+  long iterations = 0;           ///< Arnoldi restarts.
+  std::string failure;           ///< Non-empty: what failed.
+};
+
+/// Options of `fv_invariant`.
+struct FvOptions {
+  int order = 3;       ///< Reconstruction order p.
+  int n_eigen = 6;     ///< Eigenvalues reported.
+  double step = 1.0;   ///< h of λ = e^{μh}.
+  double tol = 1e-10;  ///< Spectra's tolerance.
+};
+
+/// The density on the grid, the spectrum, and their estimated errors (see the file comment).
+struct FvInvariantResult {
+  FvGridSolution fine;                       ///< On the run's grid.
+  std::vector<std::complex<double>> lambda;  ///< e^{μh}, n_eigen of them.
+  std::vector<double> lambda_error;          ///< Per λ (NaN: no estimate).
+  std::vector<double> mu_error;              ///< Per μ (NaN: no estimate).
+  std::vector<int> coarse_nodes;             ///< Nodes per axis of the coarse grid (or empty).
+  double error = std::numeric_limits<double>::quiet_NaN();  ///< Density, relative L1.
+  std::vector<double> mode_errors;  ///< Per mode (NaN: a mode without mass).
+  double observed_order = std::numeric_limits<double>::quiet_NaN();        ///< From three grids.
+  double gap = 0.0, gap_error = std::numeric_limits<double>::quiet_NaN();  ///< 1 − |λ₂/λ₁|.
+  double decay_rate = 0.0,
+         decay_rate_error = std::numeric_limits<double>::quiet_NaN();  ///< Re μ₁ − Re μ₂.
+  double leak_rate = 0.0;                                              ///< −Re μ₁.
+  std::optional<bool> decays;  ///< gap > gap_error; unknown without an estimate.
+  double seconds_fine = 0.0, seconds_coarse = 0.0;  ///< Wall time per part.
+  std::vector<std::string> notes;                   ///< What the summary should say.
+};
+
+/// Solve the generator of M on `grid` (see the file comment).
+template <HybridModel M>
+FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const double* par,
+                             const std::vector<FvGuardPlane>& planes, const FvOptions& o) {
+  using SpMat = Eigen::SparseMatrix<double>;
+  const FvOperator<state_dim_v<M>> op = assemble_fv_generator<M>(grid, par, planes, o.order);
+  FvGridSolution s;
+  const auto n = static_cast<Eigen::Index>(op.size());
+  s.unknowns = op.size();
+  s.nonzeros = static_cast<std::size_t>(op.B.nonZeros());
+  s.rate = op.rate > 0.0 ? op.rate : 1.0;
+  // Bordered null-vector system.
+  std::vector<Eigen::Triplet<double>> t;
+  t.reserve(s.nonzeros + 2 * op.size());
+  for (Eigen::Index c = 0; c < op.B.outerSize(); ++c)
+    for (SpMat::InnerIterator it(op.B, c); it; ++it) t.emplace_back(it.row(), it.col(), it.value());
+  for (Eigen::Index r = 0; r < n; ++r) {
+    t.emplace_back(r, n, op.vol[static_cast<std::size_t>(r)]);
+    t.emplace_back(n, r, op.vol[static_cast<std::size_t>(r)]);
+  }
+  SpMat A(n + 1, n + 1);
+  A.setFromTriplets(t.begin(), t.end());
+  A.makeCompressed();
+  Eigen::SparseLU<SpMat, Eigen::COLAMDOrdering<int>> lu;
+  lu.compute(A);
+  if (lu.info() != Eigen::Success) {
+    s.failure = "the bordered generator is singular (" + lu.lastErrorMessage() +
+                "): the null space has several dimensions (a region the flow never leaves, "
+                "or a rest point on a face?)";
+    return s;
+  }
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + 1);
+  rhs[n] = 1.0;
+  const Eigen::VectorXd sol = lu.solve(rhs);
+  std::vector<double> u(sol.data(), sol.data() + n);
+  s.sigma = sol[n];
+  // Spectrum of L near the shift.
+  SpMat L = op.B;
+  for (Eigen::Index c = 0; c < L.outerSize(); ++c)
+    for (SpMat::InnerIterator it(L, c); it; ++it)
+      it.valueRef() /= op.vol[static_cast<std::size_t>(it.row())];
+  const Eigen::Index nev = std::min<Eigen::Index>(std::max(o.n_eigen + 2, 8), n - 2);
+  if (nev >= 1) {
+    const Eigen::Index ncv = std::min<Eigen::Index>(n, std::max<Eigen::Index>(2 * nev + 1, 30));
+    try {
+      Spectra::SparseGenRealShiftSolve<double> shift(L);
+      Spectra::GenEigsRealShiftSolver<Spectra::SparseGenRealShiftSolve<double>> eigs(
+          shift, nev, ncv, -kFvShift * s.rate);
+      eigs.init();
+      eigs.compute(Spectra::SortRule::LargestMagn, 1000, o.tol, Spectra::SortRule::LargestMagn);
+      s.iterations = static_cast<long>(eigs.num_iterations());
+      if (eigs.info() == Spectra::CompInfo::Successful) {
+        s.eigen_converged = true;
+        const Eigen::VectorXcd ev = eigs.eigenvalues();
+        std::vector<Eigen::Index> order(static_cast<std::size_t>(ev.size()));
+        for (Eigen::Index k = 0; k < ev.size(); ++k) order[static_cast<std::size_t>(k)] = k;
+        std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) {
+          const std::complex<double> x = ev[a], y = ev[b];
+          if (x.real() != y.real()) return x.real() > y.real();
+          if (std::fabs(x.imag()) != std::fabs(y.imag()))
+            return std::fabs(x.imag()) < std::fabs(y.imag());
+          return x.imag() > y.imag();
+        });
+        for (const Eigen::Index k : order) s.mu.push_back(ev[k]);
+        // Mass leaves the box: the density is μ₁'s eigenvector (real: rotate its phase).
+        s.leaks = s.sigma > 1e-8 * s.rate && s.mu.front().real() < -1e-8 * s.rate;
+        if (s.leaks) {
+          const Eigen::MatrixXcd V = eigs.eigenvectors();
+          const Eigen::Index k = order.front();
+          Eigen::Index big = 0;
+          for (Eigen::Index r = 1; r < n; ++r)
+            if (std::abs(V(r, k)) > std::abs(V(big, k))) big = r;
+          const std::complex<double> ph = std::conj(V(big, k)) / std::abs(V(big, k));
+          double mass = 0.0;
+          for (Eigen::Index r = 0; r < n; ++r) {
+            u[static_cast<std::size_t>(r)] = (V(r, k) * ph).real();
+            mass += op.vol[static_cast<std::size_t>(r)] * u[static_cast<std::size_t>(r)];
+          }
+          for (double& x : u) x /= mass;
+        }
+      }
+    } catch (const std::exception& e) {
+      s.failure = std::string("the eigen-solver failed: ") + e.what();
+    }
+  }
+  // Residual of the returned u: B u + σ·vol for the bordered solution, B u − μ₁·vol·u for the
+  // eigenvector.
+  {
+    const Eigen::Map<const Eigen::VectorXd> uv(u.data(), n);
+    const Eigen::VectorXd Bu = op.B * uv;
+    double num = 0.0, den = 0.0;
+    const double mu1 = s.leaks ? s.mu.front().real() : 0.0;
+    for (Eigen::Index r = 0; r < n; ++r) {
+      const double v = op.vol[static_cast<std::size_t>(r)];
+      num += std::fabs(Bu[r] + (s.leaks ? -mu1 * v * uv[r] : s.sigma * v));
+      den += v * std::fabs(uv[r]);
+    }
+    s.residual = num / (s.rate * std::max(den, 1e-300));
+  }
+  s.density = fv_node_values(op, grid, u, &s.on_jump);
+  return s;
+}
+
+namespace detail {
+
+/// max over modes of Σ w|u_f − u_c| / Σ w|u_f| on the coarse nodes (fine node 2i per axis),
+/// nodes on a jump of either excluded; per mode into `per_mode` (NaN: no mass).
+template <std::size_t N>
+double fv_difference(const TensorGrid<N>& fine, const FvGridSolution& f,
+                     const TensorGrid<N>& coarse, const FvGridSolution& c, int n_mode,
+                     std::vector<double>* per_mode) {
+  const std::size_t nf = fine.size(), nc = coarse.size();
+  std::array<AxisRule, N> rules;
+  for (std::size_t a = 0; a < N; ++a) rules[a] = trapezoid_rule(coarse.axes[a]);
+  std::vector<double> num(static_cast<std::size_t>(n_mode), 0.0), den(num);
+  for (std::size_t i = 0; i < nc; ++i) {
+    std::size_t rem = i, fi = 0, fs = 1;
+    double w = 1.0;
+    for (std::size_t a = N; a-- > 0;) {
+      const auto na = static_cast<std::size_t>(coarse.axes[a].n);
+      const std::size_t k = rem % na;
+      rem /= na;
+      w *= rules[a].weights[k];
+      fi += fs * 2 * k;
+      fs *= static_cast<std::size_t>(fine.axes[a].n);
+    }
+    for (int m = 0; m < n_mode; ++m) {
+      const std::size_t jf = static_cast<std::size_t>(m) * nf + fi,
+                        jc = static_cast<std::size_t>(m) * nc + i;
+      if (f.on_jump[jf] || c.on_jump[jc]) continue;
+      num[static_cast<std::size_t>(m)] += w * std::fabs(f.density[jf] - c.density[jc]);
+      den[static_cast<std::size_t>(m)] += w * std::fabs(f.density[jf]);
+    }
+  }
+  double total = 0.0, worst = 0.0;
+  for (const double d : den) total += d;
+  if (per_mode)
+    per_mode->assign(static_cast<std::size_t>(n_mode), std::numeric_limits<double>::quiet_NaN());
+  for (int m = 0; m < n_mode; ++m) {
+    const auto mu = static_cast<std::size_t>(m);
+    if (!(den[mu] > 1e-12 * total)) continue;
+    const double e = num[mu] / den[mu];
+    if (per_mode) (*per_mode)[mu] = e;
+    worst = std::max(worst, e);
+  }
+  return worst;
+}
+
+/// The grid with (n+1)/2 nodes per axis on the same box, if every n is odd and the result has
+/// kFvMinNodes nodes or more.
+template <std::size_t N>
+std::optional<TensorGrid<N>> fv_half_grid(const TensorGrid<N>& g) {
+  TensorGrid<N> h = g;
+  for (std::size_t a = 0; a < N; ++a) {
+    if (g.axes[a].n % 2 == 0 || (g.axes[a].n + 1) / 2 < kFvMinNodes) return std::nullopt;
+    h.axes[a].n = (g.axes[a].n + 1) / 2;
+  }
+  return h;
+}
+
+/// The index of the eigenvalue of `c` nearest z, or -1.
+inline long nearest(const std::vector<std::complex<double>>& c, std::complex<double> z) {
+  long best = -1;
+  for (std::size_t k = 0; k < c.size(); ++k)
+    if (best < 0 || std::abs(c[k] - z) < std::abs(c[static_cast<std::size_t>(best)] - z))
+      best = static_cast<long>(k);
+  return best;
+}
+
+}  // namespace detail
+
+/// The invariant density of M by the finite-volume generator on `grid`, its spectrum as the
+/// transfer operator's over `o.step`, and their errors from the coarser grids (see the file
+/// comment). Throws std::invalid_argument for a guard it cannot cut (fv_guard_planes).
+template <HybridModel M>
+FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const double* par,
+                               const FvOptions& o) {
+  constexpr std::size_t N = state_dim_v<M>;
+  using Clock = std::chrono::steady_clock;
+  FvInvariantResult r;
+  const auto t0 = Clock::now();
+  const std::vector<FvGuardPlane> planes = fv_guard_planes<M>(grid, par);
+  r.fine = fv_solve_grid<M>(grid, par, planes, o);
+  r.seconds_fine = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (!r.fine.failure.empty()) return r;
+  const double h = o.step, factor = fv_error_factor(o.order);
+  const std::size_t ne =
+      std::min<std::size_t>(static_cast<std::size_t>(o.n_eigen), r.fine.mu.size());
+  for (std::size_t k = 0; k < ne; ++k) r.lambda.push_back(std::exp(r.fine.mu[k] * h));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  r.lambda_error.assign(ne, nan);
+  r.mu_error.assign(ne, nan);
+  if (ne >= 1) r.leak_rate = -r.fine.mu[0].real();
+  if (ne >= 2) {
+    r.decay_rate = r.fine.mu[0].real() - r.fine.mu[1].real();
+    r.gap = 1.0 - std::exp(-r.decay_rate * h);
+  }
+  const auto t1 = Clock::now();
+  const std::optional<TensorGrid<N>> half = detail::fv_half_grid(grid);
+  if (!half) {
+    r.notes.push_back(
+        "no error estimate: it needs an odd number of nodes on every axis, at least " +
+        std::to_string(2 * kFvMinNodes - 1) + " (the coarse grid's nodes are every other node)");
+    return r;
+  }
+  for (std::size_t a = 0; a < N; ++a) r.coarse_nodes.push_back(half->axes[a].n);
+  const FvGridSolution c = fv_solve_grid<M>(*half, par, planes, o);
+  if (!c.failure.empty()) {
+    r.notes.push_back("no error estimate: on the coarse grid " + c.failure);
+    return r;
+  }
+  const double D = detail::fv_difference(grid, r.fine, *half, c, M::n_mode, &r.mode_errors);
+  r.error = factor * D;
+  for (double& e : r.mode_errors) e *= factor;
+  for (std::size_t k = 0; k < ne; ++k) {
+    const long j = detail::nearest(c.mu, r.fine.mu[k]);
+    if (j < 0) continue;
+    const std::complex<double> mc = c.mu[static_cast<std::size_t>(j)];
+    r.mu_error[k] = factor * std::abs(r.fine.mu[k] - mc);
+    r.lambda_error[k] = factor * std::abs(r.lambda[k] - std::exp(mc * h));
+  }
+  if (ne >= 2) {
+    const long j1 = detail::nearest(c.mu, r.fine.mu[0]), j2 = detail::nearest(c.mu, r.fine.mu[1]);
+    if (j1 >= 0 && j2 >= 0) {
+      const double dc =
+          c.mu[static_cast<std::size_t>(j1)].real() - c.mu[static_cast<std::size_t>(j2)].real();
+      r.decay_rate_error = factor * std::fabs(r.decay_rate - dc);
+      r.gap_error = factor * std::fabs(r.gap - (1.0 - std::exp(-dc * h)));
+      r.decays = r.gap > r.gap_error;
+      if (!*r.decays)
+        r.notes.push_back(
+            "the spectral gap is within its estimated error of 0: no decay is claimed (the "
+            "eigenvalues after the first lie on the unit circle up to the scheme's damping, "
+            "which falls like n^-p: a cycle, not mixing)");
+    }
+  }
+  // A third grid for the observed order.
+  if (const std::optional<TensorGrid<N>> quarter = detail::fv_half_grid(*half)) {
+    const FvGridSolution q = fv_solve_grid<M>(*quarter, par, planes, o);
+    if (q.failure.empty()) {
+      const double D2 = detail::fv_difference(*half, c, *quarter, q, M::n_mode, nullptr);
+      if (D > 0.0 && D2 > 0.0) r.observed_order = std::log2(D2 / D);
+    }
+  }
+  if (std::isfinite(r.observed_order) && std::fabs(r.observed_order - o.order) > 1.0)
+    r.notes.push_back("the observed order of convergence is " + std::to_string(r.observed_order) +
+                      ", not near " + std::to_string(o.order) +
+                      ": the grids are not in the asymptotic regime (or the density is not "
+                      "smooth between cuts), and the error estimate is unreliable");
+  r.seconds_coarse = std::chrono::duration<double>(Clock::now() - t1).count();
+  return r;
+}
+
+}  // namespace hybgen::rt
