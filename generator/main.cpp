@@ -162,7 +162,8 @@ int main(int argc, char** argv) {
   build->add_flag("-v,--verbose", bopt.verbose, "print the compiler command");
   auto* run = app.add_subcommand("run", "derive, build and run: evolve the initial density");
   add_model(run);
-  run->add_option("--out", out, "output directory (default: out/<file>, the model file's name without .model)");
+  run->add_option("--out", out,
+                  "output directory (default: out/<file>, the model file's name without .model)");
   add_build(run);
   run->footer(
       "\nSettings (--set KEY=VALUE, or KEY VALUE in the model's simulation block; also\n"

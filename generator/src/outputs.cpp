@@ -153,7 +153,8 @@ OutputTransaction::OutputTransaction(const std::string& out, OutputKind kind) : 
       if (err == EWOULDBLOCK) throw UsageError("another hybgen run is writing to '" + out + "'");
       throw UsageError("cannot lock '" + lock_path_ + "': " + std::strerror(err));
     }
-    struct stat held {}, named {};
+    struct stat held {
+    }, named{};
     if (::fstat(lock_fd_, &held) == 0 && ::stat(lock_path_.c_str(), &named) == 0 &&
         held.st_dev == named.st_dev && held.st_ino == named.st_ino)
       break;

@@ -17,7 +17,7 @@ namespace hybgen::gen {
 
 /// How `hybgen run` and `hybgen sweep` build and run.
 struct RunOptions {
-  std::string out;  ///< Output directory ("": default_out_dir: out/<file>, out/<file>-sweep).
+  std::string out;     ///< Output directory ("": default_out_dir: out/<file>, out/<file>-sweep).
   BuildOptions build;  ///< How to build the runner.
   bool quiet = false;  ///< No progress output.
 };
