@@ -128,9 +128,11 @@ inline std::string marginals_rule(const Settings& s) {
 /// method invariant takes (methods/generator_solve.hpp); nothing steps it in time yet, and
 /// the escape rate is not built on it yet.
 inline std::string fv_scheme_rule(const Settings& s) {
+  constexpr std::size_t kScheme = setting_index("scheme");
+  static_assert(kScheme < kSettings.size(), "the setting scheme");
   if (s.word<"scheme">() != "fv") return "";
   const MethodSpec& m = method_named(s.word<"method">());
-  if (m.id == Method::invariant || !method_reads(m, *find_setting("scheme"))) return "";
+  if (m.id == Method::invariant || !method_reads(m, kSettings[kScheme])) return "";
   return "scheme=fv is the finite-volume generator, whose null vector is the invariant density; "
          "method " +
          s.word<"method">() +
