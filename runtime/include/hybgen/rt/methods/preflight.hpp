@@ -49,6 +49,7 @@
 #include <utility>
 #include <vector>
 
+#include "hybgen/rt/method_table.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
 #include "hybgen/rt/model.hpp"
 
