@@ -101,11 +101,19 @@ constexpr const MethodSpec& method_spec(Method m) {
   return kMethods[static_cast<std::size_t>(m)];
 }
 
+/// The index of the row named `name`, or kMethods.size() when there is none. (An index, not
+/// a pointer, so that compile-time checks hold under -fsanitize=undefined too: GCC 12 does not
+/// take a pointer's comparison with null as a constant expression there.)
+constexpr std::size_t method_index(std::string_view name) {
+  for (std::size_t i = 0; i < kMethods.size(); ++i)
+    if (kMethods[i].name == name) return i;
+  return kMethods.size();
+}
+
 /// The row named `name`, or null.
 constexpr const MethodSpec* find_method(std::string_view name) {
-  for (const MethodSpec& m : kMethods)
-    if (m.name == name) return &m;
-  return nullptr;
+  const std::size_t i = method_index(name);
+  return i < kMethods.size() ? &kMethods[i] : nullptr;
 }
 
 /// The row named `name`; throws std::invalid_argument "unknown method 'NAME'".

@@ -171,7 +171,7 @@ static_assert(
         while (i < s.methods.size()) {
           std::size_t j = s.methods.find(' ', i);
           if (j == std::string_view::npos) j = s.methods.size();
-          if (find_method(s.methods.substr(i, j - i)) == nullptr) return false;
+          if (method_index(s.methods.substr(i, j - i)) == kMethods.size()) return false;
           i = j + 1;
         }
       }
