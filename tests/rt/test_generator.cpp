@@ -260,7 +260,7 @@ TEST(Generator, ThermostatAndSawtoothMatchTheirClosedFormsAtOrderThree) {
               t.observed_order, std::abs(t.lambda[0]) - 1.0, t.fine.sigma);
   std::printf("sawtooth 401: err %.3e est %.3e order %.2f |l1|-1 %.1e mu2 %.8f%+.8fi decays %d\n",
               es, s.error, s.observed_order, std::abs(s.lambda[0]) - 1.0, s.fine.mu[1].real(),
-              s.fine.mu[1].imag(), s.decays.value_or(true));
+              s.fine.mu[1].imag(), s.spectrum.decays.value_or(true));
   EXPECT_LT(et, 1e-6);
   EXPECT_LT(es, 1e-7);
   EXPECT_GE(t.error, et);
@@ -271,8 +271,8 @@ TEST(Generator, ThermostatAndSawtoothMatchTheirClosedFormsAtOrderThree) {
   EXPECT_NEAR(std::abs(s.lambda[0]), 1.0, 1e-12);
   // The period from the phase of λ₂: 2π/Im μ₂ = ln 2.
   EXPECT_NEAR(2 * std::numbers::pi / std::fabs(s.fine.mu[1].imag()), std::log(2.0), 1e-6);
-  ASSERT_TRUE(s.decays.has_value());
-  EXPECT_FALSE(*s.decays);
+  ASSERT_TRUE(s.spectrum.decays.has_value());
+  EXPECT_FALSE(*s.spectrum.decays);
   EXPECT_NEAR(s.observed_order, 3.0, 0.3);
 }
 

@@ -195,15 +195,30 @@ img { max-width: 100%; } .muted { color: #666; }
     const nlohmann::json& inv = run.summary[summary_key::invariant];
     h << "<h2>Spectrum</h2>\n";
     if (has(files, "spectrum.png")) h << "<img src=\"spectrum.png\" alt=\"the spectrum\">\n";
-    h << "<p>spectral gap " << number(inv.value("spectral_gap", 0.0)) << ", decay rate "
-      << number(inv.value("decay_rate", 0.0)) << " per unit time</p>\n";
-    // scheme=fv: the errors estimated from a coarser grid (methods/generator_solve.hpp).
+    // The rates with their errors and the decisions they support (methods/two_grid.hpp).
+    const auto with_error = [&](const char* key) {
+      const std::string e = std::string(key) + "_error";
+      std::string text = number(inv.value(key, 0.0));
+      if (inv.contains(e) && inv[e].is_number()) text += " ± " + number(inv[e].get<double>());
+      return text;
+    };
+    const auto is = [&](const char* key, bool value) {
+      return inv.contains(key) && inv[key].is_boolean() && inv[key].get<bool>() == value;
+    };
+    h << "<p>spectral gap " << with_error("spectral_gap") << ", decay rate "
+      << with_error("decay_rate") << " per unit time"
+      << (is("decays", false) ? ": the gap is within its error of 0, so no decay is claimed" : "")
+      << "</p>\n";
+    if (is("leaks", true))
+      h << "<p>leak rate " << with_error("leak_rate")
+        << " per unit time: mass leaves the box, so no density in it is invariant; the frame "
+           "is the conditionally invariant density (method=escape gives the escape rate)</p>\n";
     if (inv.contains("error") && inv["error"].is_number())
       h << "<p>estimated error of the density " << number(inv["error"].get<double>())
         << " (relative L1, from the grid of "
         << html(inv.value("coarse_grid", nlohmann::json()).dump()) << " nodes)"
-        << (inv.value("decays", nlohmann::json(true)) == nlohmann::json(false)
-                ? "; the gap is within its error of 0: no decay is claimed"
+        << (is("error_reliable", false)
+                ? "; <b>unreliable</b>: the observed order of convergence is not the scheme's"
                 : "")
         << "</p>\n";
   }

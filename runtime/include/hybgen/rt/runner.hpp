@@ -477,15 +477,36 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
         std::printf("   +/- %.1e", l["error"].get<double>());
       std::printf("\n");
     }
-    std::printf("spectral gap %.3e, decay rate %.4g per unit time\n",
-                inv["spectral_gap"].get<double>(), inv["decay_rate"].get<double>());
-    // scheme=fv: the errors estimated from the coarse grid (methods/generator_solve.hpp).
+    // The rates with their errors, and the decisions they support (methods/two_grid.hpp).
+    const auto err = [&](const char* key) {
+      const std::string e = std::string(key) + "_error";
+      return inv.contains(e) && inv[e].is_number() ? inv[e].get<double>() : -1.0;
+    };
+    const auto flag = [&](const char* key) {
+      return inv.contains(key) && inv[key].is_boolean() ? std::optional<bool>(inv[key].get<bool>())
+                                                        : std::nullopt;
+    };
+    if (err("spectral_gap") >= 0)
+      std::printf(
+          "spectral gap %.3e +/- %.1e, decay rate %.4g +/- %.1e per unit time%s\n",
+          inv["spectral_gap"].get<double>(), err("spectral_gap"), inv["decay_rate"].get<double>(),
+          err("decay_rate"),
+          flag("decays") == false ? ": the gap is within its error of 0, no decay is claimed" : "");
+    else
+      std::printf("spectral gap %.3e, decay rate %.4g per unit time (no error estimate)\n",
+                  inv["spectral_gap"].get<double>(), inv["decay_rate"].get<double>());
+    if (flag("leaks") == true)
+      std::printf(
+          "leak rate %.4g +/- %.1e per unit time: mass leaves the box, no density in "
+          "it is invariant (method=escape)\n",
+          inv["leak_rate"].get<double>(), err("leak_rate"));
     if (inv.contains("error") && inv["error"].is_number())
       std::printf(
           "estimated error of the density %.2e (relative L1), from the grid of %s nodes%s\n",
           inv["error"].get<double>(), inv["coarse_grid"].dump().c_str(),
-          inv.value("decays", nlohmann::json()).is_boolean() && !inv["decays"].get<bool>()
-              ? "; the gap is within its error of 0: no decay claimed"
+          flag("error_reliable") == false
+              ? "; UNRELIABLE: the observed order of convergence is not the scheme's "
+                "(summary.json, invariant.note)"
               : "");
   } else if (s.contains(k::escape)) {
     const auto& e = s[k::escape];

@@ -38,6 +38,7 @@
 
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/methods/invariant.hpp"
+#include "hybgen/rt/methods/two_grid.hpp"
 
 namespace hybgen::rt {
 
@@ -55,15 +56,6 @@ struct EscapeRate {
   double solver_error = 0.0;    ///< tol/h: the eigen-solver's part of rate_error.
   bool closed = false;          ///< κ ≤ rate_error: λ₁ within its error of 1.
 };
-
-/// The grid of the same box with (n + 1)/2 nodes per axis (at least 2): for odd n, every
-/// other node of `grid`.
-template <std::size_t N>
-TensorGrid<N> halved_grid(const TensorGrid<N>& grid) {
-  TensorGrid<N> coarse = grid;
-  for (GridAxis& a : coarse.axes) a.n = std::max(2, (a.n + 1) / 2);
-  return coarse;
-}
 
 /// κ and its error from the leading eigenpairs on the grid (`fine`) and on the halved grid
 /// (`coarse`), for an operator of step `step` solved to the relative tolerance `tol`.

@@ -22,12 +22,12 @@
 /// weights w; nodes on a cut of the mode excluded: two-valued). For order p the fine error is
 /// ≈ D/(2^p − 1), so D itself covers it with a margin of ≈ 7 for p = 3 and ≈ 3 for p = 2
 /// (measured 6.8–7.2 for p = 3 in tests/validation/test_invariant_fv.cpp); for p = 1 the margin is
-/// ≈ 1 and `fv_error_factor` doubles it. `error` = factor·D; each eigenvalue's `error` is
-/// factor·|λ(n) − λ((n+1)/2)| for the coarse eigenvalue nearest in μ; the gap's and the decay
-/// rate's likewise. A gap within its error of 0 claims no decay (`decays` false): the cycles'
-/// eigenvalues lie on the unit circle up to the scheme's damping, which falls like n^{−p}.
-/// The observed order log2(D((n+3)/4 → (n+1)/2) / D) says whether the estimate is in its
-/// asymptotic regime (`error_reliable`: within 1 of p).
+/// ≈ 1 and `error_factor` doubles it. `error` = factor·D; each eigenvalue's `error` is
+/// factor·|λ(n) − λ((n+1)/2)| for the coarse eigenvalue nearest it; the gap's, the decay
+/// rate's and the leak rate's likewise, and a gap within its error of 0 claims no decay
+/// (two_grid.hpp: the cycles' eigenvalues lie on the unit circle up to the scheme's damping,
+/// which falls like n^{−p}). The observed order log2(D((n+3)/4 → (n+1)/2) / D) says whether
+/// the estimate is in its asymptotic regime (`error_reliable`, two_grid.hpp's `order_near`).
 
 // See transfer.hpp: GCC 12's flow-sensitive warnings misfire inside Eigen/Spectra.
 #pragma GCC diagnostic push
@@ -53,6 +53,7 @@
 
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/methods/generator.hpp"
+#include "hybgen/rt/methods/two_grid.hpp"
 #include "hybgen/rt/model.hpp"
 
 namespace hybgen::rt {
@@ -61,11 +62,6 @@ namespace hybgen::rt {
 inline constexpr double kFvShift = 1e-2;
 /// Fewest nodes per axis of a grid the error estimate solves on.
 inline constexpr int kFvMinNodes = 5;
-
-/// The factor on the two-resolution difference that makes it cover the error at order p.
-constexpr double fv_error_factor(int p) {
-  return p <= 1 ? 2.0 : 1.0;
-}
 
 /// One grid's solution.
 struct FvGridSolution {
@@ -95,17 +91,12 @@ struct FvOptions {
 struct FvInvariantResult {
   FvGridSolution fine;                       ///< On the run's grid.
   std::vector<std::complex<double>> lambda;  ///< e^{μh}, n_eigen of them.
-  std::vector<double> lambda_error;          ///< Per λ (NaN: no estimate).
-  std::vector<double> mu_error;              ///< Per μ (NaN: no estimate).
   std::vector<int> coarse_nodes;             ///< Nodes per axis of the coarse grid (or empty).
   double error = std::numeric_limits<double>::quiet_NaN();  ///< Density, relative L1.
   std::vector<double> mode_errors;  ///< Per mode (NaN: a mode without mass).
-  double observed_order = std::numeric_limits<double>::quiet_NaN();        ///< From three grids.
-  double gap = 0.0, gap_error = std::numeric_limits<double>::quiet_NaN();  ///< 1 − |λ₂/λ₁|.
-  double decay_rate = 0.0,
-         decay_rate_error = std::numeric_limits<double>::quiet_NaN();  ///< Re μ₁ − Re μ₂.
-  double leak_rate = 0.0;                                              ///< −Re μ₁.
-  std::optional<bool> decays;  ///< gap > gap_error; unknown without an estimate.
+  double observed_order = std::numeric_limits<double>::quiet_NaN();  ///< From three grids.
+  std::optional<bool> error_reliable;  ///< observed_order near the order (two_grid.hpp).
+  SpectrumErrors spectrum;             ///< The rates of λ and their errors (two_grid.hpp).
   double seconds_fine = 0.0, seconds_coarse = 0.0;  ///< Wall time per part.
   std::vector<std::string> notes;                   ///< What the summary should say.
 };
@@ -215,68 +206,13 @@ FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const doubl
 
 namespace detail {
 
-/// max over modes of Σ w|u_f − u_c| / Σ w|u_f| on the coarse nodes (fine node 2i per axis),
-/// nodes on a jump of either excluded; per mode into `per_mode` (NaN: no mass).
-template <std::size_t N>
-double fv_difference(const TensorGrid<N>& fine, const FvGridSolution& f,
-                     const TensorGrid<N>& coarse, const FvGridSolution& c, int n_mode,
-                     std::vector<double>* per_mode) {
-  const std::size_t nf = fine.size(), nc = coarse.size();
-  std::array<AxisRule, N> rules;
-  for (std::size_t a = 0; a < N; ++a) rules[a] = trapezoid_rule(coarse.axes[a]);
-  std::vector<double> num(static_cast<std::size_t>(n_mode), 0.0), den(num);
-  for (std::size_t i = 0; i < nc; ++i) {
-    std::size_t rem = i, fi = 0, fs = 1;
-    double w = 1.0;
-    for (std::size_t a = N; a-- > 0;) {
-      const auto na = static_cast<std::size_t>(coarse.axes[a].n);
-      const std::size_t k = rem % na;
-      rem /= na;
-      w *= rules[a].weights[k];
-      fi += fs * 2 * k;
-      fs *= static_cast<std::size_t>(fine.axes[a].n);
-    }
-    for (int m = 0; m < n_mode; ++m) {
-      const std::size_t jf = static_cast<std::size_t>(m) * nf + fi,
-                        jc = static_cast<std::size_t>(m) * nc + i;
-      if (f.on_jump[jf] || c.on_jump[jc]) continue;
-      num[static_cast<std::size_t>(m)] += w * std::fabs(f.density[jf] - c.density[jc]);
-      den[static_cast<std::size_t>(m)] += w * std::fabs(f.density[jf]);
-    }
-  }
-  double total = 0.0, worst = 0.0;
-  for (const double d : den) total += d;
-  if (per_mode)
-    per_mode->assign(static_cast<std::size_t>(n_mode), std::numeric_limits<double>::quiet_NaN());
-  for (int m = 0; m < n_mode; ++m) {
-    const auto mu = static_cast<std::size_t>(m);
-    if (!(den[mu] > 1e-12 * total)) continue;
-    const double e = num[mu] / den[mu];
-    if (per_mode) (*per_mode)[mu] = e;
-    worst = std::max(worst, e);
-  }
-  return worst;
-}
-
 /// The grid with (n+1)/2 nodes per axis on the same box, if every n is odd and the result has
 /// kFvMinNodes nodes or more.
 template <std::size_t N>
 std::optional<TensorGrid<N>> fv_half_grid(const TensorGrid<N>& g) {
-  TensorGrid<N> h = g;
-  for (std::size_t a = 0; a < N; ++a) {
+  for (std::size_t a = 0; a < N; ++a)
     if (g.axes[a].n % 2 == 0 || (g.axes[a].n + 1) / 2 < kFvMinNodes) return std::nullopt;
-    h.axes[a].n = (g.axes[a].n + 1) / 2;
-  }
-  return h;
-}
-
-/// The index of the eigenvalue of `c` nearest z, or -1.
-inline long nearest(const std::vector<std::complex<double>>& c, std::complex<double> z) {
-  long best = -1;
-  for (std::size_t k = 0; k < c.size(); ++k)
-    if (best < 0 || std::abs(c[k] - z) < std::abs(c[static_cast<std::size_t>(best)] - z))
-      best = static_cast<long>(k);
-  return best;
+  return halved_grid(g);
 }
 
 }  // namespace detail
@@ -295,18 +231,11 @@ FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const dou
   r.fine = fv_solve_grid<M>(grid, par, planes, o);
   r.seconds_fine = std::chrono::duration<double>(Clock::now() - t0).count();
   if (!r.fine.failure.empty()) return r;
-  const double h = o.step, factor = fv_error_factor(o.order);
+  const double h = o.step, factor = error_factor(o.order);
   const std::size_t ne =
       std::min<std::size_t>(static_cast<std::size_t>(o.n_eigen), r.fine.mu.size());
   for (std::size_t k = 0; k < ne; ++k) r.lambda.push_back(std::exp(r.fine.mu[k] * h));
-  const double nan = std::numeric_limits<double>::quiet_NaN();
-  r.lambda_error.assign(ne, nan);
-  r.mu_error.assign(ne, nan);
-  if (ne >= 1) r.leak_rate = -r.fine.mu[0].real();
-  if (ne >= 2) {
-    r.decay_rate = r.fine.mu[0].real() - r.fine.mu[1].real();
-    r.gap = 1.0 - std::exp(-r.decay_rate * h);
-  }
+  r.spectrum = spectrum_errors(r.lambda, {}, h, factor);  // the rates; errors below
   const auto t1 = Clock::now();
   const std::optional<TensorGrid<N>> half = detail::fv_half_grid(grid);
   if (!half) {
@@ -321,40 +250,35 @@ FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const dou
     r.notes.push_back("no error estimate: on the coarse grid " + c.failure);
     return r;
   }
-  const double D = detail::fv_difference(grid, r.fine, *half, c, M::n_mode, &r.mode_errors);
+  const auto difference = [](const TensorGrid<N>& f, const FvGridSolution& fs,
+                             const TensorGrid<N>& cg, const FvGridSolution& cs,
+                             std::vector<double>* per_mode) {
+    return coarse_difference(f, std::span<const double>(fs.density),
+                             std::span<const char>(fs.on_jump), cg,
+                             std::span<const double>(cs.density), std::span<const char>(cs.on_jump),
+                             M::n_mode, per_mode);
+  };
+  const double D = difference(grid, r.fine, *half, c, &r.mode_errors);
   r.error = factor * D;
   for (double& e : r.mode_errors) e *= factor;
-  for (std::size_t k = 0; k < ne; ++k) {
-    const long j = detail::nearest(c.mu, r.fine.mu[k]);
-    if (j < 0) continue;
-    const std::complex<double> mc = c.mu[static_cast<std::size_t>(j)];
-    r.mu_error[k] = factor * std::abs(r.fine.mu[k] - mc);
-    r.lambda_error[k] = factor * std::abs(r.lambda[k] - std::exp(mc * h));
-  }
-  if (ne >= 2) {
-    const long j1 = detail::nearest(c.mu, r.fine.mu[0]), j2 = detail::nearest(c.mu, r.fine.mu[1]);
-    if (j1 >= 0 && j2 >= 0) {
-      const double dc =
-          c.mu[static_cast<std::size_t>(j1)].real() - c.mu[static_cast<std::size_t>(j2)].real();
-      r.decay_rate_error = factor * std::fabs(r.decay_rate - dc);
-      r.gap_error = factor * std::fabs(r.gap - (1.0 - std::exp(-dc * h)));
-      r.decays = r.gap > r.gap_error;
-      if (!*r.decays)
-        r.notes.push_back(
-            "the spectral gap is within its estimated error of 0: no decay is claimed (the "
-            "eigenvalues after the first lie on the unit circle up to the scheme's damping, "
-            "which falls like n^-p: a cycle, not mixing)");
-    }
-  }
+  std::vector<std::complex<double>> coarse_lambda;
+  for (const std::complex<double> m : c.mu) coarse_lambda.push_back(std::exp(m * h));
+  r.spectrum = spectrum_errors(r.lambda, coarse_lambda, h, factor);
+  if (r.spectrum.decays == false)
+    r.notes.push_back(
+        "the spectral gap is within its estimated error of 0: no decay is claimed (the "
+        "eigenvalues after the first lie on the unit circle up to the scheme's damping, "
+        "which falls like n^-p: a cycle, not mixing)");
   // A third grid for the observed order.
   if (const std::optional<TensorGrid<N>> quarter = detail::fv_half_grid(*half)) {
     const FvGridSolution q = fv_solve_grid<M>(*quarter, par, planes, o);
     if (q.failure.empty()) {
-      const double D2 = detail::fv_difference(*half, c, *quarter, q, M::n_mode, nullptr);
+      const double D2 = difference(*half, c, *quarter, q, nullptr);
       if (D > 0.0 && D2 > 0.0) r.observed_order = std::log2(D2 / D);
     }
   }
-  if (std::isfinite(r.observed_order) && std::fabs(r.observed_order - o.order) > 1.0)
+  if (std::isfinite(r.observed_order)) r.error_reliable = order_near(r.observed_order, o.order);
+  if (r.error_reliable == false)
     r.notes.push_back("the observed order of convergence is " + std::to_string(r.observed_order) +
                       ", not near " + std::to_string(o.order) +
                       ": the grids are not in the asymptotic regime (or the density is not "

@@ -32,10 +32,12 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <complex>
 #include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -53,6 +55,7 @@
 #include "hybgen/rt/methods/generator_solve.hpp"
 #include "hybgen/rt/methods/invariant.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
+#include "hybgen/rt/methods/two_grid.hpp"
 
 namespace hybgen::rt {
 
@@ -229,6 +232,58 @@ inline nlohmann::json eigenvalues_json(const InvariantResult& inv) {
   return eig;
 }
 
+/// A number, or null when it is not finite (no estimate).
+inline nlohmann::json number_or_null(double x) {
+  return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json();
+}
+
+/// The spectrum's members of the invariant block of summary.json, every one with its error
+/// (two_grid.hpp; null: no estimate): `eigenvalues` (re, im, abs, error), `spectral_gap`,
+/// `decay_rate`, `leak_rate`, and the decisions `decays` and `leaks`.
+inline void add_spectrum_json(nlohmann::json& j, std::span<const std::complex<double>> lambda,
+                              const SpectrumErrors& e) {
+  nlohmann::json eig = nlohmann::json::array();
+  for (std::size_t k = 0; k < lambda.size(); ++k)
+    eig.push_back(
+        {{"re", lambda[k].real()},
+         {"im", lambda[k].imag()},
+         {"abs", std::abs(lambda[k])},
+         {"error", number_or_null(k < e.lambda_error.size() ? e.lambda_error[k] : std::nan(""))}});
+  j["eigenvalues"] = eig;
+  j["spectral_gap"] = e.gap;
+  j["spectral_gap_error"] = number_or_null(e.gap_error);
+  j["decay_rate"] = e.decay_rate;
+  j["decay_rate_error"] = number_or_null(e.decay_rate_error);
+  j["leak_rate"] = e.leak_rate;
+  j["leak_rate_error"] = number_or_null(e.leak_rate_error);
+  j["decays"] = e.decays ? nlohmann::json(*e.decays) : nlohmann::json();
+  j["leaks"] = e.leaks ? nlohmann::json(*e.leaks) : nlohmann::json();
+}
+
+/// The density's error members of the invariant block (two_grid.hpp; null: no estimate).
+inline void add_density_error_json(nlohmann::json& j, double error,
+                                   const std::vector<double>& mode_errors, double observed_order,
+                                   std::optional<bool> reliable,
+                                   const std::vector<int>& coarse_nodes) {
+  j["error"] = number_or_null(error);
+  j["mode_errors"] = nlohmann::json::array();
+  for (const double e : mode_errors) j["mode_errors"].push_back(number_or_null(e));
+  j["observed_order"] = number_or_null(observed_order);
+  j["error_reliable"] = reliable ? nlohmann::json(*reliable) : nlohmann::json();
+  j["coarse_grid"] = coarse_nodes;
+}
+
+/// What a spectrum's decisions tell the user (two_grid.hpp): no decay, mass that leaves.
+inline void spectrum_warnings(const SpectrumErrors& e, std::vector<std::string>& warnings) {
+  if (e.leaks == true)
+    warnings.push_back(
+        "mass leaves the box: lambda1 is below 1 by more than its error (leak rate " +
+        std::to_string(e.leak_rate) + " +/- " + std::to_string(e.leak_rate_error) +
+        " per unit time), so no density in the box is invariant; the frame is the "
+        "conditionally invariant density. method=escape reports the escape rate with its "
+        "error");
+}
+
 }  // namespace detail
 
 /// The characteristics method and its adaptive mass budget (`dt` unused).
@@ -397,18 +452,6 @@ template <HybridModel M>
   r.solution.n_point = grid.size();
   r.solution.u = inv.fine.density;
   r.frame_names = {std::string(method_spec(Method::invariant).frame)};
-  const auto number = [](double x) {
-    return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json();
-  };
-  nlohmann::json eig = nlohmann::json::array();
-  for (std::size_t k = 0; k < inv.lambda.size(); ++k)
-    eig.push_back({{"re", inv.lambda[k].real()},
-                   {"im", inv.lambda[k].imag()},
-                   {"abs", std::abs(inv.lambda[k])},
-                   {"error", number(inv.lambda_error[k])},
-                   {"mu_re", inv.fine.mu[k].real()},
-                   {"mu_im", inv.fine.mu[k].imag()},
-                   {"mu_error", number(inv.mu_error[k])}});
   double low = std::numeric_limits<double>::infinity();
   for (const double u : inv.fine.density) low = std::min(low, u);
   nlohmann::json j = {{"scheme", "fv"},
@@ -417,26 +460,21 @@ template <HybridModel M>
                       {"rows", inv.fine.unknowns},
                       {"nonzeros", inv.fine.nonzeros},
                       {"file", "invariant.npy"},
-                      {"eigenvalues", eig},
-                      {"spectral_gap", inv.gap},
-                      {"spectral_gap_error", number(inv.gap_error)},
-                      {"decay_rate", inv.decay_rate},
-                      {"decay_rate_error", number(inv.decay_rate_error)},
-                      {"decays", inv.decays ? nlohmann::json(*inv.decays) : nlohmann::json()},
-                      {"leak_rate", inv.leak_rate},
                       {"min_value", low},
                       {"residual", inv.fine.residual},
                       {"sigma", inv.fine.sigma},
-                      {"error", number(inv.error)},
-                      {"mode_errors", nlohmann::json::array()},
-                      {"observed_order", number(inv.observed_order)},
-                      {"coarse_grid", inv.coarse_nodes},
                       {"solver", "bordered SparseLU; shift-invert Arnoldi (Spectra)"},
                       {"iterations", inv.fine.iterations},
                       {"converged", inv.fine.eigen_converged},
                       {"assembly_seconds", inv.seconds_fine},
                       {"error_seconds", inv.seconds_coarse}};
-  for (const double e : inv.mode_errors) j["mode_errors"].push_back(number(e));
+  detail::add_spectrum_json(j, inv.lambda, inv.spectrum);
+  for (std::size_t k = 0; k < inv.lambda.size(); ++k) {
+    j["eigenvalues"][k]["mu_re"] = inv.fine.mu[k].real();
+    j["eigenvalues"][k]["mu_im"] = inv.fine.mu[k].imag();
+  }
+  detail::add_density_error_json(j, inv.error, inv.mode_errors, inv.observed_order,
+                                 inv.error_reliable, inv.coarse_nodes);
   std::string note =
       "error: estimated relative L1 error of the density (max over modes; nodes on a cut "
       "excluded), the difference from the grid of coarse_grid nodes" +
@@ -444,7 +482,8 @@ template <HybridModel M>
       "; each eigenvalue's error likewise (docs/methods.md, \"invariant\")";
   for (const std::string& n : inv.notes) note += ". " + n;
   j["note"] = note;
-  if (inv.fine.leaks)
+  detail::spectrum_warnings(inv.spectrum, r.warnings);
+  if (inv.fine.leaks && inv.spectrum.leaks != true)
     r.warnings.push_back(
         "mass leaves the box: the density is the quasi-stationary one (the "
         "eigenvector of the rightmost eigenvalue), decaying at leak_rate");
@@ -473,20 +512,81 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   InvariantOptions io;
   io.n_eigen = std::max(2, static_cast<int>(s.settings.integer<"eigenvalues">()));
   const InvariantResult inv = invariant_density(op, io);
+  // The errors (two_grid.hpp): the same scheme on the halved grid, and halved again for the
+  // observed order; the density's difference needs every node in this process.
+  const TensorGrid<N> half = halved_grid(grid), quarter = halved_grid(half);
+  const auto coarse_solve = [&](const TensorGrid<N>& g, const char* title) {
+    const TransferOperator<N> cop = detail::assemble<M>(g, par, o, s.quiet, title);
+    if (!cop.ok()) return InvariantResult{};
+    return invariant_density(cop, io);
+  };
+  const auto t1 = detail::MethodClock::now();
+  const InvariantResult c = coarse_solve(half, "transfer operator: assembly (halved grid)");
+  const InvariantResult q =
+      op.distributed ? InvariantResult{}
+                     : coarse_solve(quarter, "transfer operator: assembly (quartered grid)");
+  const double error_s = detail::seconds_since(t1);
   r.solve_s = detail::seconds_since(t0);
   detail::set_eigenvector_frame(r, op, inv, method_spec(Method::invariant));
+  constexpr int kOrder = 1;  // the sampled schemes are first order at best (docs/methods.md)
+  const double factor = error_factor(kOrder);
+  const SpectrumErrors spec =
+      spectrum_errors(inv.eigenvalues, c.eigenvalues, o.step, factor, io.tol);
+  double error = std::numeric_limits<double>::quiet_NaN(), observed = error;
+  std::vector<double> mode_errors;
+  std::optional<bool> reliable;
+  std::vector<std::string> notes;
+  if (op.distributed) {
+    notes.push_back(
+        "no error estimate of the density over several ranks (the eigenvalues' "
+        "errors are estimated)");
+  } else if (!c.density.empty()) {
+    const int n_mode = static_cast<int>(op.n_mode);
+    const std::span<const char> none;
+    const double D =
+        coarse_difference(grid, std::span<const double>(inv.density), none, half,
+                          std::span<const double>(c.density), none, n_mode, &mode_errors);
+    error = factor * D;
+    for (double& e : mode_errors) e *= factor;
+    if (!q.density.empty()) {
+      const double D2 =
+          coarse_difference(half, std::span<const double>(c.density), none, quarter,
+                            std::span<const double>(q.density), none, n_mode, nullptr);
+      if (D > 0.0 && D2 > 0.0)
+        observed = std::log2(D2 / D), reliable = order_near(observed, kOrder);
+    }
+    if (reliable == false)
+      notes.push_back("the observed order of convergence is " + std::to_string(observed) +
+                      ", not near 1: the error estimate is unreliable (the scheme's error does "
+                      "not fall like the grid spacing here); scheme=fv converges at order 3 "
+                      "where it applies");
+  }
+  if (spec.decays == false)
+    notes.push_back(
+        "the spectral gap is within its estimated error of 0: no decay is claimed "
+        "(the scheme's numerical diffusion moves a cycle's eigenvalues inside the "
+        "unit circle)");
+  std::vector<int> coarse_nodes;
+  for (const GridAxis& a : half.axes) coarse_nodes.push_back(a.n);
   nlohmann::json j = detail::operator_summary(o, op);
   j["file"] = r.frame_names.front() + ".npy";
-  j["eigenvalues"] = detail::eigenvalues_json(inv);
-  j["spectral_gap"] = inv.gap;
-  j["decay_rate"] = inv.decay_rate;
-  j["leak_rate"] = inv.leak_rate;
+  detail::add_spectrum_json(j, inv.eigenvalues, spec);
+  detail::add_density_error_json(j, error, mode_errors, observed, reliable, coarse_nodes);
+  j["order"] = kOrder;
+  j["error_seconds"] = error_s;
   j["min_value"] = inv.min_value;
   j["residual"] = inv.residual;
   j["solver"] = inv.method;
   j["iterations"] = inv.iterations;
   j["converged"] = inv.converged;
+  std::string note =
+      "error: estimated relative L1 error of the density (max over modes), twice the "
+      "difference from the grid of coarse_grid nodes; each eigenvalue's error likewise "
+      "(docs/methods.md, \"invariant\")";
+  for (const std::string& n : notes) note += ". " + n;
+  j["note"] = note;
   r.summary[summary_key::invariant] = j;
+  detail::spectrum_warnings(spec, r.warnings);
   if (!inv.converged)
     r.warnings.push_back("the eigen-solver (" + inv.method +
                          ") did not meet its tolerance; see invariant.residual in summary.json");
