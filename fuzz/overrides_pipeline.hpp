@@ -20,6 +20,7 @@
 
 #include "hybgen/gen/check.hpp"
 #include "hybgen/gen/parse.hpp"
+#include "hybgen/rt/method_table.hpp"
 
 namespace hybgen::fuzz {
 
@@ -73,11 +74,10 @@ inline std::string override_invariant_violation(const gen::Model& m) {
     return "bad particles/seed/step accepted";
   if (k.integer<"eigenvalues">() < 1 || k.integer<"eigenvalues">() > 64)
     return "bad eigenvalues accepted";
-  const std::string& method = k.word<"method">();
-  if (method != "characteristics" && method != "transfer" && method != "invariant" &&
-      method != "particles")
-    return "unknown method accepted";
-  if (k.word<"scheme">() != "hat" && k.word<"scheme">() != "cell") return "unknown scheme accepted";
+  if (!rt::find_method(k.word<"method">())) return "unknown method accepted";
+  const std::string& scheme = k.word<"scheme">();
+  if (scheme != "auto" && scheme != "hat" && scheme != "cell" && scheme != "fv")
+    return "unknown scheme accepted";
   if (k.integer<"samples">() < 0 || k.integer<"samples">() > 64) return "bad samples accepted";
   if (!(m.limits.derive_seconds > 0) || m.limits.max_expr_nodes < 1 ||
       !(m.limits.max_expand_terms >= 1))

@@ -1,12 +1,8 @@
 // Validation of `method=invariant` with `scheme=fv` (the finite-volume generator,
 // runtime/include/hybgen/rt/methods/generator.hpp) through the whole pipeline: `hybgen run` on
 // .model files (tests/validation/models/, models/sawtooth.model), the densities read back from
-// the .npy files and summary.json, against closed forms derived here (none comes from hybgen).
-//
-// Closed forms. In one dimension Liouville's equation for a stationary density is (u f)' = 0
-// between switches, and mass conservation at a switch carries the flux q = u|f| across it
-// unchanged (identity reset), or from the guard to the reset's image (the sawtooth). So q is
-// the same constant all around a cycle and u = q/|f|, q = 1/(period) for unit mass:
+// the .npy files and summary.json, against closed forms (tests/support/cycle_closed_forms.hpp
+// derives them; none comes from hybgen):
 //   thermostat (heat T' = 4 − T until T = 2, cool T' = −T until T = 1): on [1, 2],
 //     u_heat = 1/(ln 3 (4 − T)), u_cool = 1/(ln 3 T) (period ln(3/2) + ln 2 = ln 3), and 0 on
 //     the transients (heat above 2, cool below 1) of the box [0.8, 2.2];
@@ -31,6 +27,7 @@
 #include <vector>
 
 #include "hybgen/rt/io/npy.hpp"
+#include "support/cycle_closed_forms.hpp"
 #include "support/e2e.hpp"
 
 namespace {
@@ -73,31 +70,11 @@ std::vector<double> density(const FvRun& r, const std::string& mode) {
   return hybgen::rt::read_npy(p.string()).data;
 }
 
-/// Whether x is on a jump of the thermostat's density (T = 1 or 2): two-valued, excluded.
-bool on_thermo_jump(double x) {
-  return std::fabs(x - 1.0) < 1e-9 || std::fabs(x - 2.0) < 1e-9;
-}
-
-/// u_heat, u_cool of the thermostat.
-double thermo(int m, double T) {
-  if (T < 1.0 || T > 2.0) return 0.0;
-  return 1.0 / (std::log(3.0) * (m == 0 ? 4.0 - T : T));
-}
-
-/// u of the sawtooth.
-double saw(double x) {
-  return 1.0 / (std::log(2.0) * (1.0 + x));
-}
-
-/// The node of index i of n on [lo, hi].
-double node(double lo, double hi, int n, int i) {
-  return lo + (hi - lo) * i / (n - 1);
-}
-
-/// Trapezoid weight of index i of n (up to the spacing, which cancels in a relative norm).
-double trap(int n, int i) {
-  return i == 0 || i == n - 1 ? 0.5 : 1.0;
-}
+using hybgen::testing::grid_node;
+using hybgen::testing::on_thermostat_jump;
+using hybgen::testing::sawtooth_density;
+using hybgen::testing::thermostat_density;
+using hybgen::testing::trapezoid_weight;
 
 /// Relative L1 error per thermostat mode on n nodes of [0.8, 2.2], jumps excluded.
 std::vector<double> thermostat_errors(const FvRun& r, int n) {
@@ -108,10 +85,11 @@ std::vector<double> thermostat_errors(const FvRun& r, int n) {
     EXPECT_EQ(u.size(), static_cast<std::size_t>(n));
     double num = 0.0, den = 0.0;
     for (int i = 0; i < n && static_cast<std::size_t>(i) < u.size(); ++i) {
-      const double T = node(0.8, 2.2, n, i);
-      if (on_thermo_jump(T)) continue;
-      num += trap(n, i) * std::fabs(u[static_cast<std::size_t>(i)] - thermo(m, T));
-      den += trap(n, i) * thermo(m, T);
+      const double T = grid_node(0.8, 2.2, n, i);
+      if (on_thermostat_jump(T)) continue;
+      num += trapezoid_weight(n, i) *
+             std::fabs(u[static_cast<std::size_t>(i)] - thermostat_density(m, T));
+      den += trapezoid_weight(n, i) * thermostat_density(m, T);
     }
     out.push_back(num / den);
   }
@@ -124,9 +102,9 @@ double sawtooth_error(const FvRun& r, int n) {
   EXPECT_EQ(u.size(), static_cast<std::size_t>(n));
   double num = 0.0, den = 0.0;
   for (int i = 0; i < n && static_cast<std::size_t>(i) < u.size(); ++i) {
-    const double x = node(0.0, 1.0, n, i);
-    num += trap(n, i) * std::fabs(u[static_cast<std::size_t>(i)] - saw(x));
-    den += trap(n, i) * saw(x);
+    const double x = grid_node(0.0, 1.0, n, i);
+    num += trapezoid_weight(n, i) * std::fabs(u[static_cast<std::size_t>(i)] - sawtooth_density(x));
+    den += trapezoid_weight(n, i) * sawtooth_density(x);
   }
   return num / den;
 }
@@ -198,11 +176,12 @@ TEST(InvariantFv, ProductOfTwoCyclesInTwoDimensions) {
     ASSERT_EQ(u.size(), static_cast<std::size_t>(nT * nx));
     double num = 0.0, den = 0.0;
     for (int i = 0; i < nT; ++i) {
-      const double T = node(0.8, 2.2, nT, i);
-      if (on_thermo_jump(T)) continue;
+      const double T = grid_node(0.8, 2.2, nT, i);
+      if (on_thermostat_jump(T)) continue;
       for (int j = 0; j < nx; ++j) {
-        const double x = node(0.0, 1.0, nx, j), w = trap(nT, i) * trap(nx, j);
-        const double exact = thermo(m, T) * saw(x);
+        const double x = grid_node(0.0, 1.0, nx, j),
+                     w = trapezoid_weight(nT, i) * trapezoid_weight(nx, j);
+        const double exact = thermostat_density(m, T) * sawtooth_density(x);
         num += w * std::fabs(u[static_cast<std::size_t>(i * nx + j)] - exact);
         den += w * exact;
       }

@@ -79,11 +79,12 @@ inline constexpr std::array kSettings = {
                 "relative tolerance of the full mass budget's cubatures"},
     SettingSpec{"step", SettingType::real, 0.0, "", 0.0, 1e300, false, "",
                 "transfer invariant escape", "time step of the transfer operator (0: dt)"},
-    SettingSpec{"scheme", SettingType::word, 0.0, "hat", 0, 0, false, "hat|cell|fv",
+    SettingSpec{"scheme", SettingType::word, 0.0, "auto", 0, 0, false, "auto|hat|cell|fv",
                 "transfer invariant escape",
-                "transfer operator: hat (forward samples on hat functions), cell (Ulam), or fv "
-                "(invariant only: the null vector of a cut-cell finite-volume generator, with "
-                "error estimates; axis-aligned guards)"},
+                "auto (fv for method=invariant where it applies, else hat), hat (forward "
+                "samples on hat functions), cell (Ulam), or fv (invariant only: the null vector "
+                "of a cut-cell finite-volume generator, order 3; guards that are coordinate "
+                "planes)"},
     SettingSpec{"fv_order", SettingType::integer, 3, "", 1, 3, false, "", "invariant",
                 "scheme=fv: order of the upwind reconstruction (3; 1 and 2 for tests of the "
                 "order)"},

@@ -39,6 +39,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <span>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -423,6 +424,25 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   return r;
 }
 
+namespace detail {
+
+/// Why scheme=auto of the invariant method cannot take the finite-volume generator on this
+/// model and run, or "" when it can: it runs in one process, on guards that are coordinate
+/// planes (generator_geometry.hpp, `fv_guard_planes`).
+template <HybridModel M>
+std::string fv_unavailable(const TensorGrid<state_dim_v<M>>& grid, const double* par,
+                           const MethodSettings& s) {
+  if (s.backend && s.backend->ranks() > 1) return "the generator runs in one process";
+  try {
+    (void)fv_guard_planes<M>(grid, par);
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace detail
+
 /// scheme=fv of the invariant method: the finite-volume generator's null vector on the grid's
 /// nodes, its eigenvalues as the transfer operator's over `step` (else dt), and their errors
 /// from the grid of (n+1)/2 nodes per axis (generator_solve.hpp). The same summary keys as the
@@ -503,8 +523,20 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
                                                 std::span<const double>, double dt,
                                                 const double* par, const MethodSettings& s) {
   constexpr std::size_t N = state_dim_v<M>;
-  if (s.settings.word<"scheme">() == "fv") return solve_by_invariant_fv<M>(grid, dt, par, s);
+  const std::string& scheme = s.settings.word<"scheme">();
+  if (scheme == "fv") return solve_by_invariant_fv<M>(grid, dt, par, s);
+  // scheme=auto: the generator where it applies, else hat, saying why.
+  std::string fallback;
+  if (scheme == "auto") {
+    fallback = detail::fv_unavailable<M>(grid, par, s);
+    if (fallback.empty()) return solve_by_invariant_fv<M>(grid, dt, par, s);
+  }
   MethodResult<N> r;
+  if (!fallback.empty())
+    r.warnings.push_back(
+        "scheme=auto used hat, first order, not the finite-volume generator "
+        "(order 3): " +
+        fallback);
   const TransferOptions o = detail::transfer_options(s, dt);
   const auto t0 = detail::MethodClock::now();
   const TransferOperator<N> op = detail::assemble<M>(grid, par, o, s.quiet);

@@ -113,9 +113,10 @@ inline const char* scheme_name(TransferScheme s) {
   return s == TransferScheme::cell ? "cell" : "hat";
 }
 
-/// The scheme named `name`; throws std::invalid_argument for any other name.
+/// The scheme named `name` (`auto`: hat, the transfer operator's default); throws
+/// std::invalid_argument for any other name.
 inline TransferScheme parse_scheme(const std::string& name) {
-  if (name == "hat") return TransferScheme::hat;
+  if (name == "hat" || name == "auto") return TransferScheme::hat;
   if (name == "cell") return TransferScheme::cell;
   if (name == "fv")
     throw std::invalid_argument(

@@ -1,0 +1,241 @@
+// The error estimates of `method=invariant` (runtime/include/hybgen/rt/methods/two_grid.hpp)
+// against the true errors, for both kinds of scheme: the finite-volume generator (fv, order 3)
+// and the sampled transfer operator (hat, first order at best). Five closed-form cases
+// (tests/support/cycle_closed_forms.hpp derives them), each through the whole pipeline:
+// `hybgen run` on a .model file, the density read back from the .npy files, the estimates
+// from summary.json.
+//
+// What is asserted, per case and scheme:
+//  * `invariant.error` covers the true relative L1 error and is at most 10 times it;
+//  * λ₁'s error covers |λ₁ − 1| (the systems are closed); fv has |λ₁ − 1| ≤ 1e-9;
+//  * λ₂'s error covers its distance from the nearest exact eigenvalue e^{2πih Σ k_i/T_i}
+//    (the flows are periodic, of periods T_i);
+//  * no decay is claimed (the gap is within its error of 0) and no leak (λ₁ within its
+//    error of 1): a periodic flow neither mixes nor loses mass, whatever the scheme's damping;
+//  * scheme=auto, the default, takes fv on every one of them (their guards are coordinate
+//    planes), and hat with a warning naming the guard where fv does not apply.
+//
+// Measured (2026-11-28, the 2-core development machine, `ctest -R InvariantErrors -V`): the
+// estimate over the true error is 6.8–7.2 for fv on all five; for hat 1.6–3.8, including the
+// two cases where hat's observed order is far from 1 and the estimate is flagged unreliable
+// (thermostat on a box wider than its cycle, quadratic cycle). True errors at the grids below:
+// fv 1.3e-8 (thermostat), 1.6e-9 (sawtooth), 1.9e-9 (quadratic), 4.9e-9 (halving), 1.5e-7
+// (product); hat 1.0e-1, 2.5e-4, 1.6e-3, 7.7e-3, 5.7e-2.
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <complex>
+#include <cstdio>
+#include <filesystem>
+#include <functional>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "hybgen/rt/io/npy.hpp"
+#include "support/cycle_closed_forms.hpp"
+#include "support/e2e.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hybgen::testing::Axis;
+using hybgen::testing::relative_l1;
+using nlohmann::json;
+using Point = std::vector<double>;
+
+const fs::path kWork = hybgen::testing::e2e_dir("validation_invariant_errors");
+const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
+const std::string kSource = std::string(HYBGEN_SOURCE_DIR) + "/";
+
+/// One closed-form case: a model, its grid, its modes' exact densities and its periods.
+struct Case {
+  std::string name;                                ///< Test name part.
+  std::string model;                               ///< Path from the source directory.
+  std::vector<Axis> axes;                          ///< The grid the run uses (--set grid=...).
+  std::vector<std::string> modes;                  ///< Mode names ({""}: one mode, invariant.npy).
+  std::function<double(int, const Point&)> exact;  ///< Mode m's density at a point.
+  std::function<bool(const Point&)> on_jump;       ///< Nodes on a jump, left out.
+  /// The periods T_i of the independent cycles: the exact spectrum is exp(2πih Σ k_i/T_i).
+  std::vector<double> periods;
+};
+
+/// gtest's name for a case in messages.
+void PrintTo(const Case& c, std::ostream* os) {
+  *os << c.name;
+}
+
+std::string grid_setting(const std::vector<Axis>& axes) {
+  std::string g;
+  for (const Axis& a : axes) {
+    if (!g.empty()) g += 'x';
+    g += std::to_string(a.n);
+  }
+  return g;
+}
+
+bool thermostat_jump(const Point& x) {
+  return hybgen::testing::on_thermostat_jump(x[0]);
+}
+
+std::vector<Case> cases() {
+  namespace t = hybgen::testing;
+  const std::string m = "tests/validation/models/";
+  return {
+      {"thermostat",
+       m + "thermostat_fv.model",
+       {{0.8, 2.2, 281}},
+       {"heat", "cool"},
+       [](int mode, const Point& x) { return t::thermostat_density(mode, x[0]); },
+       thermostat_jump,
+       {std::log(3.0)}},
+      {"sawtooth",
+       "models/sawtooth.model",
+       {{0.0, 1.0, 401}},
+       {""},
+       [](int, const Point& x) { return t::sawtooth_density(x[0]); },
+       {},
+       {std::log(2.0)}},
+      {"quadratic",
+       m + "quadratic_cycle.model",
+       {{0.0, 1.0, 401}},
+       {""},
+       [](int, const Point& x) { return t::quadratic_density(x[0]); },
+       {},
+       {std::numbers::pi / 4.0}},
+      {"halving",
+       m + "halving_cycle.model",
+       {{0.0, 1.0, 401}},
+       {"up", "down"},
+       [](int mode, const Point& x) { return t::halving_density(mode, x[0]); },
+       [](const Point& x) { return std::fabs(x[0] - 0.5) < 1e-9; },
+       {std::log(3.0)}},
+      {"product",
+       m + "thermostat_sawtooth_fv.model",
+       {{0.8, 2.2, 141}, {0.0, 1.0, 101}},
+       {"heat", "cool"},
+       [](int mode, const Point& x) {
+         return t::thermostat_density(mode, x[0]) * t::sawtooth_density(x[1]);
+       },
+       thermostat_jump,
+       {std::log(3.0), std::log(2.0)}},
+  };
+}
+
+/// One run of a case with a scheme, and what it wrote.
+struct InvRun {
+  int code = -1;
+  std::string out;
+  json inv;  ///< summary.json's invariant block.
+  fs::path dir;
+};
+
+InvRun run(const Case& c, const std::string& scheme) {
+  InvRun r;
+  r.dir = kWork / (c.name + "_" + scheme);
+  fs::remove_all(r.dir);
+  const auto res = hybgen_cli("run '" + c.model + "' --out '" + r.dir.string() +
+                              "' --set method=invariant --set scheme=" + scheme +
+                              " --set outputs=npy --set grid=" + grid_setting(c.axes));
+  r.code = res.code;
+  r.out = res.out;
+  if (r.code == 0) r.inv = hybgen::testing::read_json_file(r.dir / "summary.json")["invariant"];
+  return r;
+}
+
+/// The true error: max over modes of the relative L1 error.
+double true_error(const Case& c, const InvRun& r) {
+  double worst = 0.0;
+  for (std::size_t m = 0; m < c.modes.size(); ++m) {
+    const fs::path p =
+        r.dir / (c.modes[m].empty() ? "invariant.npy" : "invariant_" + c.modes[m] + ".npy");
+    const std::vector<double> u = hybgen::rt::read_npy(p.string()).data;
+    const int mode = static_cast<int>(m);
+    worst = std::max(worst,
+                     relative_l1(
+                         u, c.axes, [&](const Point& x) { return c.exact(mode, x); }, c.on_jump));
+  }
+  return worst;
+}
+
+std::complex<double> eigenvalue(const json& inv, int k) {
+  const json& l = inv["eigenvalues"][k];
+  return {l["re"].get<double>(), l["im"].get<double>()};
+}
+
+class InvariantErrors : public ::testing::TestWithParam<std::tuple<Case, std::string>> {};
+
+TEST_P(InvariantErrors, EstimatesCoverTheTrueErrorsAndNoDecayIsClaimed) {
+  const auto& [c, scheme] = GetParam();
+  const InvRun r = run(c, scheme);
+  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_EQ(r.inv["scheme"], scheme) << r.inv.dump();
+  const double truth = true_error(c, r);
+  ASSERT_TRUE(r.inv["error"].is_number()) << r.inv.dump();
+  const double est = r.inv["error"].get<double>();
+  const std::complex<double> l1 = eigenvalue(r.inv, 0), l2 = eigenvalue(r.inv, 1);
+  const double h = r.inv["step"].get<double>();
+  // λ₂'s distance from the nearest exact eigenvalue other than 1 (|k_i| ≤ 3).
+  double d2 = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < 49; ++k) {
+    const int k1 = k % 7 - 3, k2 = k / 7 - 3;
+    if ((k1 == 0 && k2 == 0) || (k2 != 0 && c.periods.size() < 2)) continue;
+    double phase = 2.0 * std::numbers::pi * h * k1 / c.periods[0];
+    if (k2 != 0) phase += 2.0 * std::numbers::pi * h * k2 / c.periods[1];
+    d2 = std::min(d2, std::abs(l2 - std::polar(1.0, phase)));
+  }
+
+  std::printf(
+      "%s %s: true error %.3e, estimated %.3e (ratio %.2f, observed order %s); "
+      "|l1 - 1| %.1e (+/- %.1e); |l2 - exact| %.1e (+/- %.1e)\n",
+      c.name.c_str(), scheme.c_str(), truth, est, est / truth,
+      r.inv["observed_order"].dump().c_str(), std::abs(l1 - 1.0),
+      r.inv["eigenvalues"][0]["error"].get<double>(), d2,
+      r.inv["eigenvalues"][1]["error"].get<double>());
+  EXPECT_GE(est, truth);
+  EXPECT_LE(est, 10.0 * truth);
+  EXPECT_GE(r.inv["eigenvalues"][0]["error"].get<double>(), std::abs(l1 - 1.0));
+  EXPECT_GE(r.inv["eigenvalues"][1]["error"].get<double>(), d2);
+  if (scheme == "fv") {
+    EXPECT_LE(std::abs(l1 - 1.0), 1e-9);
+  }
+  EXPECT_EQ(r.inv["decays"], false) << r.inv.dump();
+  EXPECT_EQ(r.inv["leaks"], false) << r.inv.dump();
+  EXPECT_LE(r.inv["spectral_gap"].get<double>(), r.inv["spectral_gap_error"].get<double>());
+}
+
+INSTANTIATE_TEST_SUITE_P(FiveCycles, InvariantErrors,
+                         ::testing::Combine(::testing::ValuesIn(cases()),
+                                            ::testing::Values("fv", "hat")),
+                         [](const auto& param_info) {
+                           return std::get<0>(param_info.param).name + "_" +
+                                  std::get<1>(param_info.param);
+                         });
+
+TEST(InvariantSchemeAuto, TakesTheGeneratorWhereTheGuardsAreCoordinatePlanes) {
+  const Case c = cases()[3];  // halving: a reset that is not the identity
+  const InvRun r = run(c, "auto");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.inv["scheme"], "fv") << r.inv.dump();
+  EXPECT_LE(true_error(c, r), 1e-6);
+}
+
+TEST(InvariantSchemeAuto, FallsBackToHatNamingTheGuard) {
+  // A curved guard (radial_fv.model's rim): the generator does not cut it yet.
+  Case c;
+  c.name = "radial";
+  c.model = "tests/validation/models/radial_fv.model";
+  c.axes = {{-1.1, 1.1, 45}, {-1.1, 1.1, 45}};
+  const InvRun r = run(c, "auto");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.inv["scheme"], "hat") << r.inv.dump();
+  EXPECT_NE(r.out.find("scheme=auto used hat"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("guard 'rim'"), std::string::npos) << r.out;
+  EXPECT_TRUE(r.inv["error"].is_number()) << r.inv.dump();
+}
+
+}  // namespace
