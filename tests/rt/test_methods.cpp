@@ -124,7 +124,7 @@ TEST(Methods, TransferOperatorSchemes) {
   s.set("method", "transfer");
   // Withdrawn: the settings table (settings.hpp) refuses it before any solver sees it.
   EXPECT_THROW(s.set("scheme", "interpolate"), std::invalid_argument);
-  EXPECT_EQ(s.settings.word<"scheme">(), "hat");
+  EXPECT_EQ(s.settings.word<"scheme">(), "auto");  // hat for transfer (transfer.hpp)
 }
 
 TEST(Methods, ParticlesAgreeWithinMonteCarloNoise) {

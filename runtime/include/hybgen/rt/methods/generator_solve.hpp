@@ -60,6 +60,9 @@ namespace hybgen::rt {
 
 /// The shift of the eigen-solver, as a fraction of the model's rate (FvOperator::rate).
 inline constexpr double kFvShift = 1e-2;
+/// A density below −this × its maximum is oscillating, not rounding (scheme=auto's test,
+/// methods.hpp `solve_by_invariant_fv`).
+inline constexpr double kFvNegativeTolerance = 1e-6;
 /// Fewest nodes per axis of a grid the error estimate solves on.
 inline constexpr int kFvMinNodes = 5;
 

@@ -447,12 +447,14 @@ std::string fv_unavailable(const TensorGrid<state_dim_v<M>>& grid, const double*
 /// nodes, its eigenvalues as the transfer operator's over `step` (else dt), and their errors
 /// from the grid of (n+1)/2 nodes per axis (generator_solve.hpp). The same summary keys as the
 /// transfer operator's spectrum, and `error`, `order`, `coarse_grid`, per eigenvalue `error`
-/// and μ, `decays`.
+/// and μ, `decays`. With `oscillates` (scheme=auto), a density that oscillates (below
+/// −kFvNegativeTolerance × its maximum) is not returned: `*oscillates` says why.
 /// (Not inlined into solve_by_invariant: GCC 12 then misreads the sampled path's vectors,
 /// -Wfree-nonheap-object in invariant.hpp.)
 template <HybridModel M>
 [[gnu::noinline]] MethodResult<state_dim_v<M>> solve_by_invariant_fv(
-    const TensorGrid<state_dim_v<M>>& grid, double dt, const double* par, const MethodSettings& s) {
+    const TensorGrid<state_dim_v<M>>& grid, double dt, const double* par, const MethodSettings& s,
+    std::string* oscillates = nullptr) {
   constexpr std::size_t N = state_dim_v<M>;
   MethodResult<N> r;
   FvOptions o;
@@ -462,6 +464,20 @@ template <HybridModel M>
   o.step = step > 0 ? step : dt;
   const auto t0 = detail::MethodClock::now();
   const FvInvariantResult inv = fv_invariant<M>(grid, par, o);  // throws: a guard it cannot cut
+  // scheme=auto: a density with features below the grid spacing (a measure concentrated near
+  // an attracting cycle) makes the high-order reconstruction oscillate.
+  if (const auto [lo, hi] = std::minmax_element(inv.fine.density.begin(), inv.fine.density.end());
+      oscillates && inv.fine.failure.empty() && lo != inv.fine.density.end() &&
+      *lo < -kFvNegativeTolerance * *hi) {
+    char b[400];
+    std::snprintf(b, sizeof b,
+                  "the finite-volume generator's density oscillated (min %.3g against max %.3g), "
+                  "as it does where the density has features below the grid spacing (a measure "
+                  "concentrated near an attracting cycle); hat keeps it non-negative",
+                  *lo, *hi);
+    *oscillates = b;
+    return r;
+  }
   r.solve_s = detail::seconds_since(t0);
   if (!inv.fine.failure.empty()) {
     r.failure = "(the finite-volume generator) " + inv.fine.failure;
@@ -529,7 +545,10 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   std::string fallback;
   if (scheme == "auto") {
     fallback = detail::fv_unavailable<M>(grid, par, s);
-    if (fallback.empty()) return solve_by_invariant_fv<M>(grid, dt, par, s);
+    if (fallback.empty()) {
+      MethodResult<N> fv = solve_by_invariant_fv<M>(grid, dt, par, s, &fallback);
+      if (fallback.empty()) return fv;
+    }
   }
   MethodResult<N> r;
   if (!fallback.empty())
