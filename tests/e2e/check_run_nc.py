@@ -69,6 +69,15 @@ else:
     assert np.array_equal(ds[ours("eigenvalue_abs")].values, np.array([l["abs"] for l in ev]))
     assert np.array_equal(ds[ours("eigenvalue_real")].values, np.array([l["re"] for l in ev]))
     assert ds.attrs["spectral_gap"] == s["invariant"]["spectral_gap"]
+    # The estimated errors travel with the numbers (docs/outputs.md).
+    errors = np.array([np.nan if l.get("error") is None else l["error"] for l in ev])
+    assert np.array_equal(ds[ours("eigenvalue_error")].values, errors, equal_nan=True), "eigenvalue_error"
+    assert not np.isnan(errors).all(), "no eigenvalue carries an error"
+    for key in ("spectral_gap_error", "decay_rate_error", "leak_rate_error"):
+        assert ds.attrs[key] == s["invariant"][key], key
+    assert ds.attrs["density_error"] == s["invariant"]["error"]
+    assert ds.attrs["decays"] == ("true" if s["invariant"]["decays"] else "false")
+    assert ds.attrs["leaks"] == ("true" if s["invariant"]["leaks"] else "false")
 
 # Where it came from.
 text = open(model_file, "rb").read()

@@ -11,11 +11,17 @@
 /// 2πik/period (k ∈ ℤ): the transfer operator's λ = e^{μh} lie on the unit circle, none
 /// decays, and arg λ₂ = 2πh/period.
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <filesystem>
 #include <functional>
 #include <numbers>
+#include <ostream>
+#include <string>
 #include <vector>
+
+#include "hybgen/rt/io/npy.hpp"
 
 namespace hybgen::testing {
 
@@ -90,4 +96,99 @@ inline double relative_l1(const std::vector<double>& u, const std::vector<Axis>&
   return num / den;
 }
 
+/// A point of the state space.
+using Point = std::vector<double>;
+
+/// One closed-form case: a model, its grid, its modes' exact densities and its periods.
+struct Case {
+  std::string name;                                ///< Test name part.
+  std::string model;                               ///< Path from the source directory.
+  std::vector<Axis> axes;                          ///< The grid the run uses (--set grid=...).
+  std::vector<std::string> modes;                  ///< Mode names ({""}: one mode, invariant.npy).
+  std::function<double(int, const Point&)> exact;  ///< Mode m's density at a point.
+  std::function<bool(const Point&)> on_jump;       ///< Nodes on a jump, left out.
+  /// The periods T_i of the independent cycles: the exact spectrum is exp(2πih Σ k_i/T_i).
+  std::vector<double> periods;
+};
+
+/// gtest's name for a case in messages.
+inline void PrintTo(const Case& c, std::ostream* os) {
+  *os << c.name;
+}
+
+/// The setting `grid` of the axes ("281", "141x101").
+inline std::string grid_setting(const std::vector<Axis>& axes) {
+  std::string g;
+  for (const Axis& a : axes) {
+    if (!g.empty()) g += 'x';
+    g += std::to_string(a.n);
+  }
+  return g;
+}
+
+/// Whether a point is on a jump of the thermostat density (its first coordinate).
+inline bool thermostat_jump(const Point& x) {
+  return on_thermostat_jump(x[0]);
+}
+
+/// The five cycles of tests/validation/test_invariant_errors.cpp and
+/// bench/bench_invariant.cpp, at the grids they run on.
+inline std::vector<Case> cycle_cases() {
+  const std::string m = "tests/validation/models/";
+  return {
+      {"thermostat",
+       m + "thermostat_fv.model",
+       {{0.8, 2.2, 281}},
+       {"heat", "cool"},
+       [](int mode, const Point& x) { return thermostat_density(mode, x[0]); },
+       thermostat_jump,
+       {std::log(3.0)}},
+      {"sawtooth",
+       "models/sawtooth.model",
+       {{0.0, 1.0, 401}},
+       {""},
+       [](int, const Point& x) { return sawtooth_density(x[0]); },
+       {},
+       {std::log(2.0)}},
+      {"quadratic",
+       m + "quadratic_cycle.model",
+       {{0.0, 1.0, 401}},
+       {""},
+       [](int, const Point& x) { return quadratic_density(x[0]); },
+       {},
+       {std::numbers::pi / 4.0}},
+      {"halving",
+       m + "halving_cycle.model",
+       {{0.0, 1.0, 401}},
+       {"up", "down"},
+       [](int mode, const Point& x) { return halving_density(mode, x[0]); },
+       [](const Point& x) { return std::fabs(x[0] - 0.5) < 1e-9; },
+       {std::log(3.0)}},
+      {"product",
+       m + "thermostat_sawtooth_fv.model",
+       {{0.8, 2.2, 141}, {0.0, 1.0, 101}},
+       {"heat", "cool"},
+       [](int mode, const Point& x) {
+         return thermostat_density(mode, x[0]) * sawtooth_density(x[1]);
+       },
+       thermostat_jump,
+       {std::log(3.0), std::log(2.0)}},
+  };
+}
+
+/// A case's true error: the worst mode's relative L1 error of the invariant density that a
+/// run wrote in `dir` (invariant.npy, or invariant_MODE.npy per mode).
+inline double cycle_case_error(const Case& c, const std::filesystem::path& dir) {
+  double worst = 0.0;
+  for (std::size_t m = 0; m < c.modes.size(); ++m) {
+    const std::filesystem::path p =
+        dir / (c.modes[m].empty() ? "invariant.npy" : "invariant_" + c.modes[m] + ".npy");
+    const std::vector<double> u = hybgen::rt::read_npy(p.string()).data;
+    const int mode = static_cast<int>(m);
+    worst = std::max(worst,
+                     relative_l1(
+                         u, c.axes, [&](const Point& x) { return c.exact(mode, x); }, c.on_jump));
+  }
+  return worst;
+}
 }  // namespace hybgen::testing

@@ -44,86 +44,18 @@ namespace {
 
 namespace fs = std::filesystem;
 using hybgen::testing::Axis;
-using hybgen::testing::relative_l1;
+using hybgen::testing::Point;
 using nlohmann::json;
-using Point = std::vector<double>;
 
 const fs::path kWork = hybgen::testing::e2e_dir("validation_invariant_errors");
 const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
-const std::string kSource = std::string(HYBGEN_SOURCE_DIR) + "/";
 
-/// One closed-form case: a model, its grid, its modes' exact densities and its periods.
-struct Case {
-  std::string name;                                ///< Test name part.
-  std::string model;                               ///< Path from the source directory.
-  std::vector<Axis> axes;                          ///< The grid the run uses (--set grid=...).
-  std::vector<std::string> modes;                  ///< Mode names ({""}: one mode, invariant.npy).
-  std::function<double(int, const Point&)> exact;  ///< Mode m's density at a point.
-  std::function<bool(const Point&)> on_jump;       ///< Nodes on a jump, left out.
-  /// The periods T_i of the independent cycles: the exact spectrum is exp(2πih Σ k_i/T_i).
-  std::vector<double> periods;
-};
+using hybgen::testing::Case;
+using hybgen::testing::grid_setting;
 
-/// gtest's name for a case in messages.
-void PrintTo(const Case& c, std::ostream* os) {
-  *os << c.name;
-}
-
-std::string grid_setting(const std::vector<Axis>& axes) {
-  std::string g;
-  for (const Axis& a : axes) {
-    if (!g.empty()) g += 'x';
-    g += std::to_string(a.n);
-  }
-  return g;
-}
-
-bool thermostat_jump(const Point& x) {
-  return hybgen::testing::on_thermostat_jump(x[0]);
-}
-
+/// The cases: the support header's five.
 std::vector<Case> cases() {
-  namespace t = hybgen::testing;
-  const std::string m = "tests/validation/models/";
-  return {
-      {"thermostat",
-       m + "thermostat_fv.model",
-       {{0.8, 2.2, 281}},
-       {"heat", "cool"},
-       [](int mode, const Point& x) { return t::thermostat_density(mode, x[0]); },
-       thermostat_jump,
-       {std::log(3.0)}},
-      {"sawtooth",
-       "models/sawtooth.model",
-       {{0.0, 1.0, 401}},
-       {""},
-       [](int, const Point& x) { return t::sawtooth_density(x[0]); },
-       {},
-       {std::log(2.0)}},
-      {"quadratic",
-       m + "quadratic_cycle.model",
-       {{0.0, 1.0, 401}},
-       {""},
-       [](int, const Point& x) { return t::quadratic_density(x[0]); },
-       {},
-       {std::numbers::pi / 4.0}},
-      {"halving",
-       m + "halving_cycle.model",
-       {{0.0, 1.0, 401}},
-       {"up", "down"},
-       [](int mode, const Point& x) { return t::halving_density(mode, x[0]); },
-       [](const Point& x) { return std::fabs(x[0] - 0.5) < 1e-9; },
-       {std::log(3.0)}},
-      {"product",
-       m + "thermostat_sawtooth_fv.model",
-       {{0.8, 2.2, 141}, {0.0, 1.0, 101}},
-       {"heat", "cool"},
-       [](int mode, const Point& x) {
-         return t::thermostat_density(mode, x[0]) * t::sawtooth_density(x[1]);
-       },
-       thermostat_jump,
-       {std::log(3.0), std::log(2.0)}},
-  };
+  return hybgen::testing::cycle_cases();
 }
 
 /// One run of a case with a scheme, and what it wrote.
@@ -149,17 +81,7 @@ InvRun run(const Case& c, const std::string& scheme) {
 
 /// The true error: max over modes of the relative L1 error.
 double true_error(const Case& c, const InvRun& r) {
-  double worst = 0.0;
-  for (std::size_t m = 0; m < c.modes.size(); ++m) {
-    const fs::path p =
-        r.dir / (c.modes[m].empty() ? "invariant.npy" : "invariant_" + c.modes[m] + ".npy");
-    const std::vector<double> u = hybgen::rt::read_npy(p.string()).data;
-    const int mode = static_cast<int>(m);
-    worst = std::max(worst,
-                     relative_l1(
-                         u, c.axes, [&](const Point& x) { return c.exact(mode, x); }, c.on_jump));
-  }
-  return worst;
+  return hybgen::testing::cycle_case_error(c, r.dir);
 }
 
 std::complex<double> eigenvalue(const json& inv, int k) {

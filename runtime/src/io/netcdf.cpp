@@ -5,6 +5,7 @@
 #include <netcdf.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <ctime>
@@ -302,13 +303,15 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   const nlohmann::json inv = run.summary.is_object() && run.summary.contains(summary_key::invariant)
                                  ? run.summary[summary_key::invariant]
                                  : nlohmann::json();
-  std::vector<double> re, im, ab;
-  int re_var = -1, im_var = -1, abs_var = -1;
+  std::vector<double> re, im, ab, er;
+  int re_var = -1, im_var = -1, abs_var = -1, err_var = -1;
   if (inv.is_object() && inv.contains("eigenvalues")) {
     for (const auto& l : inv["eigenvalues"]) {
       re.push_back(l.at("re").get<double>());
       im.push_back(l.at("im").get<double>());
       ab.push_back(l.at("abs").get<double>());
+      er.push_back(l.contains("error") && l["error"].is_number() ? l["error"].get<double>()
+                                                                 : std::nan(""));
     }
     const int ev = nc.dim(names("eigenvalue"), re.size());
     re_var = nc.var(names("eigenvalue_real"), NC_DOUBLE, {ev});
@@ -317,14 +320,24 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     nc.text(re_var, "long_name", "real part of an eigenvalue of the transfer operator");
     nc.text(im_var, "long_name", "imaginary part of an eigenvalue of the transfer operator");
     nc.text(abs_var, "long_name", "modulus of an eigenvalue of the transfer operator");
-    // scheme=fv: the density's estimated error (methods/generator_solve.hpp).
+    err_var = nc.var(names("eigenvalue_error"), NC_DOUBLE, {ev});
+    nc.text(err_var, "long_name",
+            "estimated error of the eigenvalue (from a grid of half the nodes per axis; NaN: "
+            "no estimate)");
+    // The estimated errors and the decisions they support (methods/two_grid.hpp).
     if (inv.contains("error") && inv["error"].is_number())
       nc.number(NC_GLOBAL, "density_error", inv["error"].get<double>());
-    for (const char* key : {"spectral_gap", "decay_rate", "step"})
+    for (const char* key : {"spectral_gap", "spectral_gap_error", "decay_rate", "decay_rate_error",
+                            "leak_rate", "leak_rate_error", "step"})
       if (inv.contains(key) && inv[key].is_number())
         nc.number(NC_GLOBAL,
                   (std::string(key == std::string("step") ? "transfer_" : "") + key).c_str(),
                   inv[key].get<double>());
+    for (const char* key : {"decays", "leaks", "error_reliable"})
+      if (inv.contains(key) && inv[key].is_boolean())
+        nc.text(NC_GLOBAL,
+                (std::string(key == std::string("error_reliable") ? "density_" : "") + key).c_str(),
+                inv[key].get<bool>() ? "true" : "false");
   }
 
   // The escape rate (escape): per unit time of the model, −ln λ₁ / transfer_step.
@@ -422,6 +435,7 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     nc.put(re_var, re);
     nc.put(im_var, im);
     nc.put(abs_var, ab);
+    nc.put(err_var, er);
   }
   nc.close();
 }
