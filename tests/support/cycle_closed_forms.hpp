@@ -69,8 +69,9 @@ struct Axis {
   int n = 2;                  ///< Nodes.
 };
 
-/// Σ w|u − exact| / Σ w|exact| over the nodes of a 1-D or 2-D grid (C order), the nodes where
-/// `skip` holds left out; NaN if u has the wrong size.
+/// Σ w|u − exact| / Σ w|exact| over the nodes of a tensor grid (C order), the nodes where
+/// `skip` holds left out (Σ w|u| where the exact density is 0 on every node: a mode not yet
+/// reached); NaN if u has the wrong size.
 inline double relative_l1(const std::vector<double>& u, const std::vector<Axis>& axes,
                           const std::function<double(const std::vector<double>&)>& exact,
                           const std::function<bool(const std::vector<double>&)>& skip = {}) {
@@ -93,7 +94,7 @@ inline double relative_l1(const std::vector<double>& u, const std::vector<Axis>&
     num += w * std::fabs(u[k] - e);
     den += w * std::fabs(e);
   }
-  return num / den;
+  return den > 0.0 ? num / den : num;
 }
 
 /// A point of the state space.
