@@ -220,17 +220,16 @@ std::optional<TensorGrid<N>> fv_half_grid(const TensorGrid<N>& g) {
 
 }  // namespace detail
 
-/// The invariant density of M by the finite-volume generator on `grid`, its spectrum as the
-/// transfer operator's over `o.step`, and their errors from the coarser grids (see the file
-/// comment). Throws std::invalid_argument for a guard it cannot cut (fv_guard_planes).
+/// The invariant density of M by the finite-volume generator on `grid`, cut at `planes`
+/// (fv_guard_planes of the same grid), its spectrum as the transfer operator's over `o.step`,
+/// and their errors from the coarser grids (see the file comment).
 template <HybridModel M>
 FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const double* par,
-                               const FvOptions& o) {
+                               const FvOptions& o, const std::vector<FvGuardPlane>& planes) {
   constexpr std::size_t N = state_dim_v<M>;
   using Clock = std::chrono::steady_clock;
   FvInvariantResult r;
   const auto t0 = Clock::now();
-  const std::vector<FvGuardPlane> planes = fv_guard_planes<M>(grid, par);
   r.fine = fv_solve_grid<M>(grid, par, planes, o);
   r.seconds_fine = std::chrono::duration<double>(Clock::now() - t0).count();
   if (!r.fine.failure.empty()) return r;
@@ -288,6 +287,14 @@ FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const dou
                       "smooth between cuts), and the error estimate is unreliable");
   r.seconds_coarse = std::chrono::duration<double>(Clock::now() - t1).count();
   return r;
+}
+
+/// fv_invariant on the planes of M's guards in the box; throws std::invalid_argument for a
+/// guard it cannot cut (fv_guard_planes).
+template <HybridModel M>
+FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const double* par,
+                               const FvOptions& o) {
+  return fv_invariant<M>(grid, par, o, fv_guard_planes<M>(grid, par));
 }
 
 }  // namespace hybgen::rt

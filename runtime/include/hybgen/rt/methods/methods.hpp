@@ -428,13 +428,13 @@ namespace detail {
 
 /// Why scheme=auto of the invariant method cannot take the finite-volume generator on this
 /// model and run, or "" when it can: it runs in one process, on guards that are coordinate
-/// planes (generator_geometry.hpp, `fv_guard_planes`).
+/// planes (generator_geometry.hpp, `fv_guard_planes`, whose planes go to `planes`).
 template <HybridModel M>
 std::string fv_unavailable(const TensorGrid<state_dim_v<M>>& grid, const double* par,
-                           const MethodSettings& s) {
+                           const MethodSettings& s, std::vector<FvGuardPlane>& planes) {
   if (s.backend && s.backend->ranks() > 1) return "the generator runs in one process";
   try {
-    (void)fv_guard_planes<M>(grid, par);
+    planes = fv_guard_planes<M>(grid, par);
   } catch (const std::invalid_argument& e) {
     return e.what();
   }
@@ -448,13 +448,14 @@ std::string fv_unavailable(const TensorGrid<state_dim_v<M>>& grid, const double*
 /// from the grid of (n+1)/2 nodes per axis (generator_solve.hpp). The same summary keys as the
 /// transfer operator's spectrum, and `error`, `order`, `coarse_grid`, per eigenvalue `error`
 /// and μ, `decays`. With `oscillates` (scheme=auto), a density that oscillates (below
-/// −kFvNegativeTolerance × its maximum) is not returned: `*oscillates` says why.
+/// −kFvNegativeTolerance × its maximum) is not returned: `*oscillates` says why. `planes`:
+/// the guards' planes when the caller found them (else found here).
 /// (Not inlined into solve_by_invariant: GCC 12 then misreads the sampled path's vectors,
 /// -Wfree-nonheap-object in invariant.hpp.)
 template <HybridModel M>
 [[gnu::noinline]] MethodResult<state_dim_v<M>> solve_by_invariant_fv(
     const TensorGrid<state_dim_v<M>>& grid, double dt, const double* par, const MethodSettings& s,
-    std::string* oscillates = nullptr) {
+    std::string* oscillates = nullptr, const std::vector<FvGuardPlane>* planes = nullptr) {
   constexpr std::size_t N = state_dim_v<M>;
   MethodResult<N> r;
   FvOptions o;
@@ -463,7 +464,9 @@ template <HybridModel M>
   const double step = s.settings.real<"step">();
   o.step = step > 0 ? step : dt;
   const auto t0 = detail::MethodClock::now();
-  const FvInvariantResult inv = fv_invariant<M>(grid, par, o);  // throws: a guard it cannot cut
+  // Throws: a guard it cannot cut (without `planes`, found by scheme=auto already).
+  const FvInvariantResult inv =
+      planes ? fv_invariant<M>(grid, par, o, *planes) : fv_invariant<M>(grid, par, o);
   // scheme=auto: a density with features below the grid spacing (a measure concentrated near
   // an attracting cycle) makes the high-order reconstruction oscillate.
   if (const auto [lo, hi] = std::minmax_element(inv.fine.density.begin(), inv.fine.density.end());
@@ -544,9 +547,10 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   // scheme=auto: the generator where it applies, else hat, saying why.
   std::string fallback;
   if (scheme == "auto") {
-    fallback = detail::fv_unavailable<M>(grid, par, s);
+    std::vector<FvGuardPlane> planes;
+    fallback = detail::fv_unavailable<M>(grid, par, s, planes);
     if (fallback.empty()) {
-      MethodResult<N> fv = solve_by_invariant_fv<M>(grid, dt, par, s, &fallback);
+      MethodResult<N> fv = solve_by_invariant_fv<M>(grid, dt, par, s, &fallback, &planes);
       if (fallback.empty()) return fv;
     }
   }
