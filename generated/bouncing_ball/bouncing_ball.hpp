@@ -33,8 +33,8 @@ struct bouncing_ball {
   static constexpr std::array<const char*, 1> mode_names{"flight"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"ground"};
-  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse.
-  static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true}}};
+  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {

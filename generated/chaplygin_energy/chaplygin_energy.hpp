@@ -33,8 +33,8 @@ struct chaplygin_energy {
   static constexpr std::array<const char*, 2> mode_names{"plus", "minus"};
   /// Guard names.
   static constexpr std::array<const char*, 2> guard_names{"turn_right", "turn_left"};
-  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse.
-  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, 1, true}, {1, 0, -1, true}}};
+  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, 1, true, -1}, {1, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {

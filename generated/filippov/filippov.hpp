@@ -33,8 +33,8 @@ struct filippov {
   static constexpr std::array<const char*, 2> mode_names{"A", "B"};
   /// Guard names.
   static constexpr std::array<const char*, 2> guard_names{"A_to_B", "B_to_A"};
-  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse.
-  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, -1, true}, {1, 0, 1, true}}};
+  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, -1, true, -1}, {1, 0, 1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {

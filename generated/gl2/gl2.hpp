@@ -33,8 +33,8 @@ struct gl2 {
   static constexpr std::array<const char*, 1> mode_names{"flow"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"impact"};
-  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse.
-  static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true}}};
+  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double*, double* out) {

@@ -488,6 +488,7 @@ struct Checker {
       Converter conv(src, full_scope, "the surface of " + where);
       spec.surface = conv.convert(g.when.lhs) - conv.convert(g.when.rhs);
       spec.surface_loc = g.when.loc;
+      spec.direction_loc = g.direction_loc;
       if (!depends_on_any(spec.surface, state_syms))
         throw src.error(g.when.loc, "the surface of " + where + " does not depend on the state");
       spec.direction = g.direction;

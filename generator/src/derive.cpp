@@ -544,6 +544,35 @@ struct Deriver {
                             "surface: the reset is not locally injective there)");
       g.has_inverse = false;
       g.inverse_on_guard_only = true;
+      // One constant component i, with s and the other components affine in the state: Δ
+      // maps the plane S affinely and injectively onto the whole plane x_i = Δ_i, so every
+      // point y there has exactly one pre-image on S, which Newton on Δ_j(z) = y_j (j ≠ i),
+      // s(z) = 0 finds in one step from anywhere (rt::GuardInfo::image_axis). Otherwise the
+      // image may be part of the plane, or S curved with sheets where the guard does not fire,
+      // and a Newton from the image could fail or land on the wrong sheet: no axis, and the
+      // characteristics refuse the guard. (Two constant components would collapse S onto a
+      // set of codimension ≥ 2, which injective_on_guard has refused.)
+      auto affine_in_state = [&](const ex& e) {
+        for (const ex& a : X)
+          for (const ex& b : X)
+            if (!is_identically_zero(
+                    e.diff(GiNaC::ex_to<GiNaC::symbol>(a)).diff(GiNaC::ex_to<GiNaC::symbol>(b)),
+                    all_symbols))
+              return false;
+        return true;
+      };
+      std::vector<int> constant;
+      bool others_affine = affine_in_state(g.surface);
+      for (std::size_t i = 0; i < n; ++i) {
+        bool free_of_state = true;
+        for (const ex& xi : X)
+          if (g.reset[i].has(xi)) free_of_state = false;
+        if (free_of_state)
+          constant.push_back(static_cast<int>(i));
+        else if (!affine_in_state(g.reset[i]))
+          others_affine = false;
+      }
+      if (constant.size() == 1 && others_affine) g.image_axis = constant.front();
     };
     if (changed.empty()) {
       g.has_inverse = true;
@@ -814,39 +843,46 @@ struct Deriver {
       }
       if (!behind.empty()) {
         const std::string point = point_text(m.state, behind);
-        sys.warnings.push_back(
+        sys.warnings.emplace_back(
             where +
-            " is a wall (its reset maps the surface onto itself), and the domain "
-            "reaches behind it, e.g. (" +
-            point +
-            "): no state there is reached from the "
-            "front of the wall, so mass placed there is not a state of the system; bound the "
-            "domain at the wall or add a `support` relation");
+                " is a wall (its reset maps the surface onto itself), and the domain "
+                "reaches behind it, e.g. (" +
+                point +
+                "): no state there is reached from the front of the wall, so mass placed "
+                "there is not a state of the system; bound the domain at the wall or add a "
+                "`support` relation",
+            gs.surface_loc);
       }
     }
     if (leaks > 0) {
       const std::string point = point_text(m.state, leak_point);
       const bool dec = g.direction == Direction::Decreasing;
-      sys.warnings.push_back(
+      sys.warnings.emplace_back(
           where + ": at (" + point + ") and " + std::to_string(leaks - 1) +
-          " more sampled points the flow of mode '" + before.name +
-          "' leaves the support through the surface in the direction the guard does not fire "
-          "(declared " +
-          (dec ? "decreasing" : "increasing") +
-          "): that mass leaves the state space unnoticed; did you mean '" +
-          (dec ? "increasing" : "decreasing") + "'?");
+              " more sampled points the flow of mode '" + before.name +
+              "' leaves the support through the surface in the direction the guard does not "
+              "fire (declared " +
+              (dec ? "decreasing" : "increasing") +
+              "): that mass leaves the state space unnoticed; did you mean '" +
+              (dec ? "increasing" : "decreasing") + "'?",
+          gs.direction_loc);
     }
     if (on_surface == 0) {
-      sys.warnings.push_back(where +
-                             ": the surface does not meet the simulation domain (with the "
-                             "parameters at their defaults)");
+      sys.warnings.emplace_back(where +
+                                    ": the surface does not meet the simulation domain (with "
+                                    "the parameters at their defaults)",
+                                gs.surface_loc);
     } else if (crossing == 0) {
-      sys.warnings.push_back(where +
-                             ": at every sampled point of the surface inside the domain "
-                             "the flow of mode '" +
-                             before.name +
-                             "' crosses it in the "
-                             "other direction, so the guard never fires there");
+      const bool dec = gs.direction == Direction::Decreasing;
+      sys.warnings.emplace_back(where +
+                                    ": at every sampled point of the surface inside the "
+                                    "domain the flow of mode '" +
+                                    before.name +
+                                    "' crosses it in the other direction, so the guard never "
+                                    "fires there: its mass runs on in mode '" +
+                                    before.name + "'; did you mean '" +
+                                    (dec ? "increasing" : "decreasing") + "'?",
+                                gs.direction_loc);
     } else {
       if (jzero == crossing)
         throw src.error(gs.reset_loc, "the hybrid Jacobian of " + where +
@@ -858,10 +894,11 @@ struct Deriver {
                             "again at once (beating: the paper's hypothesis H.5, S ∩ Δ(S) = ∅, "
                             "fails)");
       if (retrigger > 0)
-        sys.warnings.push_back(where + ": at " + std::to_string(retrigger) + " of " +
-                               std::to_string(crossing) +
-                               " sampled crossings the reset lands on a guard that fires again "
-                               "at once (H.5)");
+        sys.warnings.emplace_back(where + ": at " + std::to_string(retrigger) + " of " +
+                                      std::to_string(crossing) +
+                                      " sampled crossings the reset lands on a guard that "
+                                      "fires again at once (H.5)",
+                                  gs.reset_loc);
     }
   }
 };
@@ -880,7 +917,7 @@ HybridSystem derive_within_limits(const Model& m, const SourceText& src, LimitSc
   // before a run): say so at `check` too when that is the model's method.
   if (m.sim.present)
     for (const auto& g : sys.guards)
-      if (g.inverse_on_guard_only)
+      if (g.inverse_on_guard_only && g.image_axis < 0)
         if (const std::string why = rt::inverse_rule(m.sim.settings, g.name); !why.empty())
           sys.warnings.push_back("`run` will refuse this method: " + why);
 

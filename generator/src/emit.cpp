@@ -348,13 +348,13 @@ class HeaderBuilder {
     os << "  /// Guard names.\n  static constexpr std::array<const char*, " << gnames.size()
        << "> guard_names{" << names(gnames) << "};\n";
     os << "  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), "
-          "closed-form inverse.\n";
+          "closed-form inverse, axis of a constant reset component (-1: none).\n";
     os << "  static constexpr std::array<hybgen::rt::GuardInfo, " << gnames.size() << "> guards{{";
     for (std::size_t g = 0; g < sys_.guards.size(); ++g) {
       const auto& gd = sys_.guards[g];
       os << (g ? ", " : "") << "{" << gd.from << ", " << gd.to << ", "
          << (gd.direction == Direction::Decreasing ? -1 : 1) << ", "
-         << (gd.has_inverse ? "true" : "false") << "}";
+         << (gd.has_inverse ? "true" : "false") << ", " << gd.image_axis << "}";
     }
     os << "}};\n\n";
     os << kernels_;
@@ -434,7 +434,7 @@ std::string report_markdown(const HybridSystem& sys, ExprPrinter& pr) {
   os << derive_latex(sys) << "\n";
   if (!sys.warnings.empty()) {
     os << "## Warnings\n\n";
-    for (const auto& w : sys.warnings) os << "- " << w << "\n";
+    for (const auto& w : sys.warnings) os << "- " << w.text << "\n";
   }
   return os.str();
 }

@@ -10,10 +10,10 @@ namespace hybgen::gen {
 
 namespace {
 std::string format_model_error(const std::string& file, SourceLoc loc, const std::string& message,
-                               const std::string& excerpt) {
+                               const std::string& excerpt, const char* severity = "error") {
   std::ostringstream os;
-  os << file << ':' << (loc.line > 0 ? loc.line : 1) << ':' << (loc.col > 0 ? loc.col : 1)
-     << ": error: " << message;
+  os << file << ':' << (loc.line > 0 ? loc.line : 1) << ':' << (loc.col > 0 ? loc.col : 1) << ": "
+     << severity << ": " << message;
   if (!excerpt.empty()) os << '\n' << excerpt;
   return os.str();
 }
@@ -113,17 +113,23 @@ SourceLoc SourceText::loc_of(std::size_t offset) const {
   return {static_cast<int>(lo + 1), static_cast<int>(offset - line_starts_[lo] + 1)};
 }
 
-ModelError SourceText::error(SourceLoc loc, const std::string& message) const {
-  std::string excerpt;
+std::string SourceText::excerpt(SourceLoc loc) const {
   std::string l = line(loc.line);
-  if (loc.line > 0 && (!l.empty() || loc.col <= 1)) {
-    // Tabs in the excerpt are kept so that the caret lines up in terminals.
-    std::string caret;
-    for (int k = 1; k < loc.col && static_cast<std::size_t>(k - 1) < l.size(); ++k)
-      caret += (l[static_cast<std::size_t>(k - 1)] == '\t') ? '\t' : ' ';
-    excerpt = "  " + l + "\n  " + caret + "^";
-  }
-  return ModelError(path_, loc, message, excerpt);
+  if (loc.line <= 0 || (l.empty() && loc.col > 1)) return {};
+  // Tabs in the excerpt are kept so that the caret lines up in terminals.
+  std::string caret;
+  for (int k = 1; k < loc.col && static_cast<std::size_t>(k - 1) < l.size(); ++k)
+    caret += (l[static_cast<std::size_t>(k - 1)] == '\t') ? '\t' : ' ';
+  return "  " + l + "\n  " + caret + "^";
+}
+
+ModelError SourceText::error(SourceLoc loc, const std::string& message) const {
+  return ModelError(path_, loc, message, excerpt(loc));
+}
+
+std::string SourceText::warning(SourceLoc loc, const std::string& message) const {
+  if (loc.line <= 0) return path_ + ": warning: " + message;
+  return format_model_error(path_, loc, message, excerpt(loc), "warning");
 }
 
 }  // namespace hybgen::gen

@@ -15,7 +15,8 @@
 
 namespace hybgen::gen {
 
-Frontend::Frontend(SourceText source, const FrontendOptions& options) : src(std::move(source)) {
+Frontend::Frontend(SourceText source, const FrontendOptions& options)
+    : src(std::move(source)), sets(options.sets) {
   const auto t0 = std::chrono::steady_clock::now();
   src.validate();
   const ModelAst ast = parse(src);  // stage 1: text -> AST
@@ -52,7 +53,7 @@ Frontend::Frontend(SourceText source, const FrontendOptions& options) : src(std:
 }
 
 void Frontend::print_warnings(std::ostream& os) const {
-  for (const auto& w : sys.warnings) os << src.path() << ": warning: " << w << "\n";
+  for (const auto& w : sys.warnings) os << src.warning(w.loc, w.text) << "\n";
 }
 
 }  // namespace hybgen::gen

@@ -29,6 +29,8 @@ const char* direction_word(Direction d) {
 /// |J| in LaTeX: a number is printed as its absolute value.
 std::string abs_latex(ExprPrinter& pr, const ex& e) {
   if (GiNaC::is_a<GiNaC::numeric>(e)) return pr.latex(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)));
+  const ex a = GiNaC::abs(e);  // e itself where provably ≥ 0 (an even power of a real symbol)
+  if (!a.has(GiNaC::abs(GiNaC::wild()))) return pr.latex(a);
   return "\\left|" + pr.latex(e) + "\\right|";
 }
 
@@ -36,6 +38,23 @@ std::string tuple_latex(ExprPrinter& pr, const std::vector<ex>& v) {
   std::string s = "\\left(";
   for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + pr.latex(v[i]);
   return s + "\\right)";
+}
+
+/// |e| in text: the value of a number, e itself where it is provably ≥ 0 (GiNaC's abs
+/// simplifies an even power of a real symbol), else |e|.
+std::string abs_text(ExprPrinter& pr, const ex& e) {
+  if (GiNaC::is_a<GiNaC::numeric>(e)) return pr.ginac(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)));
+  const ex a = GiNaC::abs(e);
+  if (!a.has(GiNaC::abs(GiNaC::wild()))) return pr.ginac(a);
+  return "|" + pr.ginac(e) + "|";
+}
+
+/// c·u in text: "0", "u", "-u", "c u", or "(c) u" for a sum.
+std::string scaled_text(ExprPrinter& pr, const ex& c, const std::string& u) {
+  if (c.is_zero()) return "0";
+  if (c.is_equal(1)) return u;
+  if (c.is_equal(-1)) return "-" + u;
+  return (GiNaC::is_a<GiNaC::add>(c) ? "(" + pr.ginac(c) + ")" : pr.ginac(c)) + " " + u;
 }
 
 std::string tuple_text(ExprPrinter& pr, const std::vector<ex>& v) {
@@ -243,8 +262,8 @@ std::string derive_text(const HybridSystem& sys) {
   std::ostringstream os;
   os << "model " << m.name << " ("
      << (m.reduction ? "Lie-group impact system reduced to g* x K\\G: " : "general hybrid system: ")
-     << m.state.size() << " states, " << sys.modes.size() << " mode"
-     << (sys.modes.size() == 1 ? "" : "s") << ", " << sys.guards.size() << " guard"
+     << m.state.size() << " state" << (m.state.size() == 1 ? "" : "s") << ", " << sys.modes.size()
+     << " mode" << (sys.modes.size() == 1 ? "" : "s") << ", " << sys.guards.size() << " guard"
      << (sys.guards.size() == 1 ? "" : "s") << ")\n";
   os << "state       (";
   for (std::size_t i = 0; i < m.state.size(); ++i) os << (i ? ", " : "") << m.state[i];
@@ -271,6 +290,11 @@ std::string derive_text(const HybridSystem& sys) {
     if (g.has_inverse)
       os << "  inverse reset    Delta^-1" << tuple_text(pr, m.state_symbols) << " = "
          << tuple_text(pr, g.reset_inverse) << "\n";
+    else if (g.inverse_on_guard_only && g.image_axis >= 0)
+      os << "  inverse reset    on the guard only: the image lies on "
+         << m.state[static_cast<std::size_t>(g.image_axis)] << " = "
+         << pr.ginac(g.reset[static_cast<std::size_t>(g.image_axis)])
+         << "; its pre-image on s = 0 by Newton at run time\n";
     else if (g.inverse_on_guard_only)
       os << "  inverse reset    none: locally injective on the guard only (methods "
          << rt::forward_methods() << ")\n";
@@ -288,26 +312,30 @@ std::string derive_text(const HybridSystem& sys) {
     for (std::size_t i = 0; i < m.state.size(); ++i)
       if (!md.flow[i].is_zero())
         os << " + (" << pr.ginac(md.flow[i]) << ") d" << u << "/d" << m.state[i];
-    os << " = " << (md.divergence.is_zero() ? "0" : "-(" + pr.ginac(md.divergence) + ") " + u)
-       << "\n";
+    os << " = " << scaled_text(pr, -md.divergence, u) << "\n";
   }
   for (const auto& g : sys.guards) {
     std::string uf =
         sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.from)].name : "u";
     std::string ut =
         sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.to)].name : "u";
-    os << "  jump at " << g.name << ": " << ut << "(t+, y) = " << uf
-       << "(t-, Delta^-1(y)) / |J(Delta^-1(y))|";
+    // The post-reset point is named by the states themselves (a generic name such as y
+    // could be one of them).
+    const std::string point = tuple_text(pr, m.state_symbols);
+    const std::string args = point.substr(1, point.size() - 2);
+    os << "  jump at " << g.name << ": " << ut << "(t+, " << args << ") = " << uf << "(t-, Delta^-1"
+       << point << ") / |J(Delta^-1" << point << ")|";
     if (g.has_inverse) {
       std::string pre = tuple_text(pr, g.reset_inverse);
-      os << "\n      = " << uf << "(t-, " << pre.substr(1, pre.size() - 2) << ") / |"
-         << pr.ginac(jacobian_at_preimage(sys, g)) << "|";
+      os << "\n      = " << uf << "(t-, " << pre.substr(1, pre.size() - 2) << ")";
+      const ex J = jacobian_at_preimage(sys, g);
+      if (const std::string a = abs_text(pr, J); a != "1") os << " / " << a;
     }
-    os << "   for y in Delta(S)\n";
+    os << "   for " << point << " in Delta(S)\n";
   }
   if (!sys.warnings.empty()) {
     os << "\nwarnings\n";
-    for (const auto& w : sys.warnings) os << "  " << w << "\n";
+    for (const auto& w : sys.warnings) os << "  " << w.text << "\n";
   }
   return os.str();
 }
@@ -345,7 +373,8 @@ std::string derive_latex(const HybridSystem& sys) {
   os << "\\[\n\\begin{cases}\n";
   for (const auto& md : sys.modes) {
     std::string u = multi ? "u_{" + tex_label(md.name) + "}" : "u";
-    os << "  " << pde_latex(sys, pr, md, u) << ", & x \\notin \\Delta(\\mathcal S); \\\\[1ex]\n";
+    os << "  " << pde_latex(sys, pr, md, u) << ", & (" << state_args_latex(m).substr(2)
+       << ") \\notin \\Delta(\\mathcal S); \\\\[1ex]\n";
   }
   for (std::size_t k = 0; k < sys.guards.size(); ++k) {
     const auto& g = sys.guards[k];
@@ -364,10 +393,10 @@ std::string derive_latex(const HybridSystem& sys) {
       else
         os << "\\dfrac{" << uf << "(t^-" << pre << ")}{" << abs_latex(pr, Jpre) << "}";
     } else {
-      os << "\\dfrac{" << uf
-         << "(t^-, \\Delta^{-1}(x))}{\\left|\\mathcal J(\\Delta^{-1}(x))\\right|}";
+      os << "\\dfrac{" << uf << "(t^-, \\Delta^{-1}(" << args.substr(2)
+         << "))}{\\left|\\mathcal J(\\Delta^{-1}(" << args.substr(2) << "))\\right|}";
     }
-    os << ", & x \\in \\Delta(\\mathcal S_{" << tex_label(g.name) << "})"
+    os << ", & (" << args.substr(2) << ") \\in \\Delta(\\mathcal S_{" << tex_label(g.name) << "})"
        << (k + 1 < sys.guards.size() ? ";\\\\[1ex]" : ".") << "\n";
   }
   os << "\\end{cases}\n\\]\n";
@@ -442,8 +471,10 @@ nlohmann::ordered_json derive_json(const HybridSystem& sys) {
     } else {
       gj["reset_inverse"] = nullptr;
     }
-    gj["reset_inverse_kind"] =
-        g.has_inverse ? "symbolic" : (g.inverse_on_guard_only ? "none" : "numeric");
+    gj["reset_inverse_kind"] = g.has_inverse                                  ? "symbolic"
+                               : g.inverse_on_guard_only && g.image_axis >= 0 ? "guard"
+                               : g.inverse_on_guard_only                      ? "none"
+                                                                              : "numeric";
     gj["hybrid_jacobian"] = pr.ginac(g.hybrid_jacobian_on_surface);
     gj["hybrid_jacobian_general"] = pr.ginac(g.hybrid_jacobian);
     guards.push_back(gj);
@@ -453,7 +484,9 @@ nlohmann::ordered_json derive_json(const HybridSystem& sys) {
     j["reduction"] = reduction_json(m, pr);
   else
     j["reduction"] = nullptr;
-  j["warnings"] = sys.warnings;
+  nlohmann::ordered_json warnings = nlohmann::ordered_json::array();
+  for (const auto& w : sys.warnings) warnings.push_back(w.text);
+  j["warnings"] = warnings;
   return j;
 }
 

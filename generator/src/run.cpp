@@ -69,7 +69,8 @@ void check_runnable(const Frontend& fe) {
 std::vector<std::pair<std::size_t, std::string>> guards_without_inverse(const Frontend& fe) {
   std::vector<std::pair<std::size_t, std::string>> out;
   for (std::size_t gi = 0; gi < fe.sys.guards.size(); ++gi)
-    if (fe.sys.guards[gi].inverse_on_guard_only) out.emplace_back(gi, fe.sys.guards[gi].name);
+    if (fe.sys.guards[gi].inverse_on_guard_only && fe.sys.guards[gi].image_axis < 0)
+      out.emplace_back(gi, fe.sys.guards[gi].name);
   return out;
 }
 
@@ -107,6 +108,7 @@ nlohmann::json run_provenance(const Frontend& fe) {
   checks["guards"] = guards;
   return {{"checks", checks},
           {"model_path", fe.src.path()},
+          {"sets", fe.sets},
           {"model_text", fe.src.text()},
           {"model_sha256", sha256_hex(fe.src.text())},
           {"equations", derive_text(fe.sys)},

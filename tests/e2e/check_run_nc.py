@@ -89,4 +89,10 @@ assert ds.attrs["equations"].startswith("model " + s["model"])
 assert json.loads(ds.attrs["settings"])["method"] == s["method"]
 for p, v in s["parameters"].items():
     assert ds.attrs["parameter_" + p] == v, p
+# The history names the command, with every --set it applied (config.json has them).
+sets = json.load(open(os.path.join(run_dir, "config.json")))["provenance"]["sets"]
+history = ds.attrs["history"]
+assert " hybgen run " in history, history
+for kv in sets:
+    assert (" --set " + kv) in history or (" --set '" + kv + "'") in history, (kv, history)
 print("ok")

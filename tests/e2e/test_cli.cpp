@@ -449,22 +449,65 @@ simulation { domain x in [1, 2]; grid 401; initial on: 1; t_end 1; dt 0.05; meth
   EXPECT_LT(num / den, 1e-2);
 }
 
-TEST(Cli, SawtoothHasNoInverseAndRunsForward) {
+TEST(Cli, SawtoothConstantResetRunsBackwardAndForward) {
   // models/sawtooth.model: x' = 1 + x on [0, 1], x ↦ 0 at x = 1. The reset is constant: no
   // inverse in the whole line, injective on its guard (a point). derive says so in its
-  // contract ("reset_inverse_kind": "none") with J = X(0)/X(1) = 1/2; the characteristics
-  // method is refused at the reset, located; the invariant density on 401 nodes is the closed
-  // form u = 1/(ln 2 (1 + x)) (the flux u·x' is constant) within 1 % in relative L1, λ₁ = 1.
+  // contract ("reset_inverse_kind": "guard") with J = X(0)/X(1) = 1/2. The characteristics
+  // invert it on the guard: from u0 = 1 the flux u·(1 + x) = e^s, s = ln(1 + x), is carried
+  // around the period ln 2, u(x, t) = exp((s − t) mod ln 2)/(1 + x), which jumps where
+  // s ≡ t (nodes within 1e-9 of it left out). A reset singular without a constant component,
+  // (x + y, x + y) at x = 1 (injective on the guard, whose tangent e_y goes to (1, 1)), is
+  // still refused by the characteristics, located, naming the forward methods. The invariant
+  // density on 401 nodes is the closed form u = 1/(ln 2 (1 + x)) (the flux u·x' is constant)
+  // within 1 % in relative L1, λ₁ = 1.
   Result d = hybgen("derive models/sawtooth.model --format json");
   ASSERT_EQ(d.code, exit_status(ExitCode::Success)) << d.out;
   json j = json::parse(d.out.substr(0, d.out.rfind('}') + 1));
-  EXPECT_EQ(j["guards"][0]["reset_inverse_kind"], "none");
+  EXPECT_EQ(j["guards"][0]["reset_inverse_kind"], "guard");
   EXPECT_TRUE(j["guards"][0]["reset_inverse"].is_null());
   EXPECT_EQ(j["guards"][0]["hybrid_jacobian"], "1/2");
-  Result c = hybgen("run models/sawtooth.model --quiet --set method=characteristics --out '" +
-                    run_dir("sawtooth_char").string() + "'");
+  const json sc =
+      run("sawtooth", "sawtooth_char", "--set method=characteristics --set t_end=1 --set dt=0.5");
+  ASSERT_EQ(sc["times"].size(), 3u);
+  for (std::size_t k = 0; k < 3; ++k) {
+    const double t = sc["times"][k].get<double>();
+    char frame[32];
+    std::snprintf(frame, sizeof frame, "u_%04zu.npy", k);
+    const auto u = hybgen::rt::read_npy((run_dir("sawtooth_char") / frame).string());
+    ASSERT_EQ(u.data.size(), 401u);
+    double worst = 0.0;
+    for (std::size_t i = 0; i < 401; ++i) {
+      const double x = static_cast<double>(i) / 400.0, s = std::log1p(x);
+      const double phase = std::fmod(s - t + 10.0 * std::log(2.0), std::log(2.0));
+      if (phase < 1e-9 || std::log(2.0) - phase < 1e-9) continue;  // on the jump
+      const double exact = std::exp(phase) / (1.0 + x);
+      worst = std::max(worst, std::fabs(u.data[i] - exact) / exact);
+    }
+    EXPECT_LE(worst, 1e-8) << "t = " << t;
+  }
+  const std::string singular = write_model_file(kWork, "singular_reset.model", R"(model singular
+state x, y
+mode a {
+  x' = 1 + x
+  y' = -y
+}
+guard g {
+  when x = 1 increasing
+  reset (x + y, x + y)
+}
+simulation {
+  domain x in [0, 1]
+  domain y in [-1, 1]
+  grid 21x21
+  initial exp(-x^2 - y^2)
+  t_end 1
+  method characteristics
+}
+)");
+  Result c =
+      hybgen("run '" + singular + "' --quiet --out '" + run_dir("singular_char").string() + "'");
   EXPECT_EQ(c.code, exit_status(ExitCode::ModelError)) << c.out;
-  EXPECT_NE(c.out.find("models/sawtooth.model:17:3: error: the reset of guard 'fire' has no "
+  EXPECT_NE(c.out.find("singular_reset.model:9:3: error: the reset of guard 'g' has no "
                        "inverse in the whole state space"),
             std::string::npos)
       << c.out;

@@ -358,7 +358,18 @@ TEST(Derive, WarnsWhenGuardNeverFires) {
   text.replace(text.find("when i = alpha decreasing"), 25, "when i = alpha increasing");
   Derived d(text);
   ASSERT_EQ(d.sys.warnings.size(), 1u);
-  EXPECT_NE(d.sys.warnings[0].find("never fires"), std::string::npos);
+  EXPECT_NE(d.sys.warnings[0].text.find("never fires"), std::string::npos);
+  // Located at the direction word, with the way out.
+  EXPECT_NE(d.sys.warnings[0].text.find("did you mean 'decreasing'?"), std::string::npos)
+      << d.sys.warnings[0].text;
+  const std::size_t at = text.find("when i = alpha increasing") + 15;  // the 'increasing'
+  std::size_t line = 1, col = 1;
+  for (std::size_t k = 0; k < at; ++k) {
+    col = text[k] == '\n' ? 1 : col + 1;
+    line += text[k] == '\n' ? 1 : 0;
+  }
+  EXPECT_EQ(d.sys.warnings[0].loc.line, static_cast<int>(line));
+  EXPECT_EQ(d.sys.warnings[0].loc.col, static_cast<int>(col));
 }
 
 TEST(Derive, WarnsWhenTheFlowLeavesTheSupportWhereTheGuardDoesNotFire) {
@@ -371,7 +382,7 @@ TEST(Derive, WarnsWhenTheFlowLeavesTheSupportWhereTheGuardDoesNotFire) {
   text.replace(text.find("when x = 0 decreasing"), 21, "when x = 0 increasing");
   Derived d(text);
   ASSERT_EQ(d.sys.warnings.size(), 1u);
-  const std::string& w = d.sys.warnings[0];
+  const std::string& w = d.sys.warnings[0].text;
   EXPECT_NE(w.find("guard 'ground': at (x = 0, p = -"), std::string::npos) << w;
   EXPECT_NE(w.find("leaves the support"), std::string::npos) << w;
   EXPECT_NE(w.find("did you mean 'decreasing'?"), std::string::npos) << w;
@@ -389,7 +400,7 @@ TEST(Derive, WarnsWhenTheDomainReachesBehindAWall) {
   bare.replace(bare.find("support x >= 0"), 14, "");
   Derived d(bare);
   ASSERT_EQ(d.sys.warnings.size(), 1u);
-  const std::string& w = d.sys.warnings[0];
+  const std::string& w = d.sys.warnings[0].text;
   EXPECT_NE(w.find("guard 'ground' is a wall"), std::string::npos) << w;
   EXPECT_NE(w.find("reaches behind it, e.g. (x = -"), std::string::npos) << w;
   Derived ok(text);
@@ -407,6 +418,7 @@ guard g { when x = 1 increasing; reset (0, y) }
   const IrGuard& g = d.sys.guards[0];
   EXPECT_FALSE(g.has_inverse);
   EXPECT_TRUE(g.inverse_on_guard_only);
+  EXPECT_EQ(g.image_axis, 0);  // the image is the line x = 0: inverted on S at run time
   EXPECT_TRUE(d.same(g.hybrid_jacobian_on_surface, ex(1) / 2));
   // Not affine, det DΔ = 0·(1 + 3y²) ≡ 0, injective on S: the same, through the numeric branch.
   Derived f(R"(state x, y
@@ -414,6 +426,17 @@ mode a { x' = 1 + x; y' = -y }
 guard g { when x = 1 increasing; reset (0, y + y^3) }
 )");
   EXPECT_TRUE(f.sys.guards[0].inverse_on_guard_only);
+  // Its other component is not affine: the image might be part of the line x = 0 only, so no
+  // axis (the characteristics refuse it).
+  EXPECT_EQ(f.sys.guards[0].image_axis, -1);
+  // Singular everywhere with no constant component, injective on S (e_y ↦ (1, 1)): no axis,
+  // so the characteristics refuse it.
+  Derived h(R"(state x, y
+mode a { x' = 1 + x; y' = -y }
+guard g { when x = 1 increasing; reset (x + y, x + y) }
+)");
+  EXPECT_TRUE(h.sys.guards[0].inverse_on_guard_only);
+  EXPECT_EQ(h.sys.guards[0].image_axis, -1);
   // Not injective on S: every point of x = 1 goes to (0, 1).
   expect_derive_error(R"(state x, y
 mode a { x' = 1 + x; y' = -y }

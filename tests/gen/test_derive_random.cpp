@@ -565,7 +565,7 @@ class ModelChecker {
   }
 
   void check_guard(const RandomGuard& g, const gen::IrGuard& ig,
-                   const std::vector<std::string>& warnings) {
+                   const std::vector<gen::DeriveWarning>& warnings) {
     const std::size_t n = rm_.states.size();
     const std::string where = "guard " + g.name + " (" + g.kind + ")";
     // derive's classification of the inverse against the reset's construction.
@@ -577,9 +577,9 @@ class ModelChecker {
       fail_.push_back(where + ": expected inverse " + kind_name(g.inverse) + ", derive gave " +
                       kind_name(got_kind));
     if (got_kind == InverseExpectation::Numeric &&
-        std::none_of(warnings.begin(), warnings.end(), [&](const std::string& w) {
-          return w.find("guard '" + g.name + "'") != std::string::npos &&
-                 w.find("numerically") != std::string::npos;
+        std::none_of(warnings.begin(), warnings.end(), [&](const gen::DeriveWarning& w) {
+          return w.text.find("guard '" + g.name + "'") != std::string::npos &&
+                 w.text.find("numerically") != std::string::npos;
         }))
       fail_.push_back(where + ": a numeric inverse without its warning");
     const auto& from = rm_.modes[static_cast<std::size_t>(g.from)].flow;

@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <sstream>
+
 #include "hybgen/gen/errors.hpp"
 
 namespace {
@@ -88,6 +90,44 @@ TEST(Frontend, LiePathReducesAndUnreducedIsForLieModelsOnly) {
   FrontendOptions unreduced;
   unreduced.target = ReduceTarget::Unreduced;
   EXPECT_THROW(Frontend(SourceText("ball.model", kBall), unreduced), UsageError);
+}
+
+TEST(Frontend, AWarningNamesItsPlaceAndTheWayOut) {
+  // A thermostat whose switch off is declared the wrong way: the flow of heat crosses T = 2
+  // increasing, never decreasing. The warning points at the direction word (line 11, col 14).
+  const Frontend fe(SourceText("thermo.model", R"(model thermo
+state T
+mode heat {
+  T' = 4 - T
+}
+mode cool {
+  T' = -T
+}
+guard off {
+  from heat to cool
+  when T = 2 decreasing
+  reset identity
+}
+guard on {
+  from cool to heat
+  when T = 1 decreasing
+  reset identity
+}
+simulation {
+  domain T in [0.5, 2.5]
+  initial heat: 1
+}
+)"));
+  std::ostringstream os;
+  fe.print_warnings(os);
+  const std::string w = os.str();
+  EXPECT_NE(w.find("thermo.model:11:14: warning: guard 'off': at every sampled point"),
+            std::string::npos)
+      << w;
+  EXPECT_NE(w.find("did you mean 'increasing'?\n    when T = 2 decreasing\n" +
+                   std::string(15, ' ') + "^"),
+            std::string::npos)
+      << w;
 }
 
 TEST(Frontend, BadTextIsALocatedModelError) {

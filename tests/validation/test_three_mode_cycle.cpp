@@ -5,9 +5,12 @@
 //   A: x' = f_A = 2 + x    on [0, 1];   guard `a2b` at x = 1 (increasing), reset x ↦ 0, to B;
 //   B: x' = f_B = 2 − x    on [0, 1/2]; guard `b2c` at x = 1/2 (increasing), reset x ↦ 1, to C;
 //   C: x' = f_C = −(1 + 2x) on [0, 1];  guard `c2a` at x = 0 (decreasing), reset x ↦ 0, to A.
-// Every reset is constant (DΔ = 0: no inverse; docs/outputs.md: `run` refuses the characteristics
-// method for it, the forward methods need none). In 1-D adj(DΔ) = 1, so J = X⁺(Δx)/X⁻(x):
-// J_a2b = f_B(0)/f_A(1) = 2/3, J_b2c = f_C(1)/f_B(1/2) = −3/1.5 = −2, J_c2a = f_A(0)/f_C(0) = −2.
+// Every reset is constant (DΔ = 0: no inverse in the line; the characteristics invert it on its
+// guard when the model declares the constant component, rt::GuardInfo::image_axis, as derive
+// does: tests/validation/models/three_mode_cycle.model, run by
+// tests/validation/test_transient_closed_forms.cpp; the forward methods need no inverse). In 1-D
+// adj(DΔ) = 1, so J = X⁺(Δx)/X⁻(x): J_a2b = f_B(0)/f_A(1) = 2/3, J_b2c = f_C(1)/f_B(1/2) = −3/1.5 =
+// −2, J_c2a = f_A(0)/f_C(0) = −2.
 //
 // Closed forms. The cycle is a rotation of the phase θ ∈ [0, P): θ = ln((2 + x)/2) in A (T_A =
 // ln(3/2)), θ = T_A + ln(2/(2 − x)) in B (T_B = ln(4/3)), θ = T_A + T_B + ½ ln(3/(1 + 2x)) in C
@@ -20,9 +23,10 @@
 //   mode masses:          M_m(t) = ∫_{θ ∈ mode m} q0(θ − t) dθ.
 //
 // Compared:
-//  * characteristics: refused — the pre-flight with the backward checks (what `hybgen run`
-//    does for that method) fails with `inverse_failed` at a constant reset (Newton on
-//    Δ(z) = y with DΔ = 0), and passes without them (the forward methods).
+//  * characteristics: this kernel does not declare its constant components (image_axis −1),
+//    so the pre-flight with the backward checks (what `hybgen run` does for that method)
+//    fails with `inverse_failed` at a constant reset (Newton on Δ(z) = y with DΔ = 0), and
+//    passes without them (the forward methods).
 //  * invariant (hat, h = 0.02, 401 nodes): λ₁ = 1 to 1e-9 (a closed system), relative L1
 //    against u* below 1 % (the thermostat's bar; docs/methods.md promises O(Δx²) plus the error
 //    of straddling sub-cells at switches; measured 7.0e-3), mode masses T_m/P within 2e-3
@@ -70,7 +74,7 @@ struct Cycle {
   static constexpr std::array<double, 0> param_defaults{};                       ///< No parameters.
   static constexpr std::array<const char*, 3> mode_names{"A", "B", "C"};         ///< Mode names.
   static constexpr std::array<const char*, 3> guard_names{"a2b", "b2c", "c2a"};  ///< Guards.
-  /// A → B increasing, B → C increasing, C → A decreasing; constant resets: no inverse.
+  /// A → B increasing, B → C increasing, C → A decreasing; constant resets, undeclared.
   static constexpr std::array<rt::GuardInfo, 3> guards{rt::GuardInfo{0, 1, +1, false},
                                                        rt::GuardInfo{1, 2, +1, false},
                                                        rt::GuardInfo{2, 0, -1, false}};
@@ -169,7 +173,7 @@ double rel_l1(const std::vector<double>& w, const double* u, const std::vector<d
   return num / den;
 }
 
-TEST(ThreeModeCycle, CharacteristicsAreRefusedForTheConstantResets) {
+TEST(ThreeModeCycle, UndeclaredConstantResetsAreRefusedByTheCharacteristics) {
   const auto grid = line(101);
   rt::PreflightOptions opt;
   opt.backward = false;  // the forward methods

@@ -143,6 +143,22 @@ std::string json_text(const nlohmann::json& j, const char* key) {
   return j.is_object() && j.contains(key) && j[key].is_string() ? j[key].get<std::string>() : "";
 }
 
+/// `hybgen run PATH --set KEY=VALUE …` of the provenance (the history attribute); a word
+/// with a character a shell would read is single-quoted.
+std::string run_command(const nlohmann::json& pv) {
+  auto word = [](const std::string& w) {
+    if (!w.empty() && w.find_first_of(" \t'\"\\$`*?[]{}()<>|&;#~!") == std::string::npos) return w;
+    std::string q = "'";
+    for (const char c : w) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return q + "'";
+  };
+  std::string cmd = "hybgen run " + word(json_text(pv, "model_path"));
+  if (pv.is_object() && pv.contains("sets") && pv["sets"].is_array())
+    for (const auto& s : pv["sets"])
+      if (s.is_string()) cmd += " --set " + word(s.get<std::string>());
+  return cmd;
+}
+
 }  // namespace
 
 void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
@@ -365,7 +381,7 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
           run.model + ": " + (series ? std::string("density under the hybrid flow") : what) + " (" +
               run.method + ")");
   nc.text(NC_GLOBAL, "source", "hybgen" + (version.empty() ? "" : " " + version));
-  nc.text(NC_GLOBAL, "history", utc_now() + " hybgen run " + json_text(pv, "model_path"));
+  nc.text(NC_GLOBAL, "history", utc_now() + " " + run_command(pv));
   nc.text(NC_GLOBAL, "model", run.model);
   nc.text(NC_GLOBAL, "method", run.method);
   for (const char* key : {"model_path", "model_sha256", "model_text", "equations"})

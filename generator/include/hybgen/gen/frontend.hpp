@@ -59,11 +59,13 @@ class Frontend {
   Model model;                      ///< Checked (reduced for `lie`), with the overrides.
   HybridSystem sys;                 ///< The IR (stage Derived only); sys.model == &model.
   std::vector<double> file_params;  ///< The parameters' values as in the file, before --set.
+  std::vector<std::string> sets;    ///< The `--set KEY=VALUE` overrides applied, in order.
   FrontendStage stage = FrontendStage::Parsed;  ///< How far the stages went.
   bool lie = false;                             ///< Whether the model is a Lie-group model.
   double seconds = 0;                           ///< Wall time of the stages.
 
-  /// The derivation's warnings, one `PATH: warning: …` line each.
+  /// The derivation's warnings: `PATH:LINE:COL: warning: …` with the source line and a
+  /// caret (`PATH: warning: …` for one about the model as a whole).
   void print_warnings(std::ostream& os) const;
 };
 

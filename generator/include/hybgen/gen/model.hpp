@@ -13,6 +13,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "hybgen/gen/ast.hpp"
@@ -58,6 +59,7 @@ struct GuardSpec {
   GiNaC::ex surface;                                       ///< s(x); the guard is s = 0.
   SourceLoc surface_loc;                                   ///< Where `when` was written.
   Direction direction = Direction::Decreasing;             ///< Crossing direction.
+  SourceLoc direction_loc;                                 ///< Where the direction word is.
   ResetDecl::Kind reset_kind = ResetDecl::Kind::Identity;  ///< Form of the reset.
   GiNaC::ex restitution;                                   ///< e for Elastic (1) / Restitution.
   std::vector<GiNaC::ex> reset;  ///< Explicit components (Kind::Explicit).
@@ -147,18 +149,32 @@ struct IrGuard {
   /// No inverse at all: DΔ is singular everywhere, but Δ is injective on the guard (a
   /// constant component). Only the forward methods (rt::forward_methods()) apply.
   bool inverse_on_guard_only = false;
+  /// With `inverse_on_guard_only`: the index i of the reset's one constant component (Δ_i
+  /// free of the state) when s and the other components are affine in the state, so that Δ
+  /// maps S onto the plane x_i = Δ_i and the backward characteristics invert Δ on S
+  /// (rt::GuardInfo::image_axis); −1: none, and only the forward methods apply.
+  int image_axis = -1;
   std::vector<GiNaC::ex> reset_inverse;  ///< Δ⁻¹(y) in the state symbols.
   GiNaC::ex hybrid_jacobian;             ///< J(x) for x ∈ S (general formula).
   GiNaC::ex hybrid_jacobian_on_surface;  ///< J with s = 0 substituted when possible.
   std::string surface_note;              ///< How J was restricted to S (for reports).
 };
 
+/// A non-fatal finding of derive's checks, located where the model says what it is about
+/// (loc.line 0: the model as a whole).
+struct DeriveWarning {
+  /// A finding `what` at `where` (implicit: a plain string is a warning about the model).
+  DeriveWarning(std::string what, SourceLoc where = {}) : text(std::move(what)), loc(where) {}
+  std::string text;  ///< What was found, and the way out.
+  SourceLoc loc;     ///< Where.
+};
+
 /// The HybridSystem IR (output of `derive`).
 struct HybridSystem {
-  const Model* model = nullptr;       ///< The model it was derived from.
-  std::vector<IrMode> modes;          ///< Modes.
-  std::vector<IrGuard> guards;        ///< Guards.
-  std::vector<std::string> warnings;  ///< Non-fatal findings of the checks.
+  const Model* model = nullptr;         ///< The model it was derived from.
+  std::vector<IrMode> modes;            ///< Modes.
+  std::vector<IrGuard> guards;          ///< Guards.
+  std::vector<DeriveWarning> warnings;  ///< Non-fatal findings of the checks.
 };
 
 }  // namespace hybgen::gen

@@ -30,6 +30,11 @@ class SourceText {
   [[nodiscard]] SourceLoc loc_of(std::size_t offset) const;
   /// A ModelError at `loc` with the source line and a caret.
   [[nodiscard]] ModelError error(SourceLoc loc, const std::string& message) const;
+  /// "FILE:LINE:COL: warning: message" with the source line and a caret ("FILE: warning:
+  /// message" when loc has no line).
+  [[nodiscard]] std::string warning(SourceLoc loc, const std::string& message) const;
+  /// The source line of `loc` and a caret under its column ("" without a line).
+  [[nodiscard]] std::string excerpt(SourceLoc loc) const;
 
  private:
   std::string path_;

@@ -55,8 +55,9 @@ enum class Method { characteristics, transfer, invariant, particles, escape };
 struct MethodSpec {
   Method id;              ///< Its enumerator (the row's index).
   std::string_view name;  ///< The word of the setting `method`, and summary.json's `method`.
-  /// Whether it traces backward through the resets, so that every reset needs an inverse
-  /// off its guard too (the generator refuses the method otherwise: setting_rules.hpp).
+  /// Whether it traces backward through the resets, so that every reset needs an inverse:
+  /// in the whole space, or on its guard for a reset with one constant component
+  /// (GuardInfo::image_axis; the generator refuses the method otherwise: setting_rules.hpp).
   bool inverts_resets;
   /// Whether it writes one frame (`frame`, the stationary answer) instead of a time series.
   bool one_frame;

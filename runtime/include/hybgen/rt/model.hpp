@@ -24,6 +24,13 @@ struct GuardInfo {
   int to;            ///< Target mode index.
   int direction;     ///< -1: s decreases through 0; +1: s increases through 0.
   bool has_inverse;  ///< Whether `reset_inverse` is a closed form (else Newton).
+  /// The axis i of a reset with a constant component (Δ_i independent of the state: the
+  /// sawtooth's x ↦ 0, integrate-and-fire's v ↦ 0), or −1. Such a Δ has no inverse in the
+  /// whole space, but is injective on its guard S; with s and the other components affine
+  /// (derive.cpp sets the axis only then) it maps S onto the plane x_i = Δ_i, and the
+  /// pre-image of y there solves Δ_j(z) = y_j (j ≠ i), s(z) = 0 (core/geometry.hpp,
+  /// newton_reset_solve), which is what the backward characteristics need.
+  int image_axis = -1;
 };
 
 /// What the runtime needs of a generated model. All functions are pure; `x`

@@ -77,17 +77,27 @@ inline GuardInfo guard_info(std::size_t g) {
 /// A solution z of Δ_g(z) = y by Newton's method from z = start: stops when
 /// ‖δz‖∞ ≤ tol·(1 + ‖z‖∞); false if the Jacobian is singular, a value is not finite, or
 /// `max_iter` iterations do not reach the tolerance.
+/// For a guard with a constant component i (GuardInfo::image_axis), Δ_i(z) = y_i holds for
+/// every z once y is on the plane of the image, and row i of DΔ is 0: equation i is replaced
+/// by s_g(z) = 0 (row i of the Jacobian by ∇s_g), so z is THE pre-image of y on S_g, where Δ
+/// is injective (derive.cpp checks it). y_i is not used.
 template <HybridModel M>
 bool newton_reset_solve(int g, const double* y, const double* start, const double* par,
                         int max_iter, double tol, std::array<double, state_dim_v<M>>& z) {
   constexpr std::size_t N = state_dim_v<M>;
   for (std::size_t i = 0; i < N; ++i) z[i] = start[i];
+  const int axis = guard_info<M>(static_cast<std::size_t>(g)).image_axis;
   std::array<double, N * N> A;
   std::array<double, N> r;
   for (int it = 0; it < max_iter; ++it) {
     M::reset(g, z.data(), par, r.data());
     for (std::size_t i = 0; i < N; ++i) r[i] -= y[i];
     M::reset_jacobian(g, z.data(), par, A.data());
+    if (axis >= 0 && static_cast<std::size_t>(axis) < N) {
+      const auto a = static_cast<std::size_t>(axis);
+      r[a] = M::guard_surface(g, z.data(), par);
+      M::guard_gradient(g, z.data(), par, A.data() + a * N);
+    }
     if (!solve_linear<N>(A, r)) return false;
     double dz = 0.0, zn = 0.0;
     for (std::size_t i = 0; i < N; ++i) {

@@ -11,12 +11,16 @@
 ///
 /// Backward events in mode m:
 ///  * incoming guards g (to = m): b_g(x) = s_g(Δ_g⁻¹(x)) (closed-form Δ⁻¹, or Newton on
-///    Δ_g(z) = x from z = x). At a root y*, z = Δ_g⁻¹(y*) is a true pre-image only if the guard
-///    fires there: sign(∇s_g(z)·X_from(z)) = guards[g].direction. Then a REVERSED-RESET BRANCH
-///    (state z, mode `from`, weight/|J_g(z)|, same I) is spawned; it serves the output times
-///    after τ*. A reset with SEVERAL pre-images on S_g (a fold; the pre-flight finds them and
-///    passes seeds, CharacteristicsOptions::preimage_seeds) spawns one branch per pre-image,
-///    all enumerated by Newton from the seeds: the paper's general theorem sums over them.
+///    Δ_g(z) = x from z = x); for a reset with a constant component i (GuardInfo::image_axis:
+///    the sawtooth's x ↦ 0) b_g(x) = x_i − Δ_i, and the pre-image solves Δ_j(z) = x_j (j ≠ i)
+///    with s_g(z) = 0 (newton_reset_solve): the mass crossing S_g enters at Δ(S_g) with the
+///    flux ratio 1/|J| (J = ∇sᵀ adj(DΔ) X⁺ / ∇sᵀ X⁻ is finite where det DΔ = 0). At a root y*, z =
+///    Δ_g⁻¹(y*) is a true pre-image only if the guard fires there: sign(∇s_g(z)·X_from(z)) =
+///    guards[g].direction. Then a REVERSED-RESET BRANCH (state z, mode `from`, weight/|J_g(z)|,
+///    same I) is spawned; it serves the output times after τ*. A reset with SEVERAL pre-images on
+///    S_g (a fold; the pre-flight finds them and passes seeds,
+///    CharacteristicsOptions::preimage_seeds) spawns one branch per pre-image, all enumerated by
+///    Newton from the seeds: the paper's general theorem sums over them.
 ///  * outgoing guards h (from = m): if the backward path crosses S_h the way the forward flow
 ///    would make h fire (direction −guards[h].direction in τ), no forward history can continue
 ///    in mode m beyond it: the branch ends there (contributes nothing further).
@@ -209,6 +213,13 @@ class Tracer {
     const auto ei = static_cast<std::size_t>(e);
     const int g = guard_[ei];
     if (incoming_[ei]) {
+      // A constant component i: Δ_g(S_g) lies in the plane x_i = Δ_i, whose signed distance
+      // is the event (b_g = s_g∘Δ_g⁻¹ is not defined off the plane).
+      if (const int axis = guard_info<M>(static_cast<std::size_t>(g)).image_axis; axis >= 0) {
+        State d;
+        M::reset(g, x.data(), par_, d.data());
+        return x[static_cast<std::size_t>(axis)] - d[static_cast<std::size_t>(axis)];
+      }
       State z;
       bool ok = reset_inverse(g, x.data(), z);
       // Several pre-images: s_g is the same on every branch of Δ_g⁻¹ near the image (they
