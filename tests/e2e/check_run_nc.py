@@ -58,6 +58,12 @@ if series:
     for key in ["mass", "outflow", "atom"]:
         assert np.array_equal(ds[ours(key)].values, np.array(s[key])), key
     assert float(ds[ours("initial_mass")]) == s["initial_mass"]
+    # The transfer operator's error per output time (null in summary.json: NaN here).
+    if "transfer" in s and isinstance(s["transfer"].get("errors"), list):
+        want = np.array([np.nan if e is None else e for e in s["transfer"]["errors"]])
+        assert np.array_equal(ds[ours("density_error")].values, want, equal_nan=True)
+    else:
+        assert ours("density_error") not in ds
     unaccounted = s["initial_mass"] - np.array(s["mass"]) - np.array(s["outflow"]) - np.array(s["atom"])
     assert np.allclose(ds[ours("unaccounted")].values, unaccounted, rtol=0, atol=1e-15), "unaccounted"
     if "budget" in s and "mass_error" in s["budget"]:

@@ -302,6 +302,22 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     Series defect_error{names("unaccounted_error"), "sum of the terms' estimated errors", nullptr,
                         budget_defect_error(b), -1};
     budget.push_back(std::move(defect_error));
+    // The transfer operator's estimated error per output time (methods.hpp,
+    // add_transfer_errors; NaN where none was estimated).
+    const nlohmann::json* errors = nullptr;
+    if (run.summary.is_object() && run.summary.contains(summary_key::transfer) &&
+        run.summary[summary_key::transfer].contains("errors"))
+      errors = &run.summary[summary_key::transfer]["errors"];
+    if (errors != nullptr && errors->is_array() && errors->size() == K) {
+      Series e{names("density_error"),
+               "estimated relative L1 error of the density (max over modes)",
+               nullptr,
+               {},
+               -1};
+      for (const auto& v : *errors)
+        e.owned.push_back(v.is_number() ? v.get<double>() : std::nan(""));
+      budget.push_back(std::move(e));
+    }
     for (Series& s : budget) {
       s.var = nc.var(s.name, NC_DOUBLE, {time_dim});
       nc.text(s.var, "long_name", s.long_name);

@@ -190,6 +190,20 @@ img { max-width: 100%; } .muted { color: #666; }
     row("atom (Zeno)", b.atom[k], k < run.atom_error.size() ? run.atom_error[k] : 0);
     row("unaccounted", defect[k], bar[k]);
     h << "</table>\n";
+    // The transfer operator's estimated error at this time (methods.hpp, add_transfer_errors).
+    if (run.summary.is_object() && run.summary.contains(summary_key::transfer)) {
+      const nlohmann::json& t = run.summary[summary_key::transfer];
+      const nlohmann::json errors = t.value("errors", nlohmann::json());
+      const nlohmann::json ok = t.value("errors_reliable", nlohmann::json());
+      if (errors.is_array() && k < errors.size() && errors[k].is_number())
+        h << "<p>estimated error of the density at t = " << number(run.times[k]) << ": "
+          << number(errors[k].get<double>()) << " (relative L1, from the grid of "
+          << html(t.value("coarse_grid", nlohmann::json()).dump()) << " nodes)"
+          << (ok.is_array() && k < ok.size() && ok[k] == false
+                  ? "; <b>unreliable</b>: the difference does not fall with the grid spacing"
+                  : "")
+          << "</p>\n";
+    }
   }
   if (run.summary.is_object() && run.summary.contains(summary_key::invariant)) {
     const nlohmann::json& inv = run.summary[summary_key::invariant];
@@ -251,6 +265,9 @@ img { max-width: 100%; } .muted { color: #666; }
         const std::string kind = g.value("reset_inverse_kind", "");
         h << "<li>guard <code>" << html(g.value("name", "")) << "</code>: "
           << (kind == "symbolic" ? std::string("the reset has a closed-form inverse")
+              : kind == "guard"
+                  ? std::string("the reset is constant in one component and is inverted on "
+                                "its guard")
               : kind == "none"
                   ? std::string("the reset has no inverse off its guard (forward methods only)")
                   : std::string("the reset is inverted numerically (Newton)"))

@@ -529,6 +529,19 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
                     mb.mass[i], mb.outflow[i], mb.atom[i],
                     i < rec.atom_error.size() ? rec.atom_error[i] : 0.0, defect[i], bar[i]);
   }
+  // The transfer operator's error per output time (methods.hpp, add_transfer_errors).
+  if (s.contains(k::transfer) && s[k::transfer].contains("error") &&
+      s[k::transfer]["error"].is_number() && !rec.times.empty()) {
+    const auto& t = s[k::transfer];
+    std::printf(
+        "estimated error of the density at t = %g: %.2e (relative L1), from the grid of %s "
+        "nodes%s\n",
+        rec.times.back(), t["error"].get<double>(), t["coarse_grid"].dump().c_str(),
+        t.value("error_reliable", true) ? ""
+                                        : "; UNRELIABLE at some times: the difference does not "
+                                          "fall with the grid spacing (summary.json, "
+                                          "transfer.errors_reliable)");
+  }
   std::printf("outputs in %s: %s, summary.json%s\n", c.final_dir.c_str(),
               written.describe(rec.frame_names).c_str(), took);
 }
