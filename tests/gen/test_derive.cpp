@@ -452,6 +452,18 @@ guard g { when x = 1 increasing; reset (x - 1, y) }
   EXPECT_FALSE(e.sys.guards[0].inverse_on_guard_only);
 }
 
+TEST(Derive, APiecewiseLinearResetIsNotAffine) {
+  // 1 − |2y − 1| has a second derivative that vanishes wherever it is defined, but it is two
+  // to one: no closed-form inverse (one branch of it would lose the other pre-image), Newton
+  // and the pre-flight's count of pre-images instead.
+  Derived d(R"(state x, y
+mode a { x' = 1; y' = 0 }
+guard g { when x = 1 increasing; reset (x - 1, 1 - abs(2*y - 1)) }
+)");
+  EXPECT_FALSE(d.sys.guards[0].has_inverse);
+  EXPECT_FALSE(d.sys.guards[0].inverse_on_guard_only);
+}
+
 TEST(Derive, NonAffineResetHasNumericInverse) {
   Derived d(R"(state x, p
 mode a { x' = p; p' = -1 }

@@ -548,6 +548,50 @@ TEST(TransientClosedForms, AShearAndScaleResetWithOutflow) {
                 }});
 }
 
+TEST(TransientClosedForms, AReducedLieGroupSystemReflectsOffItsWall) {
+  // translation_wall.model: a Lie-group model (the translations of the plane) reduced by
+  // hybgen to ζ' = 0, q' = ζ_a with ζ_a ↦ −ζ_a at q = 0 (the model file). Backward from
+  // (ζ_a, ζ_b, q) the particle meets the wall iff q − ζ_a t < 0: u = u0 at the foot, reflected
+  // once. The nodes with q = ζ_a t lie on the jump (their history reaches the wall at t = 0).
+  const auto u0 = [](double za, double zb, double q) {
+    return std::exp(-4.0 * (za + 0.5) * (za + 0.5) - 2.0 * zb * zb - 8.0 * (q - 0.8) * (q - 0.8));
+  };
+  expect_exact(
+      {"translation_wall",
+       {{-1.5, 1.5, 31}, {-1.0, 1.0, 11}, {0.0, 2.0, 41}},
+       [u0](const Point& p, double t) {
+         const double q0 = p[2] - p[0] * t;
+         return q0 >= 0.0 ? u0(p[0], p[1], q0) : u0(-p[0], p[1], -q0);
+       },
+       [](const Point& p, double t) { return t > 0.0 && std::fabs(p[2] - p[0] * t) < 1e-9; }});
+}
+
+TEST(TransientClosedForms, ATwoToOneResetSumsBothPreImages) {
+  // tent_clock.model: the tick maps y through the tent map, two pre-images y/2 and 1 − y/2 of
+  // every y (J = ±2). Backward the clock meets the image x = 0 at x, x + 1, … < t:
+  // u = Pⁿ[u0(x − t + n, ·)](y), P[f](y) = (f(y/2) + f(1 − y/2))/2, and a history through y = 1
+  // (outside the support y < 1) is none. derive once took 1 − |2y − 1| for affine (its second
+  // derivative vanishes where defined) and inverted one branch: half the mass per tick.
+  const auto u0 = [](double x, double y) {
+    return y < 1.0
+               ? (0.5 + 0.4 * y * (x - 0.5)) * (1.0 + 0.3 * std::sin(2.0 * std::numbers::pi * y))
+               : 0.0;
+  };
+  expect_exact({"tent_clock",
+                {{0.0, 1.0, 22}, {0.0, 1.0, 40}},
+                [u0](const Point& p, double t) {
+                  const int n = t <= p[0] ? 0 : static_cast<int>(std::ceil(t - p[0]));
+                  const double x0 = p[0] - t + n;
+                  const auto P = [&](const auto& self, int k, double y) -> double {
+                    if (y >= 1.0) return 0.0;
+                    if (k == 0) return u0(x0, y);
+                    return 0.5 * (self(self, k - 1, 0.5 * y) + self(self, k - 1, 1.0 - 0.5 * y));
+                  };
+                  return P(P, n, p[1]);
+                },
+                {}});
+}
+
 TEST(TransientClosedForms, IntegrateAndFireByCharacteristics) {
   // The shipped neuron by method=characteristics (its reset (v, w) ↦ (0, w + b) is constant in
   // v) against `fire::density`, two spikes deep by t = 2; the columns v = 0 (the image) and
