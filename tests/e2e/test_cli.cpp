@@ -49,6 +49,41 @@ TEST(Cli, CheckEveryShippedModel) {
   }
 }
 
+TEST(Cli, AGuardDeclaredTheWrongWayIsAWarningWithItsPlaceAndTheFix) {
+  // A thermostat whose switch off says 'decreasing' where the heating flow crosses T = 2
+  // increasing: check exits 0 (the model is well formed) and warns at the direction word with
+  // the source line, a caret and "did you mean 'increasing'?".
+  const std::string path = write_model_file(kWork, "wrong_way.model", R"(model wrong_way
+state T
+mode heat {
+  T' = 4 - T
+}
+mode cool {
+  T' = -T
+}
+guard off {
+  from heat to cool
+  when T = 2 decreasing
+  reset identity
+}
+guard on {
+  from cool to heat
+  when T = 1 decreasing
+  reset identity
+}
+simulation {
+  domain T in [0.5, 2.5]
+  initial heat: 1
+}
+)");
+  const Result r = hybgen("check '" + path + "'");
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  EXPECT_NE(r.out.find("wrong_way.model:11:14: warning: guard 'off'"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("did you mean 'increasing'?"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("  when T = 2 decreasing\n" + std::string(15, ' ') + "^"), std::string::npos)
+      << r.out;
+}
+
 TEST(Cli, DeriveJsonContract) {
   for (const auto& m : kModels) {
     Result r = hybgen("derive models/" + m + ".model --format json");
