@@ -146,6 +146,33 @@ TEST(InvariantSchemeAuto, TakesTheGeneratorWhereTheGuardsAreCoordinatePlanes) {
   EXPECT_LE(true_error(c, r), 1e-6);
 }
 
+TEST(InvariantSchemeAuto, TheNewcomersThermostatWithoutWhereIsExactToItsEstimate) {
+  // thermostat_newcomer.model: the thermostat a new user writes (no `where` lines, a box
+  // [0.5, 2.5] wider than the cycle [1, 2]), which the hat scheme got 5-28 % wrong, by the
+  // default scheme: u_heat = 1/(2 ln 2 (3 − T)), u_cool = 1/(2 ln 2 T) on [1, 2], 0 outside.
+  // Measured (2026-11-28): 1.0e-7, estimated 7.0e-7, λ₁ = 1 to 2e-15.
+  Case c;
+  c.name = "newcomer";
+  c.model = "tests/validation/models/thermostat_newcomer.model";
+  c.axes = {{0.5, 2.5, 201}};
+  c.modes = {"heat", "cool"};
+  c.exact = [](int mode, const hybgen::testing::Point& x) {
+    const double T = x[0];
+    if (T < 1.0 || T > 2.0) return 0.0;
+    return 1.0 / (2.0 * std::log(2.0) * (mode == 0 ? 3.0 - T : T));
+  };
+  c.on_jump = hybgen::testing::thermostat_jump;
+  const InvRun r = run(c, "auto");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.inv["scheme"], "fv") << r.inv.dump();
+  const double truth = true_error(c, r), estimate = r.inv["error"].get<double>();
+  std::printf("newcomer thermostat: true %.2e, estimated %.2e\n", truth, estimate);
+  EXPECT_LE(truth, 1e-5);
+  EXPECT_GE(estimate, truth);
+  EXPECT_LE(estimate, 10.0 * truth);
+  EXPECT_NEAR(std::abs(eigenvalue(r.inv, 0)), 1.0, 1e-9);
+}
+
 TEST(InvariantSchemeAuto, FallsBackToHatNamingTheGuard) {
   // A curved guard (radial_fv.model's rim): the generator does not cut it yet.
   Case c;
