@@ -179,12 +179,26 @@ TEST(InvariantSchemeAuto, FallsBackToHatNamingTheGuard) {
   c.name = "radial";
   c.model = "tests/validation/models/radial_fv.model";
   c.axes = {{-1.1, 1.1, 45}, {-1.1, 1.1, 45}};
+  c.modes = {""};
+  // The invariant density 1/(2π ln 2 r²) on 1/2 ≤ r ≤ 1 (the model file). hat's first-order
+  // smearing at a curved guard on 45²: measured 0.22 relative L1, estimated 0.57, the observed
+  // order −0.1 flagged as unreliable (2026-11-28).
+  c.exact = [](int, const hybgen::testing::Point& p) {
+    const double r2 = p[0] * p[0] + p[1] * p[1];
+    return r2 >= 0.25 && r2 <= 1.0 ? 1.0 / (2.0 * std::numbers::pi * std::log(2.0) * r2) : 0.0;
+  };
   const InvRun r = run(c, "auto");
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_EQ(r.inv["scheme"], "hat") << r.inv.dump();
   EXPECT_NE(r.out.find("scheme=auto used hat"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("guard 'rim'"), std::string::npos) << r.out;
-  EXPECT_TRUE(r.inv["error"].is_number()) << r.inv.dump();
+  ASSERT_TRUE(r.inv["error"].is_number()) << r.inv.dump();
+  const double truth = true_error(c, r), estimate = r.inv["error"].get<double>();
+  std::printf("radial (hat): true %.3f, estimated %.3f, reliable %s\n", truth, estimate,
+              r.inv["error_reliable"].dump().c_str());
+  EXPECT_GE(estimate, truth);
+  EXPECT_LE(estimate, 10.0 * truth);
+  EXPECT_EQ(r.inv["error_reliable"], false) << r.inv.dump();
 }
 
 }  // namespace
