@@ -125,7 +125,7 @@ int main(int argc, char** argv) {
                     "build cache directory (default: $HYBGEN_CACHE or ~/.cache/hybgen)");
     sub->add_flag("--inline-runtime", bopt.inline_runtime,
                   "compile the whole runtime with the kernels inlined (about 35 s; a faster solve) "
-                  "instead of linking the precompiled runtime (under a second); see "
+                  "instead of linking the precompiled runtime (about two seconds); see "
                   "bench/runner_build.sh");
   };
   bool unreduced = false;

@@ -154,8 +154,8 @@ struct Point {
 
 /// Read the summary.json of point `p`, which its runner wrote into `dir` and ended with exit 0;
 /// a summary that cannot be read makes the point a failure (exit 70, said on stderr). Returns
-/// what its "ok" should not hide: its runner's warnings went to stderr unlabelled (several
-/// points run at once).
+/// what its "ok" should not hide: a budget that does not close, or how many warnings its
+/// runner gave (on stderr marked with the point's name, several points running at once).
 std::string finish_point(Point& p, const std::filesystem::path& dir) {
   try {
     p.summary = nlohmann::json::parse(read_file((dir / "summary.json").string()));
@@ -166,6 +166,12 @@ std::string finish_point(Point& p, const std::filesystem::path& dir) {
   }
   if (p.summary.contains("budget") && p.summary["budget"].value("closes", true) == false)
     return ", but its mass budget does not close (the warning above; column budget_closes)";
+  std::size_t warnings = 0;
+  for (const char* key : {rt::summary_key::warnings, rt::summary_key::output_warnings})
+    if (p.summary.contains(key) && p.summary[key].is_array()) warnings += p.summary[key].size();
+  if (warnings > 0)
+    return ", with " + std::to_string(warnings) + " warning" + (warnings > 1 ? "s" : "") +
+           " (above, marked [" + p.label + "]; column warnings)";
   return "";
 }
 
@@ -264,6 +270,12 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
     put_number(row, "escape_rate", s[k::escape], "rate");
     put_number(row, "escape_rate_error", s[k::escape], "rate_error");
   }
+  // The warnings of the run (their texts: the point's summary.json, and stderr with the
+  // point's name).
+  std::size_t warnings = 0;
+  for (const char* key : {k::warnings, k::output_warnings})
+    if (s.contains(key) && s[key].is_array()) warnings += s[key].size();
+  row["warnings"] = warnings;
   if (s.contains(k::seconds))
     for (const char* key : {"derive", "build", "solve", "budget", "output"})
       put_number(row, std::string("seconds_") + key, s[k::seconds], key);
@@ -346,6 +358,7 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     fs::create_directory(dir, ec);
     if (ec) throw UsageError("cannot create '" + dir.string() + "': " + ec.message());
     nlohmann::json cfg = run_config(p.fe->model, dir.string(), out + "/" + p.label, true);
+    cfg["label"] = p.label;  // its warnings say which point they are about
     cfg["provenance"] = run_provenance(*p.fe);
     cfg["seconds"] = {{"derive", p.fe->seconds}, {"build", runner.seconds}};
     p.config = (dir / "config.json").string();

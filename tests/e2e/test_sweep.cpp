@@ -111,6 +111,34 @@ double bump_integral(double a, double b) {
   return kW * std::sqrt(M_PI) / 2 * (std::erf((b - kC) / kW) - std::erf((a - kC) / kW));
 }
 
+TEST(Sweep, AWarningSaysWhichPointItIsAboutAndCountsInTheTable) {
+  // The ball with e = 0.5 on a coarse grid by t = 6 concentrates below the grid's spacing (the
+  // output stage warns); e = 1 does not. The warning names its point on stderr, the point's
+  // progress line says it has one, and its row counts it.
+  const fs::path out = kWork / "warned";
+  fs::remove_all(out);
+  const auto r = run_hybgen(
+      "sweep models/bouncing_ball.model --set e=0.5,1 --set grid=21x21 "
+      "--set t_end=6 --set dt=2 --set outputs=npy --out '" +
+          out.string() + "'",
+      kWork / "cache");
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  EXPECT_NE(r.out.find("hybgen: warning: [0_e=0.5] the grid under-resolves the density"),
+            std::string::npos)
+      << r.out;
+  EXPECT_EQ(r.out.find("hybgen: warning: the grid"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("0_e=0.5: ok, with 1 warning (above, marked [0_e=0.5]; column warnings)"),
+            std::string::npos)
+      << r.out;
+  const json table = read_json_file(out / "sweep.json");
+  ASSERT_EQ(table["rows"].size(), 2u);
+  EXPECT_EQ(table["rows"][0]["warnings"], 1) << table.dump();
+  EXPECT_EQ(table["rows"][1]["warnings"], 0) << table.dump();
+  const json s = read_json_file(out / "0_e=0.5" / "summary.json");
+  ASSERT_TRUE(s.contains("output_warnings")) << s.dump();
+  EXPECT_NE(s["output_warnings"][0].get<std::string>().find("under-resolves"), std::string::npos);
+}
+
 TEST(Sweep, TableAgreesWithTheClosedFormsOfADrift) {
   const std::string model = write_model_file(kWork, "drift.model", R"(model drift
 state x

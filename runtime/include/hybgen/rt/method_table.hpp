@@ -40,6 +40,8 @@ inline constexpr const char* mass_error = "mass_error";      ///< Its error (par
 inline constexpr const char* outflow = "outflow";            ///< Mass out of the box per time.
 inline constexpr const char* atom = "atom";                  ///< Mass at a Zeno point per time.
 inline constexpr const char* atom_error = "atom_error";      ///< Its estimated error.
+inline constexpr const char* warnings = "warnings";          ///< The method's warnings.
+inline constexpr const char* output_warnings = "output_warnings";  ///< The outputs' warnings.
 /// The blocks of the methods' own fields (MethodSpec::summary_key).
 inline constexpr const char* budget = "budget";        ///< characteristics: the mass budget.
 inline constexpr const char* transfer = "transfer";    ///< transfer: the operator and march.

@@ -54,7 +54,9 @@ struct RunConfig {
   std::vector<GridAxis> axes;           ///< Grid axes.
   /// Method, times and every method setting (settings.hpp), validated by the table's rules.
   Settings settings;
-  bool quiet = false;           ///< No progress output.
+  bool quiet = false;  ///< No progress output.
+  /// A sweep point's name (generator/src/sweep.cpp), which its warnings carry; "" for a run.
+  std::string label;
   bool preflight_only = false;  ///< Run the pre-flight scan only (`hybgen check --preflight`).
   nlohmann::json seconds;       ///< Timings of the earlier stages.
   /// The model's text, hash and derived equations (generator/src/run.cpp, run_provenance).
@@ -63,6 +65,11 @@ struct RunConfig {
   /// The method.
   const std::string& method() const { return settings.word<"method">(); }
 };
+
+/// "hybgen: warning: ", with a sweep point's name ("hybgen: warning: [0_e=0.5] ").
+inline std::string warning_prefix(const RunConfig& c) {
+  return c.label.empty() ? "hybgen: warning: " : "hybgen: warning: [" + c.label + "] ";
+}
 
 /// A configuration error (exit 2).
 class ConfigError : public std::runtime_error {
@@ -132,6 +139,7 @@ RunConfig read_config(const std::string& path) {
       if (!j.contains(key)) throw ConfigError(std::string("missing setting '") + key + "'");
     c.settings = Settings::from_json(j);
     c.quiet = j.value("quiet", false);
+    c.label = j.value("label", "");
     c.preflight_only = j.value("preflight_only", false);
     c.seconds = j.value("seconds", nlohmann::json::object());
     c.provenance = j.value("provenance", nlohmann::json::object());
@@ -248,10 +256,10 @@ std::optional<int> preflight_run(RunPlan<state_dim_v<M>>& p) {
   if (backend.root())
     for (const auto& note : notes)
       std::fprintf(stderr,
-                   "hybgen: warning: %s, at an isolated point only (measure zero: no mass is "
-                   "there); the scan excludes it, but a grid node exactly there has no finite "
-                   "density (choose a grid without a node at that point)\n",
-                   describe_preflight<M>(note).c_str());
+                   "%s%s, at an isolated point only (measure zero: no mass is there); the scan "
+                   "excludes it, but a grid node exactly there has no finite density (choose a "
+                   "grid without a node at that point)\n",
+                   warning_prefix(p.config).c_str(), describe_preflight<M>(note).c_str());
   if (!pf.ok()) {
     if (backend.root())
       std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
@@ -431,7 +439,7 @@ inline nlohmann::json finish_summary(const RunRecord& rec, const WrittenOutputs&
   s["files"] = rec.times.empty() ? std::vector<std::string>{} : written.npy;
   if (rec.n_mode() > 1 && !written.mode_npy.empty()) s["mode_files"] = written.mode_npy;
   s["outputs"] = written.to_json();
-  if (!written.warnings.empty()) s["output_warnings"] = written.warnings;
+  if (!written.warnings.empty()) s[summary_key::output_warnings] = written.warnings;
   s["gathered_values_per_rank"] = gathered;
   s[summary_key::seconds]["output"] = output_s;
   return s;
@@ -563,7 +571,8 @@ int run_chain(const RunConfig& config, const Backend& backend = serial_backend()
     return exit_status(ExitCode::Numerical);
   }
   if (backend.root())
-    for (const auto& w : res.warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
+    for (const auto& w : res.warnings)
+      std::fprintf(stderr, "%s%s\n", warning_prefix(config).c_str(), w.c_str());
   const RunRecord rec = record_run<M>(plan, res);
   // The files and summary.json are made durable together, by one sync of the staging
   // directory (io/atomic_file.hpp).
@@ -579,9 +588,11 @@ int run_chain(const RunConfig& config, const Backend& backend = serial_backend()
     return exit_status(ExitCode::Success);
   }
   for (const auto& note : written->notes) std::fprintf(stderr, "hybgen: note: %s\n", note.c_str());
-  for (const auto& w : written->warnings) std::fprintf(stderr, "hybgen: warning: %s\n", w.c_str());
+  for (const auto& w : written->warnings)
+    std::fprintf(stderr, "%s%s\n", warning_prefix(plan.config).c_str(), w.c_str());
   const double output_s = std::chrono::duration<double>(Clock::now() - t0).count();
-  const nlohmann::json summary = finish_summary(rec, *written, output_s, gathered);
+  nlohmann::json summary = finish_summary(rec, *written, output_s, gathered);
+  if (!res.warnings.empty()) summary[summary_key::warnings] = res.warnings;
   write_file_atomic((std::filesystem::path(plan.config.out_dir) / "summary.json").string(),
                     summary.dump(2) + "\n");
   durability.commit();
