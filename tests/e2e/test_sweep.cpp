@@ -41,6 +41,14 @@ std::size_t lines(const fs::path& p) {
   return n;
 }
 
+/// `hybgen COMMAND models/bouncing_ball.model SETS --out OUT` into a fresh OUT.
+hybgen::testing::ShellResult run_ball(const std::string& command, const std::string& sets,
+                                      const fs::path& out, const fs::path& cache) {
+  fs::remove_all(out);
+  return run_hybgen(
+      command + " models/bouncing_ball.model " + sets + " --out '" + out.string() + "'", cache);
+}
+
 TEST(Sweep, SixValuesOfEShareOneRunner) {
   // The case: 6 values of e; the first point's build compiles (a private cache), no
   // other compile happens, and each row is what `hybgen run` gives for that value.
@@ -85,12 +93,8 @@ TEST(Sweep, SixValuesOfEShareOneRunner) {
 
   // A separate run of one value: the same runner (cached) and the same numbers.
   const fs::path one = kWork / "six_one";
-  fs::remove_all(one);
-  const auto single = run_hybgen(
-      "run models/bouncing_ball.model --set e=0.7 --set grid=21x21 "
-      "--set t_end=2 --set dt=0.5 --out '" +
-          one.string() + "'",
-      cache);
+  const auto single =
+      run_ball("run", "--set e=0.7 --set grid=21x21 --set t_end=2 --set dt=0.5", one, cache);
   ASSERT_EQ(single.code, exit_status(ExitCode::Success)) << single.out;
   EXPECT_NE(single.out.find("runner (cached)"), std::string::npos) << single.out;
   const json s = read_json_file(one / "summary.json");
@@ -116,12 +120,9 @@ TEST(Sweep, AWarningSaysWhichPointItIsAboutAndCountsInTheTable) {
   // output stage warns); e = 1 does not. The warning names its point on stderr, the point's
   // progress line says it has one, and its row counts it.
   const fs::path out = kWork / "warned";
-  fs::remove_all(out);
-  const auto r = run_hybgen(
-      "sweep models/bouncing_ball.model --set e=0.5,1 --set grid=21x21 "
-      "--set t_end=6 --set dt=2 --set outputs=npy --out '" +
-          out.string() + "'",
-      kWork / "cache");
+  const auto r =
+      run_ball("sweep", "--set e=0.5,1 --set grid=21x21 --set t_end=6 --set dt=2 --set outputs=npy",
+               out, kWork / "cache");
   ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_NE(r.out.find("hybgen: warning: [0_e=0.5] the grid under-resolves the density"),
             std::string::npos)
