@@ -239,6 +239,23 @@ bool is_identically_zero(const ex& e, const std::vector<ex>& symbols) {
 
 namespace {
 
+/// Whether e contains none of `vars` (as written: no simplification is attempted).
+bool free_of(const ex& e, const std::vector<ex>& vars) {
+  for (const ex& v : vars)
+    if (e.has(v)) return false;
+  return true;
+}
+
+/// Whether e is affine in `vars`: each ∂e/∂v is free of them, as written. Not "the second
+/// derivatives vanish": 1 − |2y − 1| has the derivative 2(1 − 2y)/|2y − 1|, whose own
+/// derivative vanishes wherever it is defined, yet it is two-to-one
+/// (tests/validation/models/tent_clock.model).
+bool affine_in(const ex& e, const std::vector<ex>& vars) {
+  for (const ex& v : vars)
+    if (!free_of(e.diff(GiNaC::ex_to<GiNaC::symbol>(v)), vars)) return false;
+  return true;
+}
+
 /// The guard surface s = 0 solved for one state: the first x_k whose coefficient in ∇s is
 /// state-free and not zero and for which x_k − s/c no longer contains x_k (s linear in x_k),
 /// as (k, that solution); nullopt if there is none.
@@ -246,10 +263,7 @@ std::optional<std::pair<std::size_t, ex>> solve_surface(const IrGuard& g, const 
                                                         const std::vector<ex>& symbols) {
   for (std::size_t k = 0; k < X.size(); ++k) {
     const ex c = g.gradient[k];
-    bool state_free = true;
-    for (const auto& xi : X)
-      if (c.has(xi)) state_free = false;
-    if (!state_free || is_identically_zero(c, symbols)) continue;
+    if (!free_of(c, X) || is_identically_zero(c, symbols)) continue;
     ex solution = simplify(X[k] - g.surface / c);
     if (solution.has(X[k])) continue;
     return std::make_pair(k, solution);
@@ -481,16 +495,14 @@ struct Deriver {
     std::vector<std::size_t> changed;
     for (std::size_t i = 0; i < n; ++i)
       if (!is_identically_zero(g.reset[i] - X[i], all_symbols)) changed.push_back(i);
-    // Affine in the changed states: the entries of DΔ among them are free of them. Written
-    // as a test of the expressions, not of their derivatives: 1 − |2y − 1| has the
-    // derivative 2(1 − 2y)/|2y − 1|, whose own derivative vanishes wherever it is defined,
-    // yet it is two-to-one (tests/validation/models/tent_clock.model); the numeric inverse
-    // and the pre-flight's count of pre-images handle it.
+    // Affine in the changed states (`affine_in`); a piecewise-linear reset such as
+    // 1 − |2y − 1| is not, and gets the numeric inverse and the pre-flight's count of
+    // pre-images.
+    std::vector<ex> changed_states;
+    for (std::size_t i : changed) changed_states.push_back(X[i]);
     bool affine = true;
     for (std::size_t i : changed)
-      for (std::size_t a : changed)
-        for (std::size_t b : changed)
-          if (g.reset_jacobian[i * n + a].has(X[b])) affine = false;
+      if (!affine_in(g.reset[i], changed_states)) affine = false;
     // What the hybrid flow needs is the reset RESTRICTED TO ITS GUARD S: injective there when
     // DΔ is injective on the tangent spaces of S, i.e. det(DΔᵀDΔ + ∇s∇sᵀ) ≠ 0 (a v with DΔv = 0
     // and ∇s·v = 0 makes the matrix singular; conversely vᵀ(DΔᵀDΔ + ∇s∇sᵀ)v = |DΔv|² + (∇s·v)²
@@ -555,24 +567,12 @@ struct Deriver {
       // and a Newton from the image could fail or land on the wrong sheet: no axis, and the
       // characteristics refuse the guard. (Two constant components would collapse S onto a
       // set of codimension ≥ 2, which injective_on_guard has refused.)
-      auto affine_in_state = [&](const ex& e) {
-        for (const ex& a : X)
-          for (const ex& b : X)
-            if (!is_identically_zero(
-                    e.diff(GiNaC::ex_to<GiNaC::symbol>(a)).diff(GiNaC::ex_to<GiNaC::symbol>(b)),
-                    all_symbols))
-              return false;
-        return true;
-      };
       std::vector<int> constant;
-      bool others_affine = affine_in_state(g.surface);
+      bool others_affine = affine_in(g.surface, X);
       for (std::size_t i = 0; i < n; ++i) {
-        bool free_of_state = true;
-        for (const ex& xi : X)
-          if (g.reset[i].has(xi)) free_of_state = false;
-        if (free_of_state)
+        if (free_of(g.reset[i], X))
           constant.push_back(static_cast<int>(i));
-        else if (!affine_in_state(g.reset[i]))
+        else if (!affine_in(g.reset[i], X))
           others_affine = false;
       }
       if (constant.size() == 1 && others_affine) g.image_axis = constant.front();

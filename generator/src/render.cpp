@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <functional>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -26,11 +27,18 @@ const char* direction_word(Direction d) {
   return d == Direction::Decreasing ? "decreasing" : "increasing";
 }
 
-/// |J| in LaTeX: a number is printed as its absolute value.
+/// |e| without bars where they are not needed: the value of a number, or e itself where GiNaC
+/// shows it is ≥ 0 (an even power of a real symbol); nullopt where the bars stay.
+std::optional<ex> abs_without_bars(const ex& e) {
+  if (GiNaC::is_a<GiNaC::numeric>(e)) return ex(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)));
+  const ex a = GiNaC::abs(e);
+  if (!a.has(GiNaC::abs(GiNaC::wild()))) return a;
+  return std::nullopt;
+}
+
+/// |J| in LaTeX (abs_without_bars).
 std::string abs_latex(ExprPrinter& pr, const ex& e) {
-  if (GiNaC::is_a<GiNaC::numeric>(e)) return pr.latex(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)));
-  const ex a = GiNaC::abs(e);  // e itself where provably ≥ 0 (an even power of a real symbol)
-  if (!a.has(GiNaC::abs(GiNaC::wild()))) return pr.latex(a);
+  if (const auto a = abs_without_bars(e)) return pr.latex(*a);
   return "\\left|" + pr.latex(e) + "\\right|";
 }
 
@@ -40,12 +48,9 @@ std::string tuple_latex(ExprPrinter& pr, const std::vector<ex>& v) {
   return s + "\\right)";
 }
 
-/// |e| in text: the value of a number, e itself where it is provably ≥ 0 (GiNaC's abs
-/// simplifies an even power of a real symbol), else |e|.
+/// |e| in text (abs_without_bars).
 std::string abs_text(ExprPrinter& pr, const ex& e) {
-  if (GiNaC::is_a<GiNaC::numeric>(e)) return pr.ginac(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)));
-  const ex a = GiNaC::abs(e);
-  if (!a.has(GiNaC::abs(GiNaC::wild()))) return pr.ginac(a);
+  if (const auto a = abs_without_bars(e)) return pr.ginac(*a);
   return "|" + pr.ginac(e) + "|";
 }
 
@@ -314,15 +319,15 @@ std::string derive_text(const HybridSystem& sys) {
         os << " + (" << pr.ginac(md.flow[i]) << ") d" << u << "/d" << m.state[i];
     os << " = " << scaled_text(pr, -md.divergence, u) << "\n";
   }
+  // The post-reset point is named by the states themselves (a generic name such as y could
+  // be one of them).
+  const std::string point = tuple_text(pr, m.state_symbols);
+  const std::string args = point.substr(1, point.size() - 2);
   for (const auto& g : sys.guards) {
     std::string uf =
         sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.from)].name : "u";
     std::string ut =
         sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.to)].name : "u";
-    // The post-reset point is named by the states themselves (a generic name such as y
-    // could be one of them).
-    const std::string point = tuple_text(pr, m.state_symbols);
-    const std::string args = point.substr(1, point.size() - 2);
     os << "  jump at " << g.name << ": " << ut << "(t+, " << args << ") = " << uf << "(t-, Delta^-1"
        << point << ") / |J(Delta^-1" << point << ")|";
     if (g.has_inverse) {

@@ -152,6 +152,14 @@ struct Point {
   nlohmann::json summary;         ///< Its summary.json, once it ran.
 };
 
+/// The warnings a run's summary holds: the method's and the outputs'.
+std::size_t warning_count(const nlohmann::json& s) {
+  std::size_t n = 0;
+  for (const char* key : {rt::summary_key::warnings, rt::summary_key::output_warnings})
+    if (s.contains(key) && s[key].is_array()) n += s[key].size();
+  return n;
+}
+
 /// Read the summary.json of point `p`, which its runner wrote into `dir` and ended with exit 0;
 /// a summary that cannot be read makes the point a failure (exit 70, said on stderr). Returns
 /// what its "ok" should not hide: a budget that does not close, or how many warnings its
@@ -166,10 +174,7 @@ std::string finish_point(Point& p, const std::filesystem::path& dir) {
   }
   if (p.summary.contains("budget") && p.summary["budget"].value("closes", true) == false)
     return ", but its mass budget does not close (the warning above; column budget_closes)";
-  std::size_t warnings = 0;
-  for (const char* key : {rt::summary_key::warnings, rt::summary_key::output_warnings})
-    if (p.summary.contains(key) && p.summary[key].is_array()) warnings += p.summary[key].size();
-  if (warnings > 0)
+  if (const std::size_t warnings = warning_count(p.summary); warnings > 0)
     return ", with " + std::to_string(warnings) + " warning" + (warnings > 1 ? "s" : "") +
            " (above, marked [" + p.label + "]; column warnings)";
   return "";
@@ -272,10 +277,7 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
   }
   // The warnings of the run (their texts: the point's summary.json, and stderr with the
   // point's name).
-  std::size_t warnings = 0;
-  for (const char* key : {k::warnings, k::output_warnings})
-    if (s.contains(key) && s[key].is_array()) warnings += s[key].size();
-  row["warnings"] = warnings;
+  row["warnings"] = warning_count(s);
   if (s.contains(k::seconds))
     for (const char* key : {"derive", "build", "solve", "budget", "output"})
       put_number(row, std::string("seconds_") + key, s[k::seconds], key);

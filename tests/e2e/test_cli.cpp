@@ -19,6 +19,7 @@
 #include "hybgen/rt/settings.hpp"
 #include "support/ball_closed_form.hpp"
 #include "support/e2e.hpp"
+#include "support/model_texts.hpp"
 
 namespace {
 
@@ -50,32 +51,11 @@ TEST(Cli, CheckEveryShippedModel) {
 }
 
 TEST(Cli, AGuardDeclaredTheWrongWayIsAWarningWithItsPlaceAndTheFix) {
-  // A thermostat whose switch off says 'decreasing' where the heating flow crosses T = 2
-  // increasing: check exits 0 (the model is well formed) and warns at the direction word with
-  // the source line, a caret and "did you mean 'increasing'?".
-  const std::string path = write_model_file(kWork, "wrong_way.model", R"(model wrong_way
-state T
-mode heat {
-  T' = 4 - T
-}
-mode cool {
-  T' = -T
-}
-guard off {
-  from heat to cool
-  when T = 2 decreasing
-  reset identity
-}
-guard on {
-  from cool to heat
-  when T = 1 decreasing
-  reset identity
-}
-simulation {
-  domain T in [0.5, 2.5]
-  initial heat: 1
-}
-)");
+  // support/model_texts.hpp's thermostat with its switch off declared the wrong way: check
+  // exits 0 (the model is well formed) and warns at the direction word with the source line, a
+  // caret and "did you mean 'increasing'?".
+  const std::string path =
+      write_model_file(kWork, "wrong_way.model", hybgen::testing::kWrongWayThermostat);
   const Result r = hybgen("check '" + path + "'");
   EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_NE(r.out.find("wrong_way.model:11:14: warning: guard 'off'"), std::string::npos) << r.out;

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "hybgen/gen/errors.hpp"
+#include "support/model_texts.hpp"
 
 namespace {
 
@@ -93,31 +94,9 @@ TEST(Frontend, LiePathReducesAndUnreducedIsForLieModelsOnly) {
 }
 
 TEST(Frontend, AWarningNamesItsPlaceAndTheWayOut) {
-  // A thermostat whose switch off is declared the wrong way: the flow of heat crosses T = 2
-  // increasing, never decreasing. The warning points at the direction word (line 11, col 14).
-  const Frontend fe(SourceText("thermo.model", R"(model thermo
-state T
-mode heat {
-  T' = 4 - T
-}
-mode cool {
-  T' = -T
-}
-guard off {
-  from heat to cool
-  when T = 2 decreasing
-  reset identity
-}
-guard on {
-  from cool to heat
-  when T = 1 decreasing
-  reset identity
-}
-simulation {
-  domain T in [0.5, 2.5]
-  initial heat: 1
-}
-)"));
+  // support/model_texts.hpp's thermostat whose switch off is declared the wrong way: the
+  // warning points at the direction word (line 11, col 14).
+  const Frontend fe(SourceText("thermo.model", hybgen::testing::kWrongWayThermostat));
   std::ostringstream os;
   fe.print_warnings(os);
   const std::string w = os.str();
