@@ -168,17 +168,14 @@ class Converter {
                 nb.denom() > kMaxExponent)
               throw src_.error(e.args.at(1)->loc,
                                "exponent too large (at most " + std::to_string(kMaxExponent) + ")");
-            if (GiNaC::is_a<GiNaC::numeric>(a)) {
-              const auto& na = GiNaC::ex_to<GiNaC::numeric>(a);
-              if (na.is_rational()) {
-                const double bits = exact_bits(na) * GiNaC::abs(nb).to_double();
-                if (bits > kMaxExactBits)
-                  throw src_.error(
-                      e.loc, "number too large: this power has about " +
-                                 std::to_string(static_cast<long long>(bits)) + " bits (at most " +
-                                 std::to_string(static_cast<long long>(kMaxExactBits)) + ")");
-              }
-            }
+            // Not only a number: a product or power with a numeric part
+            // raises that part exactly too (finding F12).
+            const double bits = exact_bits_per_power(a) * GiNaC::abs(nb).to_double();
+            if (bits > kMaxExactBits)
+              throw src_.error(
+                  e.loc, "number too large: this power has about " +
+                             std::to_string(static_cast<long long>(bits)) + " bits (at most " +
+                             std::to_string(static_cast<long long>(kMaxExactBits)) + ")");
           }
           return bounded(GiNaC::pow(a, b), e);
         }

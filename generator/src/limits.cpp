@@ -80,6 +80,20 @@ bool exact_power_too_large(const GiNaC::numeric& a, const GiNaC::numeric& x) {
   return exact_bits(a) * GiNaC::abs(x).to_double() > kMaxExactBits;
 }
 
+double exact_bits_per_power(const GiNaC::ex& a) {
+  if (GiNaC::is_a<GiNaC::numeric>(a)) return exact_bits(GiNaC::ex_to<GiNaC::numeric>(a));
+  if (GiNaC::is_a<GiNaC::power>(a) && GiNaC::is_a<GiNaC::numeric>(a.op(1)))
+    return std::min(exact_bits_per_power(a.op(0)) *
+                        GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(a.op(1))).to_double(),
+                    kInf);
+  if (GiNaC::is_a<GiNaC::mul>(a)) {
+    double s = 0;
+    for (std::size_t i = 0; i < a.nops(); ++i) s += exact_bits_per_power(a.op(i));
+    return std::min(s, kInf);
+  }
+  return 0;
+}
+
 double expanded_constant_bound(const GiNaC::ex& e) {
   if (GiNaC::is_a<GiNaC::numeric>(e))
     return std::min(GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(e)).to_double(), kInf);

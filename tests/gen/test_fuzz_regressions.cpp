@@ -148,6 +148,22 @@ TEST(FuzzRegressions, NumericPowerTowerIsAModelError) {
                             "number too large");
 }
 
+// Finding F12 (fuzz/regressions/frontend/timeout-power-of-a-split-rational-power.model,
+// the landing CI's fuzz smoke run): check bounded a numeric power only when its base was
+// a number, but 2^409.6 = 2^(2048/5) evaluates to the product 2^409·2^(3/5), whose 4096th
+// power GiNaC computes factor by factor: 2^(409·4096), then 4096 times that. Fixed in
+// check.cpp with exact_bits_per_power (limits.hpp): a product's or power's numeric part
+// counts. Legitimate powers of products stay accepted.
+TEST(FuzzRegressions, PowerOfASplitRationalPowerIsAModelError) {
+  expect_prompt_model_error("parameter a = ((2^409.6)^4096)^4096\nstate x\nmode m { x' = a }\n",
+                            "number too large");
+  expect_prompt_model_error("state x\nmode m { x' = (2^4000*x)^20 }\n", "number too large");
+  EXPECT_EQ(fuzz::run_frontend("parameter a = (2*3^(1/2))^100\nstate x\nmode m { x' = a*x^4096 "
+                               "}\n",
+                               Guards::SizeOnly),
+            Stage::Derived);
+}
+
 // Finding F1b (fuzz/regressions/frontend/timeout-symbolic-power-tower.model):
 // check bounded each exponent as written, but GiNaC folds (x^a)^b into
 // x^(a*b), so ((x^4096)^4096)^4096 reached derive as x^(2^36) and

@@ -74,6 +74,15 @@ double exact_bits(const GiNaC::numeric& a);
 /// exact with |a| ≠ 0, 1, x rational and exact_bits(a)·|x| > kMaxExactBits.
 bool exact_power_too_large(const GiNaC::numeric& a, const GiNaC::numeric& x);
 
+/// An upper bound of the bits of the exact numbers GiNaC computes in a^x, per
+/// unit of the rational exponent x: a number gives exact_bits(a); b^r (r a
+/// number) gives exact_bits_per_power(b)·|r|, since (b^r)^x folds to b^(r·x)
+/// and, b a number, its integer part is computed; a product gives the sum
+/// over its factors, since an integer power distributes over them (finding
+/// F12: 2^409.6 is 2^409·2^(3/5), whose 4096th power holds 2^(409·4096));
+/// anything else (symbols, sums, functions) 0.
+double exact_bits_per_power(const GiNaC::ex& a);
+
 /// An upper bound of |c| where c is the constant term of expand(e): numbers
 /// give their absolute value, sums add, products multiply, positive integer
 /// powers raise; symbols, functions, constants and other powers give 0 (for
