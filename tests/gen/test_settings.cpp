@@ -14,6 +14,7 @@
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/parse.hpp"
 #include "hybgen/gen/run.hpp"
+#include "hybgen/rt/setting_rules.hpp"
 #include "hybgen/rt/settings.hpp"
 
 namespace hybgen::gen {
@@ -202,6 +203,27 @@ TEST(Settings, DefaultsAndDerivedDefaults) {
   EXPECT_FALSE(m.sim.settings.given("dt"));
   // The derivation limits are read from the table.
   EXPECT_EQ(m.limits.derive_seconds, rt::setting_number("derive_seconds"));
+}
+
+// scheme=fv is the generator: its null vector for invariant, stepped in time for transfer
+// (runtime/include/hybgen/rt/methods/generator_march.hpp); escape is not built on it, and says
+// so before anything runs (setting_rules.hpp, fv_scheme_rule).
+TEST(Settings, SchemeFvIsForTransferAndInvariant) {
+  for (const std::string method : {"transfer", "invariant", "escape", "characteristics"}) {
+    rt::Settings s;
+    rt::SettingValue m, f;
+    m.word = method;
+    f.word = "fv";
+    s.assign("method", m);
+    s.assign("scheme", f);
+    std::string why;
+    for (const rt::SettingConflict& c : rt::setting_conflicts(s, rt::RunFacts{}))
+      if (c.setting == "scheme") why = c.message;
+    EXPECT_EQ(why.empty(), method != "escape") << method << ": " << why;
+    if (method == "escape") {
+      EXPECT_NE(why.find("method=invariant or transfer"), std::string::npos);
+    }
+  }
 }
 
 TEST(Settings, DocsPageIsTheTable) {

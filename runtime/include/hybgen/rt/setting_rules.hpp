@@ -125,18 +125,20 @@ inline std::string marginals_rule(const Settings& s) {
 }
 
 /// scheme=fv discretises the generator: its null vector is the invariant density, which
-/// method invariant takes (methods/generator_solve.hpp); nothing steps it in time yet, and
-/// the escape rate is not built on it yet.
+/// method invariant takes (methods/generator_solve.hpp), and method transfer steps it in time
+/// (methods/generator_march.hpp); the escape rate is not built on it yet.
 inline std::string fv_scheme_rule(const Settings& s) {
   constexpr std::size_t kScheme = setting_index("scheme");
   static_assert(kScheme < kSettings.size(), "the setting scheme");
   if (s.word<"scheme">() != "fv") return "";
   const MethodSpec& m = method_named(s.word<"method">());
-  if (m.id == Method::invariant || !method_reads(m, kSettings[kScheme])) return "";
-  return "scheme=fv is the finite-volume generator, whose null vector is the invariant density; "
-         "method " +
+  if (m.id == Method::invariant || m.id == Method::transfer || !method_reads(m, kSettings[kScheme]))
+    return "";
+  return "scheme=fv is the finite-volume generator, whose null vector is the invariant density "
+         "and which method transfer steps in time; method " +
          s.word<"method">() +
-         " is not built on it yet: use method=invariant with scheme=fv, or scheme=hat or cell";
+         " is not built on it yet: use method=invariant or transfer with scheme=fv, or "
+         "scheme=hat or cell";
 }
 
 /// A VTK image is one process's whole grid.

@@ -78,14 +78,16 @@ inline constexpr std::array kSettings = {
     SettingSpec{"budget_tol", SettingType::real, 3e-4, "", 1e-12, 0.1, false, "", "characteristics",
                 "relative tolerance of the full mass budget's cubatures"},
     SettingSpec{"step", SettingType::real, 0.0, "", 0.0, 1e300, false, "",
-                "transfer invariant escape", "time step of the transfer operator (0: dt)"},
+                "transfer invariant escape",
+                "time step of the transfer operator (0: dt); scheme=fv of transfer: a cap of its "
+                "time step (0: the stability bound alone)"},
     SettingSpec{"scheme", SettingType::word, 0.0, "auto", 0, 0, false, "auto|hat|cell|fv",
                 "transfer invariant escape",
                 "auto (fv for method=invariant where it applies, else hat), hat (forward "
-                "samples on hat functions), cell (Ulam), or fv (invariant only: the null vector "
-                "of a cut-cell finite-volume generator, order 3; guards that are coordinate "
-                "planes)"},
-    SettingSpec{"fv_order", SettingType::integer, 3, "", 1, 3, false, "", "invariant",
+                "samples on hat functions), cell (Ulam), or fv (a cut-cell finite-volume "
+                "generator, order 3; guards that are coordinate planes; one process): its null "
+                "vector for invariant, stepped in time for transfer"},
+    SettingSpec{"fv_order", SettingType::integer, 3, "", 1, 3, false, "", "transfer invariant",
                 "scheme=fv: order of the upwind reconstruction (3; 1 and 2 for tests of the "
                 "order)"},
     SettingSpec{"samples", SettingType::integer, 0, "", 0, 64, false, "",

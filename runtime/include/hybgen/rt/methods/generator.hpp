@@ -74,6 +74,9 @@ struct FvOperator {
   std::vector<FvGuardPlane> planes;         ///< The guards' planes and images.
   /// A rate of the model: max over modes, axes and faces of |X_d| / (max_d − min_d).
   double rate = 0.0;
+  /// Per unknown, the rate at which volume leaves its cell: Σ area·|X·n| over the faces it
+  /// is the upwind cell of. out_rate/vol bounds a stable explicit step (generator_march.hpp).
+  std::vector<double> out_rate;
   /// Unknowns.
   std::size_t size() const { return offset.empty() ? 0 : offset.back(); }
   /// Cells of mode m along axis a.
@@ -113,12 +116,13 @@ inline bool fv_face_stencil(const FvAxis& ax, int f, int side, int p, int& up, s
 }  // namespace detail
 
 /// The finite-volume generator of M on `grid` with reconstruction order `order` (1–3), cut at
-/// `planes` (fv_guard_planes). Throws std::invalid_argument for another order.
+/// `planes` (fv_guard_planes), a cut within `snap` node spacings of a dual face moving that face
+/// (make_fv_axis). Throws std::invalid_argument for another order.
 template <HybridModel M>
 FvOperator<state_dim_v<M>> assemble_fv_generator(const TensorGrid<state_dim_v<M>>& grid,
                                                  const double* par,
-                                                 const std::vector<FvGuardPlane>& planes,
-                                                 int order) {
+                                                 const std::vector<FvGuardPlane>& planes, int order,
+                                                 double snap = kFvSnap) {
   constexpr std::size_t N = state_dim_v<M>;
   if (order < 1 || order > 3) throw std::invalid_argument("scheme=fv: fv_order must be 1, 2 or 3");
   FvOperator<N> op;
@@ -131,13 +135,14 @@ FvOperator<state_dim_v<M>> assemble_fv_generator(const TensorGrid<state_dim_v<M>
     std::size_t cells = 1;
     for (std::size_t a = 0; a < N; ++a) {
       op.axes[static_cast<std::size_t>(m)][a] =
-          make_fv_axis(grid.axes[a], detail::fv_cuts(planes, m, static_cast<int>(a)));
+          make_fv_axis(grid.axes[a], detail::fv_cuts(planes, m, static_cast<int>(a)), snap);
       cells *= static_cast<std::size_t>(op.cells(m, a));
     }
     op.offset.push_back(op.offset.back() + cells);
   }
   const std::size_t n = op.size();
   op.vol.assign(n, 1.0);
+  op.out_rate.assign(n, 0.0);
   std::vector<Eigen::Triplet<double>> entries;
   std::array<double, N> x{}, X{}, y{};
   std::vector<int> st;
@@ -229,6 +234,7 @@ FvOperator<state_dim_v<M>> assemble_fv_generator(const TensorGrid<state_dim_v<M>
         }
         const long src = cell(up);
         const double q = area * std::fabs(v);
+        op.out_rate[static_cast<std::size_t>(src)] += q;
         for (std::size_t j = 0; j < st.size(); ++j) {
           const long col = cell(st[j]);
           entries.emplace_back(src, col, -q * w[j]);

@@ -296,8 +296,12 @@ struct FvAxis {
   }
 };
 
-/// The partition of `a` into dual cells cut at `cuts` (see the file comment).
-inline FvAxis make_fv_axis(const GridAxis& a, std::vector<double> cuts) {
+/// The partition of `a` into dual cells cut at `cuts` (see the file comment). A cut within
+/// kFvSnap node spacings of an edge becomes that edge; one within `snap` spacings (at most 1/4)
+/// of an interior edge that is not a wall moves that edge onto the cut instead of making a cell
+/// thinner than snap·Δx (the time-stepped generator's step is bounded by its thinnest cell,
+/// generator_march.hpp; no node changes cell, since edges move by less than Δx/2).
+inline FvAxis make_fv_axis(const GridAxis& a, std::vector<double> cuts, double snap = kFvSnap) {
   FvAxis ax;
   const int n = std::max(a.n, 2);
   ax.edge.push_back(a.min);
@@ -305,18 +309,33 @@ inline FvAxis make_fv_axis(const GridAxis& a, std::vector<double> cuts) {
   ax.edge.push_back(a.max);
   ax.wall.assign(ax.edge.size(), 0);
   ax.wall.front() = ax.wall.back() = 1;
-  const double h = (a.max - a.min) / (n - 1), snap = kFvSnap * h;
+  const double h = (a.max - a.min) / (n - 1), tiny = kFvSnap * h,
+               near = std::clamp(snap, kFvSnap, 0.25) * h;
   std::sort(cuts.begin(), cuts.end());
   for (const double c : cuts) {
-    if (c < a.min - snap || c > a.max + snap) continue;
+    if (c < a.min - tiny || c > a.max + tiny) continue;
     const auto it = std::lower_bound(ax.edge.begin(), ax.edge.end(), c);
     auto k = static_cast<std::size_t>(it - ax.edge.begin());
-    if (k < ax.edge.size() && ax.edge[k] - c <= snap) {
-      if (k > 0 && k + 1 < ax.edge.size()) ax.edge[k] = c;
+    const std::size_t last = ax.edge.size() - 1;
+    if (k <= last && ax.edge[k] - c <= tiny) {
+      if (k > 0 && k < last) ax.edge[k] = c;
       ax.wall[k] = 1;
-    } else if (k > 0 && c - ax.edge[k - 1] <= snap) {
+      continue;
+    }
+    if (k > 0 && c - ax.edge[k - 1] <= tiny) {
       if (k - 1 > 0) ax.edge[k - 1] = c;
       ax.wall[k - 1] = 1;
+      continue;
+    }
+    // The nearer movable edge (interior, not a wall) within `near`, else a new edge.
+    std::size_t best = 0;
+    double best_d = near;
+    for (const std::size_t j : {k, k - 1})
+      if (j > 0 && j < last && !ax.wall[j] && std::fabs(ax.edge[j] - c) <= best_d)
+        best = j, best_d = std::fabs(ax.edge[j] - c);
+    if (best > 0) {
+      ax.edge[best] = c;
+      ax.wall[best] = 1;
     } else {
       ax.edge.insert(ax.edge.begin() + static_cast<std::ptrdiff_t>(k), c);
       ax.wall.insert(ax.wall.begin() + static_cast<std::ptrdiff_t>(k), 1);

@@ -53,6 +53,7 @@
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/settings.hpp"
 
+#include "hybgen/rt/methods/generator_march.hpp"
 #include "hybgen/rt/methods/generator_solve.hpp"
 #include "hybgen/rt/methods/invariant.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
@@ -390,19 +391,20 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
 namespace detail {
 
 /// The errors of a transfer run per output time (two_grid.hpp), into the transfer summary
-/// `t`: the same operator (same step and samples) marched on the halved grid and on the
-/// quartered one. At each time, D_k is the relative L1 difference of the frame from the
+/// `t`: the same scheme (same step and samples; for fv the same order) marched on the halved
+/// grid and on the quartered one by `solve_on(grid, title)`, which returns an empty Solution
+/// when it fails. At each time, D_k is the relative L1 difference of the frame from the
 /// halved grid's (max over modes) and D'_k the halved grid's from the quartered one's; the
 /// observed order p_k = log2(D'_k/D_k) and the estimate E_k = f(p_k)·D_k with
-/// f(p) = max(2, 1/(2^p − 1)), p clamped to ≥ 1/4 (the margin 2 of a first-order scheme, and
-/// the Richardson factor of a slower one: 2.4 at p = 1/2). The initial frame is u0 at the
-/// nodes: 0. An estimate whose p_k is below 1/4 or missing is flagged unreliable. Over
-/// several processes nothing is estimated (the frames are distributed).
-template <HybridModel M>
-void add_transfer_errors(nlohmann::json& t, const TensorGrid<state_dim_v<M>>& grid,
-                         const Solution<state_dim_v<M>>& sol, std::span<const double> times,
-                         const double* par, const TransferOptions& o, const MethodSettings& s) {
-  constexpr std::size_t N = state_dim_v<M>;
+/// f(p) = max(error_factor(order), 1/(2^p − 1)), p clamped to ≥ 1/4 (the margin 2 of a
+/// first-order scheme, 1 — a margin of 2^p − 1 — of a higher-order one, and the Richardson
+/// factor of a slower one: 2.4 at p = 1/2). The initial frame is u0 at the nodes: 0. An
+/// estimate whose p_k is below 1/4 or missing is flagged unreliable. Over several processes
+/// nothing is estimated (the frames are distributed).
+template <std::size_t N, class SolveOn>
+void add_transfer_errors(nlohmann::json& t, const TensorGrid<N>& grid, const Solution<N>& sol,
+                         std::span<const double> times, int order, const MethodSettings& s,
+                         SolveOn&& solve_on) {
   if (sol.distributed || (s.backend && s.backend->ranks() > 1)) {
     t["errors"] = nullptr;
     t["error_note"] = "no error estimate over several processes";
@@ -410,15 +412,8 @@ void add_transfer_errors(nlohmann::json& t, const TensorGrid<state_dim_v<M>>& gr
   }
   const auto t0 = MethodClock::now();
   const TensorGrid<N> half = halved_grid(grid), quarter = halved_grid(half);
-  const auto coarse = [&](const TensorGrid<N>& g, const char* title) {
-    const TransferOperator<N> cop = assemble<M>(g, par, o, s.quiet, title);
-    if (!cop.ok()) return Solution<N>{};
-    const std::vector<double> u0 = initial_vector<M>(g, par);
-    TransferRun<N> run = march(cop, u0, times, nullptr);
-    return run.ok() ? std::move(run.solution) : Solution<N>{};
-  };
-  const Solution<N> c = coarse(half, "transfer operator: assembly (halved grid)");
-  const Solution<N> q = coarse(quarter, "transfer operator: assembly (quartered grid)");
+  const Solution<N> c = solve_on(half, "transfer: halved grid");
+  const Solution<N> q = solve_on(quarter, "transfer: quartered grid");
   const auto frame = [](const Solution<N>& u, std::size_t k) {
     return std::span<const double>(u.u.data() + u.index(k, 0, 0), u.n_mode * u.n_point);
   };
@@ -446,7 +441,7 @@ void add_transfer_errors(nlohmann::json& t, const TensorGrid<state_dim_v<M>>& gr
       if (D > 0.0 && D2 > 0.0) p = std::log2(D2 / D);
     }
     const double factor =
-        std::isfinite(p) ? std::max(error_factor(1), 1.0 / (std::exp2(std::max(p, 0.25)) - 1.0))
+        std::isfinite(p) ? std::max(error_factor(order), 1.0 / (std::exp2(std::max(p, 0.25)) - 1.0))
                          : error_factor(1);
     const bool ok = std::isfinite(p) && p >= 0.25;
     all_reliable = all_reliable && ok;
@@ -464,13 +459,84 @@ void add_transfer_errors(nlohmann::json& t, const TensorGrid<state_dim_v<M>>& gr
   t["coarse_grid"] = coarse_nodes;
   t["error_seconds"] = seconds_since(t0);
   t["error_note"] =
-      "errors: per output time, the estimated relative L1 error of the density (max over "
-      "modes), max(2, 1/(2^p - 1)) times the difference from the same operator on the grid of "
-      "coarse_grid nodes, p the order observed against the grid halved again (docs/methods.md, "
+      std::string(
+          "errors: per output time, the estimated relative L1 error of the density (max "
+          "over modes), max(") +
+      (order <= 1 ? "2" : "1") +
+      ", 1/(2^p - 1)) times the difference from the same scheme on the grid of coarse_grid "
+      "nodes, p the order observed against the grid halved again (docs/methods.md, "
       "\"transfer\"); unreliable where p is below 1/4 or unknown";
 }
 
 }  // namespace detail
+
+/// scheme=fv of the transfer method: the finite-volume generator stepped in time
+/// (generator_march.hpp) on the grid, in one process, on guards that are coordinate planes;
+/// the errors per output time from the same march on the halved and quartered grids
+/// (detail::add_transfer_errors, order fv_order). `step`, when positive, caps the time step.
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_by_transfer_fv(const TensorGrid<state_dim_v<M>>& grid,
+                                                  std::span<const double> times, const double* par,
+                                                  const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  detail::set_time_frames(r, times);
+  if (s.backend && s.backend->ranks() > 1)
+    throw std::invalid_argument(
+        "scheme=fv runs in one process: run without MPI, or use scheme=hat over several");
+  const std::vector<FvGuardPlane> planes = fv_guard_planes<M>(grid, par);  // throws: a guard
+  FvMarchOptions fo;
+  fo.order = static_cast<int>(s.settings.integer<"fv_order">());
+  fo.max_step = s.settings.real<"step">();
+  const auto t0 = detail::MethodClock::now();
+  FvMarchRun<N> run;
+  {
+    Progress progress("transfer (fv): march", times.size(), s.quiet);
+    run = fv_march<M>(grid, par, planes, times, fo, &progress);
+  }
+  r.solve_s = detail::seconds_since(t0);
+  if (!run.ok()) {
+    r.failure = "(scheme=fv) " + run.failure;
+    return r;
+  }
+  r.solution = std::move(run.solution);
+  r.budget = std::move(run.budget);
+  nlohmann::json t = {
+      {"scheme", "fv"},
+      {"order", fo.order},
+      {"rows", run.unknowns},
+      {"nonzeros", run.nonzeros},
+      {"step", run.step},
+      {"cfl", kFvCfl},
+      {"steps", run.n_steps},
+      {"time_integrator", "SSP Runge-Kutta 3 (Shu-Osher)"},
+      {"assembly_seconds", run.assembly_seconds},
+      {"march_seconds", run.seconds},
+      {"budget_defect", run.budget_defect},
+      {"min_value", run.min_value},
+      {"note",
+       "the finite-volume generator stepped in time (docs/methods.md, \"transfer\"): outflow "
+       "is counted per stage, mass + outflow = initial mass to budget_defect; no atom (mass a "
+       "Zeno point absorbs stays in the cells around it)"}};
+  double top = 0.0;
+  for (const double u : r.solution.u) top = std::max(top, u);
+  if (run.min_value < -kFvNegativeTolerance * top) {
+    char b[300];
+    std::snprintf(b, sizeof b,
+                  "scheme=fv undershoots: the smallest density is %.3g against a largest of %.3g "
+                  "(the unlimited third-order reconstruction near a steep front); refine the "
+                  "grid, or --set fv_order=1 for a positive, first-order march",
+                  run.min_value, top);
+    r.warnings.push_back(b);
+  }
+  detail::add_transfer_errors(
+      t, grid, r.solution, times, fo.order, s, [&](const TensorGrid<N>& g, const char*) {
+        FvMarchRun<N> c = fv_march<M>(g, par, fv_guard_planes<M>(g, par), times, fo, nullptr);
+        return c.ok() ? std::move(c.solution) : Solution<N>{};
+      });
+  r.summary[summary_key::transfer] = t;
+  return r;
+}
 
 /// The transfer-operator method: assemble once, march to the output times, and estimate
 /// the error of every frame (detail::add_transfer_errors).
@@ -479,6 +545,7 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
                                                std::span<const double> times, double dt,
                                                const double* par, const MethodSettings& s) {
   constexpr std::size_t N = state_dim_v<M>;
+  if (s.settings.word<"scheme">() == "fv") return solve_by_transfer_fv<M>(grid, times, par, s);
   MethodResult<N> r;
   detail::set_time_frames(r, times);
   const TransferOptions o = detail::transfer_options(s, dt);
@@ -506,7 +573,13 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   t["note"] =
       "outflow and atom are counted per column of the operator (where the forward flow of each "
       "cell's samples ends); mass + outflow + atom = initial mass to budget_defect";
-  detail::add_transfer_errors<M>(t, grid, r.solution, times, par, o, s);
+  detail::add_transfer_errors(
+      t, grid, r.solution, times, 1, s, [&](const TensorGrid<N>& g, const char* title) {
+        const TransferOperator<N> cop = detail::assemble<M>(g, par, o, s.quiet, title);
+        if (!cop.ok()) return Solution<N>{};
+        TransferRun<N> crun = march(cop, initial_vector<M>(g, par), times, nullptr);
+        return crun.ok() ? std::move(crun.solution) : Solution<N>{};
+      });
   r.summary[summary_key::transfer] = t;
   return r;
 }

@@ -120,8 +120,9 @@ inline TransferScheme parse_scheme(const std::string& name) {
   if (name == "cell") return TransferScheme::cell;
   if (name == "fv")
     throw std::invalid_argument(
-        "scheme=fv is the invariant method's finite-volume generator (methods/generator.hpp), "
-        "not a transfer operator: use method=invariant, or scheme=hat or cell");
+        "scheme=fv is the finite-volume generator (methods/generator.hpp), not a sampled "
+        "transfer operator: method=transfer and invariant take it, escape does not; use "
+        "scheme=hat or cell");
   throw std::invalid_argument("unknown transfer scheme '" + name + "' (hat or cell)");
 }
 
