@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -192,6 +193,58 @@ TEST_F(Figures, PairsOfAxesAndModesAndAPagePerFrame) {
   for (auto p = pdf.find("/Type /Page"); p != std::string::npos; p = pdf.find("/Type /Page", p + 1))
     pages += pdf.compare(p, 12, "/Type /Pages") == 0 ? 0 : 1;
   EXPECT_EQ(pages, 3u);
+}
+
+/// Whether p is within `tol` of the colour (r, g, b) in every channel.
+bool near_colour(Pixel p, int r, int g, int b, int tol = 40) {
+  return std::abs(p.r - r) <= tol && std::abs(p.g - g) <= tol && std::abs(p.b - b) <= tol;
+}
+
+/// In the right quarter of `png` (the legend), the most pixels of colour (r, g, b) in one row,
+/// and how many separate runs of that colour the row has (a dashed sample has several).
+std::pair<int, int> legend_sample(const Png& png, int r, int g, int b) {
+  int best = 0, runs = 0;
+  for (int y = 0; y < png.height(); ++y) {
+    int count = 0, row_runs = 0;
+    bool in = false;
+    for (int x = 3 * png.width() / 4; x < png.width(); ++x) {
+      const bool hit = near_colour(png.at(x, y), r, g, b);
+      count += hit ? 1 : 0;
+      row_runs += hit && !in ? 1 : 0;
+      in = hit;
+    }
+    if (count > best) best = count, runs = row_runs;
+  }
+  return {best, runs};
+}
+
+TEST_F(Figures, TheBudgetsLegendShowsEachLineAsDrawn) {
+  // budget.png: the outflow (orange, solid) and what is unaccounted (a reddish purple, dashed)
+  // are told apart in the legend by colour and by the dash, as on the plot.
+  RunRecord run;
+  run.model = "leak";
+  run.method = "characteristics";
+  run.axis_names = {"x"};
+  run.axes = {{0, 1, 11}};
+  run.mode_names = {"only"};
+  run.times = {0, 1, 2};
+  run.frame_names = {"u_0000", "u_0001", "u_0002"};
+  values_.assign(3 * 11, 1.0);
+  run.density = values_;
+  run.budget.times = run.times;
+  run.budget.mass0 = 1.0;
+  run.budget.mass = {1.0, 0.8, 0.6};
+  run.budget.outflow = {0.0, 0.2, 0.35};
+  run.budget.atom = {0.0, 0.0, 0.0};
+  FigureRequest req;
+  write_figures(run, req, dir_.string());
+  const Png png(path("budget.png"));
+  const auto [outflow_px, outflow_runs] = legend_sample(png, 230, 158, 0);  // kCurve[1]
+  const auto [defect_px, defect_runs] = legend_sample(png, 204, 120, 166);  // kCurve[4]
+  EXPECT_GE(outflow_px, 15);
+  EXPECT_EQ(outflow_runs, 1);  // solid
+  EXPECT_GE(defect_px, 8);
+  EXPECT_GE(defect_runs, 2);  // dashed
 }
 
 TEST(ColourScale, LinearFromZeroAndLogAtASpike) {

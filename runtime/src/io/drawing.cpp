@@ -310,9 +310,13 @@ void draw_curves(cairo_t* cr, const Rect& r, const std::vector<double>& x,
       const double y = ly + 16.0 * static_cast<double>(i) + 9;
       set_colour(cr, legend[i]->colour);
       cairo_set_line_width(cr, legend[i]->width);
+      // The sample shows the line as drawn: dashed curves get the same dash.
+      const double dash[] = {6.0, 4.0};
+      cairo_set_dash(cr, dash, legend[i]->dashed ? 2 : 0, 0);
       cairo_move_to(cr, lx, y - 4);
       cairo_line_to(cr, lx + 24, y - 4);
       cairo_stroke(cr);
+      cairo_set_dash(cr, dash, 0, 0);
       set_colour(cr, kInk);
       text(cr, lx + 30, y, legend[i]->label);
     }

@@ -202,14 +202,19 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
   if (run.axes.size() == 1) {
     std::vector<double> x(static_cast<std::size_t>(run.axes[0].n));
     for (std::size_t i = 0; i < x.size(); ++i) x[i] = axis_node(run.axes[0], static_cast<int>(i));
+    // With several modes the sum is drawn first, thin and dashed, so that a mode holding all
+    // the mass (where the sum equals it) stays visible on top of it.
     std::vector<Curve> curves;
+    Curve sum = curve(run.n_mode() > 1 ? "sum" : "u", run.total_density(k), kInk,
+                      run.n_mode() > 1 ? 1.2 : 2.0);
+    sum.dashed = run.n_mode() > 1;
+    curves.push_back(std::move(sum));
     if (run.n_mode() > 1)
       for (std::size_t m = 0; m < run.n_mode(); ++m) {
         const auto u = run.mode_density(k, m);
-        curves.push_back(
-            curve("mode " + run.mode_names[m], {u.begin(), u.end()}, kCurve[m % kCurve.size()]));
+        curves.push_back(curve("mode " + run.mode_names[m], {u.begin(), u.end()},
+                               kCurve[m % kCurve.size()], 2.0));
       }
-    curves.push_back(curve(run.n_mode() > 1 ? "sum" : "u", run.total_density(k), kInk, 2.0));
     // An invisible curve at the run's maximum fixes the vertical range: frames compare.
     std::vector<Curve> with_range = curves;
     with_range.insert(with_range.begin(),
@@ -262,7 +267,8 @@ void draw_budget(cairo_t* cr, const RunRecord& run, double width, double height)
       {"outflow", b.outflow, kCurve[1], 2.0, band(b.outflow_error)},
       {"atom (Zeno)", b.atom, kCurve[2], 2.0,
        band(run.atom_error.size() == K ? run.atom_error : b.atom_error)},
-      {"unaccounted", budget_defect(b), kCurve[3], 1.6, band(budget_defect_error(b)), true}};
+      // Not an orange beside the outflow's: a reddish purple, dashed (legend too).
+      {"unaccounted", budget_defect(b), kCurve[4], 1.6, band(budget_defect_error(b)), true}};
   draw_curves(cr, {kLeft + 10, kTop, width - kLeft - 30 - kLegend, height - kTop - kBottom - 10},
               run.times, curves, "t", "mass");
 }
