@@ -247,6 +247,47 @@ TEST_F(Figures, TheBudgetsLegendShowsEachLineAsDrawn) {
   EXPECT_GE(defect_runs, 2);  // dashed
 }
 
+TEST_F(Figures, AOneDimensionalFrameMarksItsGuards) {
+  // u on [0, 2] (41 nodes), a guard s = x − 1.3: a dashed vertical line in the guards'
+  // colour where s changes sign, none elsewhere (the columns at x = 0.5 and 1.7 have none).
+  RunRecord run;
+  run.model = "line";
+  run.method = "characteristics";
+  run.axis_names = {"x"};
+  run.axes = {{0, 2, 41}};
+  run.mode_names = {"only"};
+  run.times = {0};
+  run.frame_names = {"u_0000"};
+  values_.assign(41, 1.0);
+  run.density = values_;
+  std::vector<double> s(41);
+  for (std::size_t i = 0; i < s.size(); ++i) s[i] = 0.05 * static_cast<double>(i) - 1.3;
+  run.guards.push_back(guard_field("switch", 0, s, run.axes, figure_pairs(1, {})));
+  FigureRequest req;
+  write_figures(run, req, dir_.string());
+  const Png png(path("u_0000.png"));
+  // Columns by their guard-coloured pixels: the line is the column with the most, and it sits
+  // 1.3/2 of the way along the plot's frame.
+  int best_x = -1, best = 0, first = png.width(), last = -1;
+  for (int x = 0; x < png.width(); ++x) {
+    int count = 0;
+    for (int y = 0; y < png.height(); ++y) count += is_guard_colour(png.at(x, y)) ? 1 : 0;
+    if (count > best) best = count, best_x = x;
+  }
+  // The plot's frame: the row with the most dark pixels is an edge of it, spanning x's range.
+  int edge_row = 0, edge_count = 0;
+  for (int y = 0; y < png.height(); ++y) {
+    int count = 0;
+    for (int x = 0; x < png.width(); ++x) count += brightness(png.at(x, y)) < 200 ? 1 : 0;
+    if (count > edge_count) edge_count = count, edge_row = y;
+  }
+  for (int x = 0; x < png.width(); ++x)
+    if (brightness(png.at(x, edge_row)) < 200) first = std::min(first, x), last = std::max(last, x);
+  ASSERT_GT(best, 40);  // dashed: most of a plot's height
+  ASSERT_LT(first, last);
+  EXPECT_NEAR(best_x, first + 0.65 * (last - first), 6);
+}
+
 TEST(ColourScale, LinearFromZeroAndLogAtASpike) {
   std::vector<double> v(1000, 1.0);
   v[3] = 2.0;

@@ -193,6 +193,44 @@ Rect panel_rect(const FrameLayout& l, std::size_t i) {
           l.panel};
 }
 
+/// The points of a 1-D run where each guard's s changes sign (linear between nodes), as
+/// dashed vertical lines in the guards' colour across `r` (the plot of the curves over `x`),
+/// each named at its top; a guard met at several points is named once.
+void draw_guard_marks(cairo_t* cr, const Rect& r, const std::vector<double>& x,
+                      const std::vector<GuardField>& guards) {
+  if (x.size() < 2) return;
+  const auto X = [&](double v) { return r.x + (v - x.front()) / (x.back() - x.front()) * r.w; };
+  const double dash[] = {4.0, 3.0};
+  set_font(cr, 11);
+  double label_y = r.y + 13;
+  for (const GuardField& g : guards) {
+    if (g.line.size() != x.size()) continue;
+    std::vector<double> at;
+    for (std::size_t i = 0; i + 1 < x.size(); ++i) {
+      const double a = g.line[i], b = g.line[i + 1];
+      if (a == 0.0 && (i == 0 || g.line[i - 1] != 0.0)) at.push_back(x[i]);
+      if (a != 0.0 && b != 0.0 && (a < 0.0) != (b < 0.0))
+        at.push_back(x[i] + a / (a - b) * (x[i + 1] - x[i]));
+    }
+    if (!at.empty() && g.line.back() == 0.0) at.push_back(x.back());
+    for (std::size_t j = 0; j < at.size(); ++j) {
+      set_colour(cr, kGuard);
+      cairo_set_line_width(cr, 1.4);
+      cairo_set_dash(cr, dash, 2, 0);
+      cairo_new_path(cr);
+      cairo_move_to(cr, X(at[j]), r.y);
+      cairo_line_to(cr, X(at[j]), r.y + r.h);
+      cairo_stroke(cr);
+      cairo_set_dash(cr, dash, 0, 0);
+      if (j == 0) {
+        const double w = text_width(cr, g.name);
+        text(cr, std::min(X(at[j]) + 4, r.x + r.w - w - 2), label_y, g.name);
+      }
+    }
+    if (!at.empty()) label_y += 14;
+  }
+}
+
 /// Frame k of the run, on a surface of the plan's size.
 void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::size_t k) {
   const FrameLayout& l = plan.layout;
@@ -221,6 +259,7 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
                       curve("", std::vector<double>(x.size(), plan.line_max), {1, 1, 1}, 0.0));
     const Rect r{kLeft + 10, kTop, l.width - kLeft - 30 - kLegend, l.height - kTop - kBottom - 10};
     draw_curves(cr, r, x, with_range, run.axis_names[0], "density u");
+    draw_guard_marks(cr, r, x, run.guards);
     return;
   }
   const std::vector<HeatPanel>& panels = plan.panels[k];

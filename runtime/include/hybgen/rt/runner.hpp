@@ -325,6 +325,9 @@ void record_geometry(const RunPlan<state_dim_v<M>>& p, RunRecord& rec) {
     const auto gi = static_cast<std::size_t>(g);
     GuardField f{M::guard_names[gi], {}, M::guards[gi].from};
     for (std::size_t q = 0; q < pairs.size(); ++q) f.planes.push_back(planes.plane(q));
+    if constexpr (N == 1)  // a line of nodes: every rank evaluates all of it
+      for (std::size_t i = 0; i < p.grid.size(); ++i)
+        f.line.push_back(M::guard_surface(g, p.grid.node(i).data(), par));
     rec.guards.push_back(std::move(f));
   }
 }

@@ -167,6 +167,9 @@ struct GuardField {
   /// the pair's first axis slowest; empty for a pair where s depends on the other axes.
   std::vector<std::vector<double>> planes;
   int from = -1;  ///< The mode it fires from (-1: every mode).
+  /// A 1-D run's s at every node (the curves' pictures mark where it changes sign); empty in
+  /// more dimensions.
+  std::vector<double> line = {};
 };
 
 /// The GuardField of s given at every node of `axes` (one process).
@@ -177,6 +180,7 @@ inline GuardField guard_field(std::string name, int from, std::span<const double
   planes.add(0, s);
   GuardField g{std::move(name), {}, from};
   for (std::size_t p = 0; p < pairs.size(); ++p) g.planes.push_back(planes.plane(p));
+  if (axes.size() == 1) g.line.assign(s.begin(), s.end());
   return g;
 }
 

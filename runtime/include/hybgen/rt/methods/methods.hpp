@@ -531,8 +531,13 @@ MethodResult<state_dim_v<M>> solve_by_transfer_fv(const TensorGrid<state_dim_v<M
   }
   detail::add_transfer_errors(
       t, grid, r.solution, times, fo.order, s, [&](const TensorGrid<N>& g, const char*) {
-        FvMarchRun<N> c = fv_march<M>(g, par, fv_guard_planes<M>(g, par), times, fo, nullptr);
-        return c.ok() ? std::move(c.solution) : Solution<N>{};
+        // A coarse grid the generator cannot cut gives no estimate, not a failed run.
+        try {
+          FvMarchRun<N> c = fv_march<M>(g, par, fv_guard_planes<M>(g, par), times, fo, nullptr);
+          return c.ok() ? std::move(c.solution) : Solution<N>{};
+        } catch (const std::invalid_argument&) {
+          return Solution<N>{};
+        }
       });
   r.summary[summary_key::transfer] = t;
   return r;
