@@ -56,7 +56,7 @@ void invariant_scheme(benchmark::State& state, const Case& c, const std::string&
 
 const bool registered = [] {
   for (const Case& c : hybgen::testing::cycle_cases())
-    for (const char* scheme : {"fv", "hat", "cell"})
+    for (const char* scheme : {"fv", "hat"})
       benchmark::RegisterBenchmark(
           ("invariant/" + c.name + "/" + scheme).c_str(),
           [c, s = std::string(scheme)](benchmark::State& st) { invariant_scheme(st, c, s); })

@@ -149,12 +149,6 @@ void BM_TransferPaper(benchmark::State& state) {
 }
 BENCHMARK(BM_TransferPaper)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
 
-/// The `cell` (Ulam) scheme, 4×4 samples per cell.
-void BM_TransferPaperCell(benchmark::State& state) {
-  paper_run(state, rt::TransferScheme::cell);
-}
-BENCHMARK(BM_TransferPaperCell)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
-
 // ---------------------------------------------------------------------------------------
 // (b) Work–precision.
 

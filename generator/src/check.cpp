@@ -804,12 +804,14 @@ bool is_simulation_setting(const std::string& key) {
 }
 
 std::string set_simulation_setting(Model& model, const std::string& key, const SettingValue& v) {
-  // The backward interpolating scheme created mass at resets with |J| != 1 and was
-  // withdrawn; its spelling gets the reason (runtime/include/hybgen/rt/methods/transfer.hpp).
+  // The backward interpolating scheme created mass at resets with |J| != 1, and Ulam's cell
+  // scheme did not converge: both were withdrawn, and their spellings get the reason
+  // (runtime/include/hybgen/rt/methods/transfer.hpp).
   if (key == "scheme" && (v.word == "interpolate" || v.word == "conservative"))
     return "'" + v.word +
            "' was withdrawn: use 'hat' (the default: forward samples "
-           "deposited on hat functions) or 'cell' (Ulam); both conserve mass";
+           "deposited on hat functions, conserving mass) or 'fv' (the finite-volume generator)";
+  if (key == "scheme" && v.word == "cell") return rt::kWithdrawnCell;
   if (std::string why = model.sim.settings.set(key, v); !why.empty()) return why;
   // The pictures' axes are the model's states: two or more of them (the runner pairs them).
   // (The rule of runtime/include/hybgen/rt/setting_rules.hpp, checked here to locate it.)

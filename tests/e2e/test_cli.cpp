@@ -354,7 +354,7 @@ TEST(Cli, OneRunnerForEveryMethodAndValue) {
   for (const char* sets : {"--set e=0.8", "--set method=transfer",
                            "--set method=particles "
                            "--set particles=20000",
-                           "--set method=invariant --set scheme=cell"}) {
+                           "--set method=invariant --set scheme=hat"}) {
     const Result r = go(sets);
     ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << sets << "\n" << r.out;
     EXPECT_NE(r.out.find("runner (cached)"), std::string::npos) << sets << "\n" << r.out;
@@ -418,7 +418,7 @@ TEST(Cli, TransferNeverCreatesMassThroughTheCommandLine) {
               s["mass"].back().get<double>(), s["outflow"].back().get<double>(),
               s["atom"].back().get<double>());
   // The withdrawn schemes are refused with the reason, before anything is built.
-  for (const char* old : {"interpolate", "conservative"}) {
+  for (const char* old : {"interpolate", "conservative", "cell"}) {
     Result r = hybgen(std::string("check models/bouncing_ball.model --set scheme=") + old);
     EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << r.out;
     EXPECT_NE(r.out.find("was withdrawn"), std::string::npos) << r.out;

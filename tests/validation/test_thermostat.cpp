@@ -123,16 +123,12 @@ TEST(Thermostat, InvariantDensityMatchesTheClosedForm) {
   // u* = (1/P)/|f_m| and λ₁ ≤ 1 + 1e-9. A closed system (no sample leaves the band: the
   // guards sit on its ends), so also λ₁ ≥ 1 − 1e-9, no outflow and no atom. The withdrawn
   // interpolating scheme gave λ₁ = 1.0025 and 20–44 % errors here.
-  // Measured (h = 0.05): hat 3.4e-3; cell 1.5e-1 with 4 samples (its 1/K quantisation: the
-  // flow moves every sample of a cell by nearly the same amount, so each cell's mass is split
-  // in quarters the same way every step) and 1.6e-2 with 32. Asserted: hat < 1e-2; cell's
-  // error falls by ≥ 4 from K = 4 to 32 (first order in 1/K) — why `hat` is the default.
+  // Measured (h = 0.05): hat 3.4e-3; asserted < 1e-2. (Ulam's `cell`, withdrawn, gave 1.5e-1
+  // with 4 samples — its 1/K quantisation: the flow moves every sample of a cell by nearly
+  // the same amount, so each cell's mass was split in quarters the same way every step.)
   Thermostat::q0 = nullptr;
   const auto grid = band(401);
-  double cell4 = 0.0;
-  for (const auto& [scheme, k] :
-       {std::pair{rt::TransferScheme::hat, 0}, std::pair{rt::TransferScheme::cell, 4},
-        std::pair{rt::TransferScheme::cell, 32}}) {
+  for (const auto& [scheme, k] : {std::pair{rt::TransferScheme::hat, 0}}) {
     SCOPED_TRACE(std::string(rt::scheme_name(scheme)) + " K=" + std::to_string(k));
     rt::TransferOptions o;
     o.step = 0.05;
@@ -159,13 +155,7 @@ TEST(Thermostat, InvariantDensityMatchesTheClosedForm) {
     EXPECT_LE(lam, 1.0 + 1e-9);
     EXPECT_GE(lam, 1.0 - 1e-9);
     EXPECT_GE(inv.min_value, 0.0);
-    if (scheme == rt::TransferScheme::hat) {
-      EXPECT_LT(err, 1e-2);
-    } else if (k == 4) {
-      cell4 = err;
-    } else {
-      EXPECT_LT(err, cell4 / 4.0);
-    }
+    EXPECT_LT(err, 1e-2);
   }
 }
 

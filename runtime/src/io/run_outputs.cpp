@@ -109,8 +109,9 @@ std::string resolution_warning(const RunRecord& run, const std::vector<double>& 
                 "the grid under-resolves the density: at t = %g the nodes' trapezoid sum is %.4g "
                 "but the mass is %.4g +/- %.2g (adaptive cubature), so the density has features "
                 "narrower than the grid's spacing and the pictures and run.nc show node samples "
-                "of them (speckle), not their shape; refine the grid, or use cell averages: "
-                "--set method=transfer --set scheme=cell, or method=particles",
+                "of them (speckle), not their shape; refine the grid, or use cell masses: "
+                "--set method=transfer (the dual cells' masses over their volumes), or "
+                "method=particles",
                 run.times[worst_k], worst_sum, b.mass[worst_k], b.mass_error[worst_k]);
   return msg;
 }

@@ -138,7 +138,7 @@ inline std::string fv_scheme_rule(const Settings& s) {
          "and which method transfer steps in time; method " +
          s.word<"method">() +
          " is not built on it yet: use method=invariant or transfer with scheme=fv, or "
-         "scheme=hat or cell";
+         "scheme=hat";
 }
 
 /// A VTK image is one process's whole grid.

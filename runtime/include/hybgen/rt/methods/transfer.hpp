@@ -6,7 +6,7 @@
 ///
 /// State layout: index r = m·n_node + i (mode m, grid node i in C order), like `Solution`.
 ///
-/// Both schemes move MASS, column by column: the mass of a node is the mass of its dual cell
+/// The scheme moves MASS, column by column: the mass of a node is the mass of its dual cell
 /// (half cells at the box faces; their volumes are exactly the trapezoid weights w), taken
 /// uniformly distributed over the cell (Ulam's ansatz) and represented by K =
 /// samples_per_axis^N sample points on the midpoint tensor pattern of the cell, each
@@ -19,10 +19,9 @@
 ///     smoothing of the deposit would carry a mode's mass across its switching surface, where
 ///     that mode's guard never fires again: measured on models/filippov.model,
 ///     tests/validation/test_moments.cpp) —
-///       `hat` (default): on the hat functions φ_j, by their exact integrals over the image
-///         of the sample's sub-cell (`deposit`), renormalised over the nodes that may hold the
-///         mass (the fraction never goes to a node that holds no state);
-///       `cell` (Ulam): all of it on the node whose dual cell contains the end point;
+///       on the hat functions φ_j (`hat`), by their exact integrals over the image of the
+///         sample's sub-cell (`deposit`), renormalised over the nodes that may hold the mass
+///         (the fraction never goes to a node that holds no state);
 ///   * outside the box or the support: outflow_i;
 ///   * at a Zeno point within h (mass concentrated on a point, which no density holds): atom_i.
 /// P_ji = fraction of cell i's mass deposited on node j, so, for every column i,
@@ -42,20 +41,22 @@
 /// e = 0.8 on 301² went from mass 2.6 to 3·10¹⁴ by t = 10. Rows cannot be made conservative
 /// without knowing where the mass goes, which is what the columns above are built from.)
 ///
-/// Accuracy. For a smooth density away from guards both schemes are consistent; per step,
-/// `hat` adds the smoothing of the uniform-cell source convolved with the hat deposit,
+/// Accuracy. For a smooth density away from guards the scheme is consistent; per step it adds
+/// the smoothing of the uniform-cell source convolved with the hat deposit,
 /// (Δx²/8)·∂²u per axis (the identity map gives u_j ← (u_{j−1} + 6u_j + u_{j+1})/8), so the
 /// error is O(Δx²) per step and O(Δx²/h) over a fixed horizon; the deposit is continuous in
-/// the end point, so it does not quantise to 1/K. `cell` quantises every fraction to k/K, an
-/// O(1/K) error that does not shrink with Δx (tests/rt/test_invariant.cpp: the cycle's
-/// invariant density has L1 error 5.5e-2, 1.4e-2, 3.2e-3 for K = 8, 32, 128 at 101 nodes):
-/// refine K together with the grid. A map that expands by more than samples_per_axis per
+/// the end point, so it does not quantise to 1/K. (Ulam's scheme, `cell` — all of a sample's
+/// fraction on the node whose dual cell holds its end point — quantised every fraction to
+/// k/K, an O(1/K) error that does not shrink with Δx: 13–15 % on the sawtooth's invariant
+/// density at every grid from 101 to 1601 nodes with K = 4, the node values zig-zagging. It
+/// was withdrawn in 2026-11; hat deposits without quantising and scheme=fv converges at order
+/// 3.) A map that expands by more than samples_per_axis per
 /// step leaves gaps between the images of one cell's samples (`hat` then under-resolves).
 /// Cost: K forward flows per node (default K = 16 in 1-D and 2-D, 27 in 3-D, 2^N above).
 /// Zeno points: the cell of a Zeno point is re-spread uniformly every step and only its
 /// samples with t_Z ≤ h drain into the atom; t_Z ~ √Δx there, so for small h the mass sits
 /// in that cell as density and the atom lags (tests/rt/test_transfer.cpp: ZenoMassBecomesAnAtom).
-/// Size: the two schemes (hat, cell), the sampling of each cell by the forward flow, the
+/// Size: the hat deposit, the sampling of each cell by the forward flow, the
 /// CSR assembly and the per-column outflow and atom bookkeeping that keep the mass exact.
 
 // GCC 12's flow-sensitive warnings (null-dereference, use-after-free, maybe-uninitialized
@@ -95,6 +96,7 @@
 #include "hybgen/rt/io/progress.hpp"
 #include "hybgen/rt/methods/forward.hpp"
 #include "hybgen/rt/model.hpp"
+#include "hybgen/rt/settings.hpp"
 
 #ifdef _OPENMP
 #include <omp.h>
@@ -102,28 +104,28 @@
 
 namespace hybgen::rt {
 
-/// Which transfer operator to assemble (see the file comment).
+/// Which transfer operator to assemble (see the file comment): one kind since Ulam's `cell`
+/// was withdrawn (settings.hpp, kWithdrawnCell).
 enum class TransferScheme {
-  hat,   ///< Forward samples deposited on the hat functions of their end points (default).
-  cell,  ///< Ulam: forward samples deposited in the dual cell of their end points.
+  hat,  ///< Forward samples deposited on the hat functions of their end points.
 };
 
-/// The scheme's name in settings and outputs ("hat", "cell").
-inline const char* scheme_name(TransferScheme s) {
-  return s == TransferScheme::cell ? "cell" : "hat";
+/// The scheme's name in settings and outputs ("hat").
+inline const char* scheme_name(TransferScheme) {
+  return "hat";
 }
 
 /// The scheme named `name` (`auto`: hat, the transfer operator's default); throws
 /// std::invalid_argument for any other name.
 inline TransferScheme parse_scheme(const std::string& name) {
   if (name == "hat" || name == "auto") return TransferScheme::hat;
-  if (name == "cell") return TransferScheme::cell;
+  if (name == "cell") throw std::invalid_argument(std::string("scheme=") + kWithdrawnCell);
   if (name == "fv")
     throw std::invalid_argument(
         "scheme=fv is the finite-volume generator (methods/generator.hpp), not a sampled "
         "transfer operator: method=transfer and invariant take it, escape does not; use "
-        "scheme=hat or cell");
-  throw std::invalid_argument("unknown transfer scheme '" + name + "' (hat or cell)");
+        "scheme=hat");
+  throw std::invalid_argument("unknown transfer scheme '" + name + "' (hat)");
 }
 
 /// Default sample points per axis and cell in N dimensions: 4 up to 2-D, 3 in 3-D, 2 above
@@ -363,33 +365,20 @@ inline void axis_box_weights(const GridAxis& ax, double dx, double c, double del
 /// no node can take it. `hat`: the sample stands for its sub-cell of the source cell (width
 /// `delta` per axis), moved rigidly to x, and is deposited on the hats by their exact
 /// integrals over that box (per axis: axis_box_weights; a tensor product), renormalised over
-/// the nodes inside the support; false when all of them are outside it. `cell`: all of it on
-/// the node whose dual cell contains x.
+/// the nodes inside the support; false when all of them are outside it.
 /// (Depositing a POINT on the hats — cloud-in-cell — is not enough: the column is then a
 /// K-point midpoint rule of the kinked integrand φ_j(T x), whose error O(1/K²) does not shrink
 /// with Δx and, for a nearly uniform flow, repeats every step; the box deposit is exact for
 /// a translation. Measured on the cycle of tests/rt/test_invariant.cpp: L1 error of the
 /// invariant density 1.0e-2, 7.7e-3, 7.3e-3, 6.1e-3 at 51 … 401 nodes with points.)
 template <std::size_t N>
-bool deposit(TransferScheme scheme, const TensorGrid<N>& grid, const std::array<double, N>& dx,
+bool deposit(const TensorGrid<N>& grid, const std::array<double, N>& dx,
              const std::array<double, N>& delta, const char* in_support,
              const std::array<double, N>& x, std::vector<std::pair<std::size_t, double>>& out) {
   for (std::size_t a = 0; a < N; ++a) {
     const GridAxis& ax = grid.axes[a];
     const double s = (x[a] - ax.min) / dx[a];
     if (!(s >= -1e-12 * (ax.n - 1) && s <= (ax.n - 1) * (1.0 + 1e-12))) return false;
-  }
-  if (scheme == TransferScheme::cell) {
-    std::size_t flat = 0;
-    for (std::size_t a = 0; a < N; ++a) {
-      const GridAxis& ax = grid.axes[a];
-      const double s = (x[a] - ax.min) / dx[a];
-      const auto j = static_cast<std::size_t>(
-          std::clamp(std::floor(s + 0.5), 0.0, static_cast<double>(ax.n - 1)));
-      flat = flat * static_cast<std::size_t>(ax.n) + j;
-    }
-    out.emplace_back(flat, 1.0);
-    return true;
   }
   thread_local std::array<std::vector<std::pair<int, double>>, N> w;
   std::size_t combos = 1;
@@ -490,7 +479,7 @@ void check_columns(TransferOperator<state_dim_v<M>>& op) {
 /// Entries per chunk of an assembling thread's list (1 MiB of OperatorEntry).
 inline constexpr std::size_t kEntryChunk = std::size_t{1} << 16;
 
-/// The operator of either scheme (see the file comment). Source cells (columns) in parallel,
+/// The operator (see the file comment). Source cells (columns) in parallel,
 /// dynamic schedule, per-thread (target, source, fraction) triplets, then CSR by rows.
 template <HybridModel M>
 TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M>>& grid,
@@ -637,7 +626,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
           continue;
         }
         State width = delta;
-        if (opt.scheme == TransferScheme::hat && Ka > 1) {
+        if (Ka > 1) {
           std::array<std::array<double, N>, N> D{};
           std::size_t stride = 1;
           for (std::size_t a = N; a-- > 0;) {
@@ -673,9 +662,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         // On the nodes of the end mode inside the support and the mode's region; where none
         // of the stencil is (a region thinner than a cell), on those inside the support.
         const std::size_t mo = static_cast<std::size_t>(res.mode) * static_cast<std::size_t>(nn);
-        if (valid[q] &&
-            (deposit<N>(opt.scheme, grid, dx, width, in_region.data() + mo, res.x, dest) ||
-             deposit<N>(opt.scheme, grid, dx, width, in_support.data(), res.x, dest))) {
+        if (valid[q] && (deposit<N>(grid, dx, width, in_region.data() + mo, res.x, dest) ||
+                         deposit<N>(grid, dx, width, in_support.data(), res.x, dest))) {
           for (std::size_t k = before; k < dest.size(); ++k) dest[k].first += mo;
         } else {
           ++n_out;
