@@ -529,16 +529,13 @@ MethodResult<state_dim_v<M>> solve_by_transfer_fv(const TensorGrid<state_dim_v<M
                   run.min_value, top);
     r.warnings.push_back(b);
   }
-  detail::add_transfer_errors(
-      t, grid, r.solution, times, fo.order, s, [&](const TensorGrid<N>& g, const char*) {
-        // A coarse grid the generator cannot cut gives no estimate, not a failed run.
-        try {
-          FvMarchRun<N> c = fv_march<M>(g, par, fv_guard_planes<M>(g, par), times, fo, nullptr);
-          return c.ok() ? std::move(c.solution) : Solution<N>{};
-        } catch (const std::invalid_argument&) {
-          return Solution<N>{};
-        }
-      });
+  detail::add_transfer_errors(t, grid, r.solution, times, fo.order, s,
+                              [&](const TensorGrid<N>& g, const char*) {
+                                // The same planes: they are the model's within the same box,
+                                // whatever the grid.
+                                FvMarchRun<N> c = fv_march<M>(g, par, planes, times, fo, nullptr);
+                                return c.ok() ? std::move(c.solution) : Solution<N>{};
+                              });
   r.summary[summary_key::transfer] = t;
   return r;
 }
