@@ -638,22 +638,31 @@ TEST(Cli, IntegrateAndFireInvariantDensityFollowsTheSpikingCycle) {
 }
 
 // `check --preflight` runs the run's pre-flight scan (building the ball's runner, shared with
-// the other tests through the cache): with e = 3/2 the reset at (0, −2) lands at p = 3,
-// outside the box, and check says so with the run's message and exit code; with the
-// default e it passes. Before, check passed both and only `run` refused.
+// the other tests through the cache) and says what the run would say: with e = 3/2 the reset at
+// (0, −2) lands at p = 3, outside the box, which is a warning (its mass is outflow) and passes;
+// a reset that lands outside the support fails with the run's message and exit code. Before,
+// check passed both and only `run` refused.
 TEST(Cli, CheckPreflightAgreesWithRun) {
   Result ok = hybgen("check models/bouncing_ball.model --preflight -q");
   EXPECT_EQ(ok.code, exit_status(ExitCode::Success)) << ok.out;
   EXPECT_NE(ok.out.find("pre-flight scan (t = 0, characteristics, grid of 5625 nodes): ok"),
             std::string::npos)
       << ok.out;
-  Result bad = hybgen("check models/bouncing_ball.model --preflight -q --set e=3/2");
+  Result out = hybgen("check models/bouncing_ball.model --preflight -q --set e=3/2");
+  EXPECT_EQ(out.code, exit_status(ExitCode::Success)) << out.out;
+  EXPECT_NE(out.out.find("the reset carries mass out of the domain (the grid box) at the point "
+                         "(x = 0, p = -2)"),
+            std::string::npos)
+      << out.out;
+  EXPECT_NE(out.out.find("ok, 1 guard(s), 1 resetting mass out of the box"), std::string::npos)
+      << out.out;
+  Result bad = hybgen("check tests/data/failures/reset_outside_support.model --preflight -q");
   EXPECT_EQ(bad.code, exit_status(ExitCode::Numerical)) << bad.out;
-  EXPECT_NE(bad.out.find("the reset lands outside the domain (the grid box) at the point (x = 0, "
-                         "p = -2)"),
+  EXPECT_NE(bad.out.find("the reset lands outside the support (the state space) at the point "
+                         "(x = 0, p = -2)"),
             std::string::npos)
       << bad.out;
-  Result plain = hybgen("check models/bouncing_ball.model --set e=3/2");
+  Result plain = hybgen("check tests/data/failures/reset_outside_support.model");
   EXPECT_EQ(plain.code, exit_status(ExitCode::Success))
       << plain.out;  // without --preflight: no runner, no scan
 }

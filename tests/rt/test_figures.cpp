@@ -20,6 +20,8 @@
 
 #include "hybgen/rt/io/colormap.hpp"
 #include "hybgen/rt/io/figures.hpp"
+// The drawing primitives are the io library's own (not installed); their axis ticks here.
+#include "../../runtime/src/io/drawing.hpp"
 
 namespace {
 
@@ -144,8 +146,8 @@ TEST_F(Figures, TheGuardIsDrawnWhereItsSurfaceIs) {
 
 TEST_F(Figures, OutsideIsGreyAndNotANumberIsMagenta) {
   RunRecord run = ramp();
-  run.outside.assign(41 * 21, 0);
-  for (std::size_t j = 0; j < 21; ++j) run.outside[0 * 21 + j] = run.outside[1 * 21 + j] = 1;
+  run.outside.assign(1, std::vector<std::uint8_t>(41 * 21, 0));
+  for (std::size_t j = 0; j < 21; ++j) run.outside[0][0 * 21 + j] = run.outside[0][1 * 21 + j] = 1;
   values_[20 * 21 + 10] = std::numeric_limits<double>::quiet_NaN();
   run.guards.clear();
   FigureRequest req;
@@ -193,6 +195,53 @@ TEST_F(Figures, PairsOfAxesAndModesAndAPagePerFrame) {
   for (auto p = pdf.find("/Type /Page"); p != std::string::npos; p = pdf.find("/Type /Page", p + 1))
     pages += pdf.compare(p, 12, "/Type /Pages") == 0 ? 0 : 1;
   EXPECT_EQ(pages, 3u);
+}
+
+TEST_F(Figures, AMarginalGreysWhatNoNodeOfTheSupportProjectsOnto) {
+  // 3-D: the marginal on (a, b) is masked where its first row of a is (the runner marks a plane
+  // node when no grid node in the support projects onto it: runner.hpp, record_geometry); the
+  // other pairs have no mask.
+  RunRecord run;
+  run.model = "three";
+  run.method = "characteristics";
+  run.axis_names = {"a", "b", "c"};
+  run.axes = {{0, 1, 11}, {0, 1, 11}, {0, 1, 11}};
+  run.mode_names = {"only"};
+  run.times = {0};
+  run.frame_names = {"u_0000"};
+  values_.assign(11 * 11 * 11, 1.0);
+  run.density = values_;
+  run.outside.assign(3, {});
+  run.outside[0].assign(11 * 11, 0);
+  for (std::size_t i = 0; i < 3; ++i)
+    for (std::size_t j = 0; j < 11; ++j) run.outside[0][i * 11 + j] = 1;  // a ≤ 0.2
+  FigureRequest req;
+  write_figures(run, req, dir_.string());
+  const FigureGeometry g = frame_geometry(run);
+  ASSERT_EQ(g.panels.size(), 3u);
+  const Png f(path("u_0000.png"));
+  auto is_grey = [](Pixel p) { return p.r == p.g && p.g == p.b && p.r > 200; };
+  // Panel (a, b): grey at a = 0.1, coloured at a = 0.7; panel (a, c): coloured at a = 0.1.
+  const auto [px, py, pw, ph] = g.panels[0];
+  EXPECT_TRUE(is_grey(f.at(px + pw * 1.5 / 11, py + ph / 2)));
+  EXPECT_FALSE(is_grey(f.at(px + pw * 7.5 / 11, py + ph / 2)));
+  const auto [qx, qy, qw, qh] = g.panels[1];
+  EXPECT_FALSE(is_grey(f.at(qx + qw * 1.5 / 11, qy + qh / 2)));
+}
+
+TEST(Ticks, EveryAxisGetsAtLeastTwo) {
+  using hybgen::rt::drawing::nice_ticks;
+  // A narrow panel asks for two ticks; on [−1.5, 1.5] the step 2 left only 0 (the 4-D
+  // marginals' y axis), so the next finer step, 1, is taken.
+  EXPECT_EQ(nice_ticks(-1.5, 1.5, 2), (std::vector<double>{-1, 0, 1}));
+  EXPECT_EQ(nice_ticks(0, 2, 2), (std::vector<double>{0, 1, 2}));
+  EXPECT_EQ(nice_ticks(-2, 2, 3), (std::vector<double>{-2, 0, 2}));
+  for (const double w : {0.3, 0.7, 1.5, 3.0, 7.0, 30.0})
+    for (int n = 2; n <= 8; ++n) {
+      const std::vector<double> t = nice_ticks(-w / 2, w / 2 + 0.01 * w, n);
+      EXPECT_GE(t.size(), 2u) << w << " " << n;
+      EXPECT_LE(t.size(), static_cast<std::size_t>(2 * n + 2)) << w << " " << n;
+    }
 }
 
 /// Whether p is within `tol` of the colour (r, g, b) in every channel.

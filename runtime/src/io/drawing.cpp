@@ -7,6 +7,7 @@
 #include <png.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <csetjmp>
@@ -22,21 +23,26 @@ namespace hybgen::rt::drawing {
 
 // ------------------------------------------------------------------ numbers on axes
 
-/// Tick values at a 1-2-5 step over [lo, hi], at most about `max_count`.
+/// Tick values at a 1-2-5 step over [lo, hi], at most about `max_count`, and at least two: a
+/// step that leaves one tick in the span (2 on [−1.5, 1.5]) gives way to the next finer one.
 std::vector<double> nice_ticks(double lo, double hi, int max_count) {
   const double span = hi - lo;
   if (!(span > 0) || !std::isfinite(span)) return {lo};
   const double raw = span / std::max(max_count, 2);
   const double base = std::pow(10.0, std::floor(std::log10(raw)));
-  double step = 10 * base;
-  for (const double m : {1.0, 2.0, 5.0, 10.0})
-    if (m * base >= raw * (1 - 1e-9)) {
-      step = m * base;
-      break;
-    }
-  std::vector<double> t;
-  for (double k = std::ceil(lo / step - 1e-9); k * step <= hi + step * 1e-9 && t.size() < 40; ++k)
-    t.push_back(std::fabs(k * step) < step * 1e-9 ? 0.0 : k * step);
+  // The 1-2-5 steps from base/10 up; the first at least `raw` is taken.
+  const std::array<double, 5> steps{0.5 * base, base, 2 * base, 5 * base, 10 * base};
+  std::size_t pick = 1;
+  while (pick + 1 < 5 && steps[pick] < raw * (1 - 1e-9)) ++pick;
+  auto ticks = [lo, hi](double step) {
+    std::vector<double> t;
+    for (double k = std::ceil(lo / step - 1e-9); k * step <= hi + step * 1e-9 && t.size() < 40; ++k)
+      t.push_back(std::fabs(k * step) < step * 1e-9 ? 0.0 : k * step);
+    return t;
+  };
+  std::vector<double> t = ticks(steps[pick]);
+  for (; t.size() < 2 && pick > 0; t = ticks(steps[--pick])) {
+  }
   return t;
 }
 

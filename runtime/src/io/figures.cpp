@@ -86,7 +86,7 @@ std::vector<HeatPanel> frame_panels(const RunRecord& run, std::size_t k) {
         p.data = pair_marginal(*mg, run, k, M > 1 ? row : M, a, b);
       else
         p.data = N == 2 ? std::vector<double>(u.begin(), u.end()) : marginal(u, run.axes, {a, b});
-      if (N == 2) p.outside = run.outside;
+      if (c < run.outside.size()) p.outside = run.outside[c];
       p.title = M > 1 ? "mode " + run.mode_names[row] : std::string();
       if (N > 2)
         p.title += std::string(p.title.empty() ? "" : ": ") + "marginal on (" + run.axis_names[a] +

@@ -231,7 +231,8 @@ void announce_run(const RunPlan<state_dim_v<M>>& p) {
 }
 
 /// Stage 2, pre-flight (t = 0): u0 ≥ 0 and finite on the grid; at every crossing point of
-/// every guard in the box, a finite reset landing in the support and the box, not on a guard
+/// every guard in the box, a finite reset landing in the support (outside the box: a warning,
+/// its mass is outflow), not on a guard
 /// that fires at once, J finite and ≠ 0, no grazing, a converging numeric inverse, and for a
 /// method that inverts the resets the seeds that enumerate a reset's several pre-images
 /// (preflight.hpp), kept in `p.seeds`. Returns the exit code when the run ends here (a
@@ -253,13 +254,24 @@ std::optional<int> preflight_run(RunPlan<state_dim_v<M>>& p) {
                  scan.size());
   std::vector<PreflightFailure<N>> notes;
   const PreflightFailure<N> pf = preflight<M>(scan, p.config.params.data(), popt, &p.seeds, &notes);
-  if (backend.root())
-    for (const auto& note : notes)
+  std::size_t retriggers = 0, outside = 0;
+  for (const auto& note : notes) {
+    const bool out = note.error == PreflightError::reset_outside_box;
+    (out ? outside : retriggers) += 1;
+    if (!backend.root()) continue;
+    if (out)
+      std::fprintf(stderr,
+                   "%s%s (the first such point): the mass reset outside the box leaves the "
+                   "computed region and is counted as outflow; to follow it, widen the "
+                   "domain\n",
+                   warning_prefix(p.config).c_str(), describe_preflight<M>(note).c_str());
+    else
       std::fprintf(stderr,
                    "%s%s, at an isolated point only (measure zero: no mass is there); the scan "
                    "excludes it, but a grid node exactly there has no finite density (choose a "
                    "grid without a node at that point)\n",
                    warning_prefix(p.config).c_str(), describe_preflight<M>(note).c_str());
+  }
   if (!pf.ok()) {
     if (backend.root())
       std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
@@ -273,7 +285,8 @@ std::optional<int> preflight_run(RunPlan<state_dim_v<M>>& p) {
                 std::string(p.method->name).c_str(), p.grid.size(), M::n_guard);
     if (enumerated > 0)
       std::printf(", %zu with several pre-images (enumerated by the characteristics)", enumerated);
-    if (!notes.empty()) std::printf(", %zu isolated re-trigger point(s)", notes.size());
+    if (retriggers > 0) std::printf(", %zu isolated re-trigger point(s)", retriggers);
+    if (outside > 0) std::printf(", %zu resetting mass out of the box", outside);
     std::printf("\n");
   }
   return exit_status(ExitCode::Success);
@@ -292,36 +305,45 @@ MethodResult<state_dim_v<M>> solve_run(RunPlan<state_dim_v<M>>& p) {
 }
 
 /// The guards on the planes of the figure pairs (each rank adds its block of the nodes), and
-/// in 2-D the nodes outside the support: what the pictures draw besides the density. Not for
-/// marginals, whose grid is never visited.
+/// the plane nodes onto which no node in the support projects: what the pictures draw besides
+/// the density. Not for marginals, whose grid is never visited.
 template <HybridModel M>
 void record_geometry(const RunPlan<state_dim_v<M>>& p, RunRecord& rec) {
   constexpr std::size_t N = state_dim_v<M>;
   const Backend& backend = *p.backend;
   const double* par = p.config.params.data();
   if (rec.marginals != nullptr) return;
-  if (N == 2 && backend.root()) {
-    rec.outside.assign(p.grid.size(), 0);
-    bool any_outside = false;
-    for (std::size_t i = 0; i < p.grid.size(); ++i) {
-      const auto y = p.grid.node(i);
-      if (!M::in_support(y.data(), par)) rec.outside[i] = 1, any_outside = true;
-    }
-    if (!any_outside) rec.outside.clear();
-  }
   const auto pairs = figure_pairs(N, rec.figure_axes);
   const Block nodes = backend.block(p.grid.size());
+  // The planes' greatest value of [node in the support]: 0 where no node projecting onto a
+  // plane node is in it (the same combination over ranks as the guards' planes, below).
+  auto combine = [&backend](GuardPlanes& planes) {
+    if (backend.ranks() == 1) return;
+    std::vector<double> v = planes.negated_extremes();
+    backend.max(std::span<double>(v));
+    planes.set_negated_extremes(v);
+  };
+  {
+    GuardPlanes support(rec.axes, pairs);
+    std::vector<double> in(nodes.size());
+    for (std::size_t i = nodes.begin; i < nodes.end; ++i)
+      in[i - nodes.begin] = M::in_support(p.grid.node(i).data(), par) ? 1.0 : 0.0;
+    support.add(nodes.begin, in);
+    combine(support);
+    rec.outside.assign(pairs.size(), {});
+    for (std::size_t q = 0; q < pairs.size(); ++q) {
+      const std::vector<double>& any_in = support.greatest(q);
+      if (std::all_of(any_in.begin(), any_in.end(), [](double v) { return v > 0.5; })) continue;
+      for (const double v : any_in) rec.outside[q].push_back(v > 0.5 ? 0 : 1);
+    }
+  }
   for (int g = 0; g < M::n_guard; ++g) {
     GuardPlanes planes(rec.axes, pairs);
     std::vector<double> s(nodes.size());
     for (std::size_t i = nodes.begin; i < nodes.end; ++i)
       s[i - nodes.begin] = M::guard_surface(g, p.grid.node(i).data(), par);
     planes.add(nodes.begin, s);
-    if (backend.ranks() > 1) {
-      std::vector<double> v = planes.negated_extremes();
-      backend.max(std::span<double>(v));
-      planes.set_negated_extremes(v);
-    }
+    combine(planes);
     const auto gi = static_cast<std::size_t>(g);
     GuardField f{M::guard_names[gi], {}, M::guards[gi].from};
     for (std::size_t q = 0; q < pairs.size(); ++q) f.planes.push_back(planes.plane(q));

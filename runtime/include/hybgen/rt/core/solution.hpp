@@ -161,10 +161,15 @@ std::string describe(const TraceFailure<state_dim_v<M>>& f) {
 ///   atom[k] = mass0 − mass[k] − outflow[k]  (mass neither in the box nor gone through its
 ///   faces: concentrated on atoms such as a Zeno point, or reset out of the box from inside).
 struct MassBudget {
-  std::vector<double> times;    ///< Output times.
-  double mass0 = 0.0;           ///< Σ_modes ∫_box u0.
-  std::vector<double> mass;     ///< Mass in the box at each output time.
-  std::vector<double> outflow;  ///< Net outflow through the box faces during [0, t_k].
+  std::vector<double> times;  ///< Output times.
+  double mass0 = 0.0;         ///< Σ_modes ∫_box u0.
+  std::vector<double> mass;   ///< Mass in the box at each output time.
+  /// Net outflow from the box during [0, t_k]: through its faces, and by resets that land
+  /// outside it (minus those that land back in it).
+  std::vector<double> outflow;
+  /// The part of `outflow` that resets carried across the box's boundary (the adaptive budget
+  /// of characteristics measures it on its own, budget/atom.hpp; empty elsewhere).
+  std::vector<double> reset_outflow;
   /// Mass at atoms: measured at Zeno points by `adaptive_mass_budget` (budget.hpp); for the
   /// fixed-rule budgets below, the remainder mass0 − mass − outflow.
   std::vector<double> atom;

@@ -141,6 +141,8 @@ class GuardPlanes {
       for (double& x : hi_[p]) x = v[at++];
     }
   }
+  /// The greatest s on pair p's plane per plane node (over the nodes projecting onto it).
+  [[nodiscard]] const std::vector<double>& greatest(std::size_t p) const { return hi_[p]; }
   /// s on pair p's plane, or empty when s depends on the other axes there.
   [[nodiscard]] std::vector<double> plane(std::size_t p) const {
     double lo = kNone, hi = -kNone;
@@ -205,8 +207,10 @@ struct RunRecord {
   /// Instead of `density` (then empty): the marginals and moments of a run too large for its
   /// grid (core/solution.hpp; particles with density=marginals).
   const Marginals* marginals = nullptr;
-  /// 2-D: 1 at nodes outside the support (empty: none; the pictures grey them).
-  std::vector<std::uint8_t> outside;
+  /// Per figure pair (figure_pairs' order): 1 at the plane's nodes onto which no grid node in
+  /// the support projects (2-D: the nodes outside the support), C order with the pair's first
+  /// axis slowest; an empty mask where there is none. The pictures grey them.
+  std::vector<std::vector<std::uint8_t>> outside;
   std::vector<GuardField> guards;  ///< Every guard on the figure pairs' planes.
   /// The axes whose pairs the pictures show (setting figure_axes; empty: every axis).
   std::vector<std::size_t> figure_axes;

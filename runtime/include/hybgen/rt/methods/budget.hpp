@@ -9,7 +9,8 @@
 ///  * budget/check_points.hpp: the points where the integrand is already known;
 ///  * budget/volume.hpp: the mass on the grid's box (`adaptive_mass`);
 ///  * budget/faces.hpp: the outflow through the box faces (`adaptive_outflow`);
-///  * budget/atom.hpp: the mass at Zeno points (`adaptive_atom`);
+///  * budget/atom.hpp: the mass at Zeno points and the mass resets carry out of the box
+///    (`adaptive_atom`);
 ///  * here: the three together and their closure (`adaptive_mass_budget`).
 ///
 /// Why adaptive. Near a Zeno point the density is unbounded and striped (bouncing ball,
@@ -20,10 +21,10 @@
 /// face), which uniform face rules integrate with an O(h) error that accumulates over time.
 /// The runtime does not know where any of this is, so the cubature finds it.
 ///
-/// The three terms are measured independently, so mass0 − mass − outflow − atom (the defect)
-/// tests them: within the sum of their estimates it says the budget is closed; beyond, it
-/// is mass no term measures (a reset carrying mass across the box boundary, or an error
-/// the estimates missed). The three share the cubature's refinement machinery and its
+/// The terms are measured independently, so mass0 − mass − outflow − atom (the defect) tests
+/// them: within the sum of their estimates it says the budget is closed; beyond, it is mass
+/// no term measures (mass from outside the box that a reset carries into it, or an error the
+/// estimates missed). The three share the cubature's refinement machinery and its
 /// bound on work (budget/cubature.hpp).
 
 #include <algorithm>
@@ -52,17 +53,19 @@ struct AdaptiveBudgetInfo {
   AdaptiveMass volume;      ///< The volume integral (masses).
   AdaptiveOutflow surface;  ///< The face integral (outflow).
   AdaptiveOutflow atom;     ///< The atom's integral (`outflow` holds the atom).
+  AdaptiveOutflow reset;    ///< The reset outflow's integral (part of the budget's outflow).
 };
 
 /// The mass budget by adaptive cubature, every term measured on its own:
 ///  * mass and mass0: `adaptive_mass` (backward characteristics in the box);
 ///  * outflow: `adaptive_outflow` (backward characteristics on the faces, integrated in time
-///    along each to rel_tol/10), target rel_tol·max(mass0, max_k mass_k);
+///    along each to rel_tol/10), target rel_tol·max(mass0, max_k mass_k), plus the net mass
+///    that resets carry out of the box (forward flows from the box, `adaptive_atom`);
 ///  * atom: `adaptive_atom` (forward flows from the box to their Zeno points), same target.
 /// Each has its estimated error (mass_error, outflow_error, atom_error); the DEFECT
 /// mass0 − mass − outflow − atom (`budget_defect`) checks them against each other: it is what
-/// no term accounts for (inflow of mass that started outside the box, mass reset out of the
-/// box from inside it, or an error the estimates missed). `grid` gives the box and the
+/// no term accounts for (mass that started outside the box and is reset into it, or an error
+/// the estimates missed). `grid` gives the box and the
 /// volume cubature's check points (`nodes`: the run's solution at its nodes, or null).
 /// A failed characteristic is reported in `failure` (volume first), a failed forward flow in
 /// `message`.
@@ -85,12 +88,15 @@ BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M
   AdaptiveOutflow ao =
       adaptive_outflow<M>(grid, times, par, opt, aopt, scale, time_tol, flux_failure);
   if (res.failure.ok()) res.failure = flux_failure;
-  AdaptiveOutflow az = adaptive_atom<M>(grid, times, par, opt, aopt, scale, res.message);
+  AdaptiveOutflow reset;
+  AdaptiveOutflow az = adaptive_atom<M>(grid, times, par, opt, aopt, scale, res.message, &reset);
   mb.mass0 = am.mass0;
   mb.mass = am.mass;
   mb.mass_error = am.error;
   mb.mass0_error = am.mass0_error;
   mb.outflow = ao.outflow;
+  mb.reset_outflow = reset.outflow;
+  for (std::size_t k = 0; k < times.size(); ++k) mb.outflow[k] += reset.outflow[k];
   mb.atom = az.outflow;
   mb.outflow_error.resize(times.size());
   mb.atom_error = az.error;
@@ -99,11 +105,12 @@ BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M
   // The time integrals' own share beyond that: what their work cap left unresolved and the
   // most their floor can change (budget/faces.hpp).
   for (std::size_t k = 0; k < times.size(); ++k)
-    mb.outflow_error[k] = ao.error[k] + time_tol * scale + ao.time_error[k];
+    mb.outflow_error[k] = ao.error[k] + time_tol * scale + ao.time_error[k] + reset.error[k];
   if (info != nullptr) {
     info->volume = std::move(am);
     info->surface = std::move(ao);
     info->atom = std::move(az);
+    info->reset = std::move(reset);
   }
   return res;
 }
@@ -114,7 +121,8 @@ BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M
 /// widened by what was left (`error`, `outflow_error`), not the run prolonged.
 inline std::string budget_bounds_reached(const AdaptiveBudgetInfo& info) {
   std::string s;
-  if (info.volume.capped || info.surface.capped || info.atom.capped) s = "its point cap";
+  if (info.volume.capped || info.surface.capped || info.atom.capped || info.reset.capped)
+    s = "its point cap";
   if (info.surface.time_capped > 0) {
     if (!s.empty()) s += " and ";
     s += "the work cap of the time integral on " + std::to_string(info.surface.time_capped) +

@@ -59,6 +59,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "hybgen/rt/core/geometry.hpp"
 #include "hybgen/rt/core/grid.hpp"
@@ -143,6 +144,17 @@ class ForwardFlow {
   template <class OnOutput>
   ForwardResult<N> run(int mode, const State& x0, std::span<const double> times,
                        OnOutput&& on_output) {
+    return run(mode, x0, times, std::forward<OnOutput>(on_output),
+               [](double, int, const State&, const State&) {});
+  }
+
+  /// As above; on_reset(double t, int g, const State& before, const State& after) is also
+  /// called at every reset the flow applies, in time order: guard g fired at time t, at the
+  /// located (projected) state `before`, and the flow continues from Δ_g(before) = `after`
+  /// (budget/atom.hpp counts the resets that carry mass across the grid box's boundary).
+  template <class OnOutput, class OnReset>
+  ForwardResult<N> run(int mode, const State& x0, std::span<const double> times,
+                       OnOutput&& on_output, OnReset&& on_reset) {
     ForwardResult<N> res;
     res.mode = mode;
     res.x = x0;
@@ -285,6 +297,7 @@ class ForwardFlow {
         res.t_stop = root.t;
         return res;
       }
+      on_reset(root.t, g, static_cast<const State&>(xe), static_cast<const State&>(y));
       double xn = 0.0;
       for (double v : xe) xn = std::max(xn, std::fabs(v));
       fixed_guard = gi.to == gi.from && dist(y, xe) <= 1e-14 * (1.0 + xn) ? g : -1;

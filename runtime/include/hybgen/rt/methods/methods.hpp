@@ -337,7 +337,8 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
     return r;
   }
   r.budget = budget.budget;
-  const bool converged = info.volume.converged && info.surface.converged && info.atom.converged;
+  const bool converged = info.volume.converged && info.surface.converged && info.atom.converged &&
+                         info.reset.converged;
   if (!converged) {
     char b[400];
     std::snprintf(b, sizeof b,
@@ -363,11 +364,10 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
     char b[560];
     std::snprintf(b, sizeof b,
                   "the mass budget does not close: at t = %g, mass0 - mass - outflow - atom = "
-                  "%.3e, %.1fx twice its estimated error %.2e. Mass no term measures: mass a reset "
-                  "carries across the grid box's boundary (into it from outside, or out of "
-                  "it), mass from outside the box at a Zeno point, or an error the estimates "
-                  "missed. A box that holds the initial density and the reset images closes "
-                  "it; else try --set budget_tol=%.0e",
+                  "%.3e, %.1fx twice its estimated error %.2e. Mass no term measures: mass "
+                  "from outside the grid box that a reset carries into it, mass from outside "
+                  "the box at a Zeno point, or an error the estimates missed. A box that holds "
+                  "the initial density closes it; else try --set budget_tol=%.0e",
                   times[worst_k], defect[worst_k], worst_ratio, bar[worst_k], aopt.rel_tol / 10);
     r.warnings.push_back(b);
   }
@@ -384,6 +384,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
                                     {"closes", worst_ratio <= 1.0},
                                     {"mass_error", mb.mass_error},
                                     {"outflow_error", mb.outflow_error},
+                                    {"reset_outflow", mb.reset_outflow},
                                     {"seconds", r.budget_s}};
   return r;
 }

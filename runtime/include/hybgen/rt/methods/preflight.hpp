@@ -10,9 +10,11 @@
 ///     with s_g = 0 exactly is one too — and kept when inside `in_support`. At each crossing
 ///     point x* (∇s·X_from(x*) has the firing sign `direction`):
 ///       - X_from(x*) and div X_from(x*) are finite;
-///       - Δ(x*) is finite, in the support and in the grid box (a reset that lands outside
-///         the domain loses its mass to no face of the box: the atom of the budget would absorb
-///         it silently);
+///       - Δ(x*) is finite and in the support. Δ(x*) outside the grid box is no failure: the
+///         mass reset there leaves the computed region and every method counts it as outflow
+///         (the characteristics' budget measures it with forward flows, budget/atom.hpp); the
+///         first such point of each guard is a note (`reset_outside_box`), which the runner
+///         prints as a warning;
 ///       - Δ(x*) is not on a guard h of the target mode that fires there at once
 ///         (|s_h(Δx*)| ≤ surface_tol·|∇s_h|·diam and sign(∇s_h·X_to(Δx*)) = direction_h:
 ///         an instantaneous re-trigger, the paper's H.5);
@@ -64,7 +66,7 @@ enum class PreflightError {
   non_finite_flow,        ///< X_from or div X_from not finite at a crossing point.
   non_finite_reset,       ///< Δ(x*) not finite.
   reset_outside_support,  ///< Δ(x*) outside `in_support`.
-  reset_outside_box,      ///< Δ(x*) outside the grid box.
+  reset_outside_box,      ///< Δ(x*) outside the grid box: a note, never a failure.
   reset_retriggers,       ///< Δ(x*) on a guard of the target mode that fires at once.
   zero_jacobian,          ///< J(x*) = 0 or not finite.
   inverse_failed,         ///< Newton for Δ⁻¹ at Δ(x*) did not converge.
@@ -91,7 +93,7 @@ inline const char* preflight_error_name(PreflightError e) {
     case PreflightError::reset_outside_support:
       return "the reset lands outside the support (the state space)";
     case PreflightError::reset_outside_box:
-      return "the reset lands outside the domain (the grid box)";
+      return "the reset carries mass out of the domain (the grid box)";
     case PreflightError::reset_retriggers:
       return "the reset lands on a guard that fires again at once (instantaneous re-trigger)";
     case PreflightError::zero_jacobian:
@@ -184,7 +186,9 @@ bool newton_converges(int g, const std::array<double, state_dim_v<M>>& y, const 
   return newton_reset_inverse<M>(g, y.data(), par, opt.newton_max_iter, opt.newton_tol, z);
 }
 
-/// All checks at a point x of S_g inside the support; returns the failure (ok() if none).
+/// All checks at a point x of S_g inside the support; returns the failure (ok() if none), or,
+/// when every check passes and only Δ(x) lies outside the box [lo, hi], `reset_outside_box`
+/// (a note for `check_guard`, not a failure).
 template <HybridModel M>
 PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, state_dim_v<M>>& x,
                                                 const std::array<double, state_dim_v<M>>& lo,
@@ -222,7 +226,7 @@ PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, 
   const double J = M::hybrid_jacobian(g, x.data(), par);
   if (!std::isfinite(J) || J == 0.0) return fail(PreflightError::zero_jacobian, J);
   if (!M::in_support(y.data(), par)) return fail(PreflightError::reset_outside_support, 0.0);
-  if (!in_box<N>(y.data(), lo, hi)) return fail(PreflightError::reset_outside_box, 0.0);
+  const bool outside = !in_box<N>(y.data(), lo, hi);
   for (std::size_t h = 0; h < static_cast<std::size_t>(M::n_guard); ++h) {
     const GuardInfo hi_ = guard_info<M>(h);
     if (hi_.from != gi.to) continue;
@@ -239,6 +243,7 @@ PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, 
   }
   if (opt.backward && !gi.has_inverse && !newton_converges<M>(g, y, par, opt))
     return fail(PreflightError::inverse_failed, 0.0);
+  if (outside) return fail(PreflightError::reset_outside_box, 0.0);
   return f;
 }
 
@@ -285,6 +290,9 @@ PreflightFailure<state_dim_v<M>> check_initial_density(const TensorGrid<state_di
 /// set has measure zero on S_g: no mass is there, the point is excluded, and the re-trigger is
 /// a note in `notes` (the runner prints it as a warning) instead of the failure. A re-trigger
 /// on a stretch of S_g (several cells apart) stays the failure.
+///
+/// Resets out of the box: a crossing whose reset lands outside the grid box passes (its mass
+/// is outflow); the first such crossing (smallest index) is a note in `notes`.
 template <HybridModel M>
 PreflightFailure<state_dim_v<M>> check_guard(
     int g, const TensorGrid<state_dim_v<M>>& grid, const double* par,
@@ -293,6 +301,14 @@ PreflightFailure<state_dim_v<M>> check_guard(
     std::vector<PreflightFailure<state_dim_v<M>>>* notes = nullptr) {
   constexpr std::size_t N = state_dim_v<M>;
   std::vector<std::pair<std::size_t, PreflightFailure<N>>> retriggers;
+  detail::FirstFailure<N> outside;  // the first crossing reset out of the box (a note)
+  // A crossing reset out of the box passes; the first one is kept for the note.
+  auto pass_outside = [&outside](std::size_t i, PreflightFailure<N>& f) {
+    if (f.error != PreflightError::reset_outside_box) return;
+    f.node = i;
+    if (outside.wanted(i)) outside.offer(i, f);
+    f.error = PreflightError::none;
+  };
   // A failure at edge/node index i: re-triggers are held back (see above).
   auto offer = [&](detail::FirstFailure<N>& first, std::size_t i, const PreflightFailure<N>& f) {
     if (f.error == PreflightError::reset_retriggers) {
@@ -336,6 +352,7 @@ PreflightFailure<state_dim_v<M>> check_guard(
     }
     if (in_y && sy == 0.0) {  // the node is on S_g
       PreflightFailure<N> f = detail::check_crossing<M>(g, y, lo, hi, diam, par, opt);
+      pass_outside(i, f);
       if (!f.ok()) {
         f.node = i;
         offer(first, i, f);
@@ -376,6 +393,7 @@ PreflightFailure<state_dim_v<M>> check_guard(
       if (!(std::fabs(M::guard_surface(g, x.data(), par)) <= sl)) x[a] = l;
       if (!M::in_support(x.data(), par)) continue;
       PreflightFailure<N> f = detail::check_crossing<M>(g, x, lo, hi, diam, par, opt);
+      pass_outside(i, f);
       if (!f.ok()) {
         f.node = i;
         offer(first, i, f);
@@ -388,6 +406,7 @@ PreflightFailure<state_dim_v<M>> check_guard(
       }
     }
   }
+  if (notes != nullptr && !outside.failure.ok()) notes->push_back(outside.failure);
   if (retriggers.empty()) return first.failure;
   std::sort(retriggers.begin(), retriggers.end(),
             [](const auto& a, const auto& b) { return a.first < b.first; });  // thread order

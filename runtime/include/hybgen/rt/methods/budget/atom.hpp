@@ -1,15 +1,22 @@
 #pragma once
 /// \file atom.hpp
-/// The atom term of the mass budget: the mass come to rest at Zeno points by each output
-/// time, measured by the adaptive cubature (budget/cubature.hpp) of the initial density of
-/// the points whose FORWARD flow (forward.hpp) reaches one, independently of the backward
-/// characteristics that give the volume and the outflow. Its result has the outflow's
-/// shape (`AdaptiveOutflow`, budget/faces.hpp; `outflow` holds the atom). The cubature
-/// covers the part of the box where the grid's nodes carry initial mass (`adaptive_atom`).
+/// The two terms of the mass budget that FORWARD flows (forward.hpp) measure, by the adaptive
+/// cubature (budget/cubature.hpp) of the initial density, independently of the backward
+/// characteristics that give the volume and the outflow through the faces:
+///  * the atom: the mass come to rest at Zeno points by each output time;
+///  * the reset outflow: the net mass that resets carry across the grid box's boundary (out
+///    of the box, minus back into it) by each output time. A reset may land outside the box
+///    (a slanted wall throws a corner of a momentum box out of it); that mass has left the
+///    computed region as surely as mass crossing a face, and the budget counts it with the
+///    outflow (budget.hpp), as the transfer and particle methods do.
+/// Both come from the same flows (`adaptive_atom`), with the outflow's shape
+/// (`AdaptiveOutflow`, budget/faces.hpp). The cubature covers the part of the box where the
+/// grid's nodes carry initial mass.
 
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -19,6 +26,7 @@
 #include <vector>
 
 #include "hybgen/rt/core/backend.hpp"
+#include "hybgen/rt/core/geometry.hpp"
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/methods/budget/check_points.hpp"
 #include "hybgen/rt/methods/budget/cubature.hpp"
@@ -37,26 +45,45 @@ inline std::size_t max_atom_checks(const AdaptiveOptions& aopt) {
 
 namespace detail {
 
-/// Atom integrand: the initial density of the points whose FORWARD flow has come to rest at a
-/// Zeno accumulation point by each output time (forward.hpp's Zeno signature),
-///   U[i·K + k] = Σ_m u0(m, x_i)·[t_Z(m, x_i) ≤ t_k].
-/// The atom is thereby MEASURED where resets accumulate, independently of the backward
-/// characteristics that give the mass and the outflow, so mass0 − mass − outflow − atom is a
-/// real check of the budget. A forward flow that hits its event cap without the Zeno
-/// signature (chattering) or fails numerically is a failure of the budget (`failure`).
+/// The forward integrand, 2K values per point (K output times): the atom's
+///   U[i·2K + k]     = Σ_m u0(m, x_i)·[t_Z(m, x_i) ≤ t_k],
+/// the initial density of the points whose flow has come to rest at a Zeno accumulation
+/// point by t_k (forward.hpp's Zeno signature), and the reset outflow's
+///   U[i·2K + K + k] = Σ_m u0(m, x_i)·(number of resets before or at t_k from a state in the
+///                     box [lo, hi] to one outside it, minus those from outside into it;
+///                     resets from a state on a face are the faces' share: `on_faces`).
+/// Both are thereby MEASURED where they happen, independently of the backward
+/// characteristics that give the mass and the outflow through the faces, so mass0 − mass −
+/// outflow − atom is a real check of the budget. A forward flow that hits its event cap
+/// without the Zeno signature (chattering) or fails numerically is a failure of the budget
+/// (`failure`).
 template <HybridModel M>
 struct ZenoValues {
   static constexpr std::size_t N = state_dim_v<M>;  ///< State dimension.
   std::span<const double> times;                    ///< Output times.
   const double* par = nullptr;                      ///< Parameters.
+  std::array<double, N> lo{};                       ///< The grid box's lower corner.
+  std::array<double, N> hi{};                       ///< The grid box's upper corner.
   ForwardOptions fopt{};                            ///< Options of the forward flows.
   const Backend* backend = nullptr;  ///< Ranks sharing the points (null: this process).
   std::string failure;               ///< First failure (describe), or empty.
 
-  /// U[i·K + k] as above, OpenMP over the points.
+  /// Whether x lies on a face of the box (to 1e-10 of its width): a guard on a face (the
+  /// bouncing ball's ground at x = 0) resets the mass crossing it there, and the faces'
+  /// integral already counts what it resets out of the box, or into it from outside
+  /// (mass_budget.hpp, face_flux), so the reset outflow leaves such resets out.
+  bool on_faces(const std::array<double, N>& x) const {
+    for (std::size_t a = 0; a < N; ++a) {
+      const double tol = 1e-10 * (hi[a] - lo[a]);
+      if (std::fabs(x[a] - lo[a]) <= tol || std::fabs(x[a] - hi[a]) <= tol) return true;
+    }
+    return false;
+  }
+
+  /// U[i·2K + j] as above, OpenMP over the points.
   bool operator()(std::span<const Cell<N>>, std::span<const std::array<double, N>> pts, std::size_t,
                   std::vector<double>& U) {
-    const std::size_t K = times.size();
+    const std::size_t K = times.size(), V = 2 * K;
     const auto P = static_cast<long long>(pts.size());
     const Backend& b = backend ? *backend : serial_backend();
     const Block mine = b.block(pts.size());
@@ -72,11 +99,23 @@ struct ZenoValues {
         const auto i = static_cast<std::size_t>(ii);
         const std::array<double, N>& x = pts[i];
         if (!M::in_support(x.data(), par)) continue;
+        double* atom = U.data() + i * V;
+        double* reset_out = atom + K;
         for (int m = 0; m < M::n_mode; ++m) {
           const double u0 = M::initial_density(m, x.data(), par);
           if (u0 == 0.0) continue;  // no mass: its fate does not matter
-          const ForwardResult<N> r =
-              flow.run(m, x, times, [](std::size_t, int, const std::array<double, N>&) {});
+          // A reset across the box's boundary at time t counts from the first t_k ≥ t on
+          // (trajectories are right-continuous: forward.hpp).
+          auto on_reset = [&](double t, int, const std::array<double, N>& before,
+                              const std::array<double, N>& after) {
+            if (on_faces(before)) return;  // the faces' integral counts it (face_flux)
+            const bool from_in = in_box<N>(before.data(), lo, hi);
+            if (from_in == in_box<N>(after.data(), lo, hi)) return;
+            const double w = from_in ? u0 : -u0;
+            for (std::size_t k = K; k-- > 0 && times[k] >= t;) reset_out[k] += w;
+          };
+          const ForwardResult<N> r = flow.run(
+              m, x, times, [](std::size_t, int, const std::array<double, N>&) {}, on_reset);
           if (r.status == ForwardStatus::event_cap || r.status == ForwardStatus::failed) {
 #pragma omp critical(hybgen_rt_budget_zeno_failure)
             {
@@ -89,14 +128,14 @@ struct ZenoValues {
           }
           if (r.status != ForwardStatus::zeno) continue;
           for (std::size_t k = 0; k < K; ++k)
-            if (times[k] >= r.t_stop) U[i * K + k] += u0;
+            if (times[k] >= r.t_stop) atom[k] += u0;
         }
       }
     }
     if (b.ranks() > 1) {
-      // Point i's K values are U[i·K, (i + 1)·K): the blocks of points tile U in rank order.
+      // Point i's V values are U[i·V, (i + 1)·V): the blocks of points tile U in rank order.
       const std::vector<double> all =
-          b.all_gather(std::span<const double>(U.data() + mine.begin * K, mine.size() * K));
+          b.all_gather(std::span<const double>(U.data() + mine.begin * V, mine.size() * V));
       std::copy(all.begin(), all.end(), U.begin());
       const std::int64_t first = b.min(std::int64_t{first_fail.load()});
       if (first < P) {
@@ -123,27 +162,36 @@ inline constexpr std::size_t zeno_roots_per_axis(std::size_t n) {
 
 }  // namespace detail
 
-/// Adaptive cubature of the Zeno atom: atom[k] = Σ_m ∫_box u0·[t_Z ≤ t_k] (see
-/// `detail::ZenoValues`), all times at once, target rel_tol·scale, over the part of the box
-/// where the grid's nodes see u0 > 0 (widened by a cell), with the grid's nodes there as
-/// check points. Models without guards have no atom (0, exactly, without a flow). On a
-/// failed forward flow `failure` is set.
+/// Adaptive cubature of the Zeno atom and of the reset outflow (see `detail::ZenoValues`):
+/// atom[k] = Σ_m ∫_box u0·[t_Z ≤ t_k] is returned, and the net mass that resets carry out of
+/// the box by t_k goes to `*reset_out` when given (`outflow` holds each). All times at once,
+/// target rel_tol·scale for every value, over the part of the box where the grid's nodes see
+/// u0 > 0 (widened by a cell), with the grid's nodes there as check points. Models without
+/// guards have neither (0, exactly, without a flow). On a failed forward flow `failure` is
+/// set.
 template <HybridModel M>
 AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<const double> times,
                               const double* par, const CharacteristicsOptions& opt,
-                              const AdaptiveOptions& aopt, double scale, std::string& failure) {
+                              const AdaptiveOptions& aopt, double scale, std::string& failure,
+                              AdaptiveOutflow* reset_out = nullptr) {
   constexpr std::size_t N = state_dim_v<M>;
   detail::validate_times(times);
   AdaptiveOutflow res;  // `outflow` holds the atom
   res.outflow.assign(times.size(), 0.0);
   res.error.assign(times.size(), 0.0);
+  if (reset_out != nullptr) *reset_out = res;
   if (M::n_guard == 0 || times.empty() || times.back() <= 0.0) {
     res.converged = true;
+    if (reset_out != nullptr) reset_out->converged = true;
     return res;
   }
   detail::ZenoValues<M> values;
   values.times = times;
   values.par = par;
+  for (std::size_t a = 0; a < N; ++a) {
+    values.lo[a] = box.axes[a].min;
+    values.hi[a] = box.axes[a].max;
+  }
   values.backend = opt.backend;
   values.fopt.ode = opt.ode;
   values.fopt.graze_tol = opt.graze_tol;
@@ -172,6 +220,7 @@ AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<c
   }
   if (!(slo[0] <= shi[0])) {  // no node carries mass: none reaches a Zeno point either
     res.converged = true;
+    if (reset_out != nullptr) reset_out->converged = true;
     return res;
   }
   for (std::size_t a = 0; a < N; ++a) {
@@ -206,20 +255,22 @@ AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<c
   detail::CheckPoints<N> checks;
   {
     detail::check_lattice(box, max_atom_checks(aopt), slo, shi, checks);
-    std::vector<double> v(checks.x.size() * times.size(), 0.0);
+    std::vector<double> v(checks.x.size() * 2 * times.size(), 0.0);
     if (values(std::span<const detail::Cell<N>>{}, std::span<const std::array<double, N>>(checks.x),
                1, v)) {
-      detail::keep_samples<M>(checks, std::move(v), times.size(), par);
+      detail::keep_samples<M>(checks, std::move(v), 2 * times.size(), par);
     } else {
       checks = {};
       values.failure.clear();
     }
   }
   detail::AdaptiveCubature<N, detail::ZenoValues<M>> cub(
-      std::move(roots), times.size(), times.size(), aopt, scale, values, &checks);
+      std::move(roots), 2 * times.size(), 2 * times.size(), aopt, scale, values, &checks);
   const bool ok = cub.run();
   if (!ok) failure = values.failure;
   detail::collect(cub, ok, 0, times.size(), res.outflow, res);
+  if (reset_out != nullptr)
+    detail::collect(cub, ok, times.size(), times.size(), reset_out->outflow, *reset_out);
   return res;
 }
 
