@@ -35,8 +35,9 @@
 ///
 /// Ties at a measure-zero coincidence (an output time equal to a reset time up to ~1e-12) are
 /// resolved consistently: the reset branch serves t_k iff the continuing trajectory at t_k is
-/// on the far side of the event surface (b_g has its post-crossing sign), so a point on such a
-/// discontinuity gets one of its two one-sided values, never their sum or zero.
+/// on the far side of the event surface (b_g has its post-crossing sign), or on it to rounding
+/// (b_g = 0) and outside the support, where the continuing history has no value; so a point on
+/// such a discontinuity gets one of its two one-sided values, never their sum or zero.
 ///
 /// Grazing mid-trace: at every guard crossing the tracer meets — a root of an outgoing guard
 /// h (forward, h fires at x) or the pre-image z = Δ_g⁻¹(y*) of an incoming root — the flow of
@@ -424,9 +425,15 @@ class Tracer {
       if (at_start || times_[kb] < tau - dw) {
         crossed = times_[kb] > tau;
       } else {
+        // The continuing trajectory at t_k: past the image surface, or on it to rounding
+        // (b_g = 0 exactly: s_g∘Δ_g⁻¹ can round a tiny distance away, x ↦ (x + 1) − 1) with
+        // the continuing history outside the support, where it has no value (u0 = 0): either
+        // way the reset's side holds t_k's value (tests/validation/models/wrap_decay.model,
+        // whose column x = 0.5 met the image x = 0 at t = 0 and got 0 from both sides).
         Vec xc;
         dense_at(kb, xc);
-        crossed = sign_of(event_value(e, xc)) == dir;
+        const int side = sign_of(event_value(e, xc));
+        crossed = side == dir || (side == 0 && !M::in_support(xc.data(), par_));
       }
       if (crossed) break;
       ++kb;
