@@ -33,6 +33,7 @@
 #include <string>
 #include <vector>
 
+#include "hybgen/gen/fs.hpp"
 #include "support/e2e.hpp"
 
 namespace {
@@ -176,6 +177,35 @@ TEST(ResetOutflow, TheTiltedFloorRunsWithEveryMethodAndItsBudgetsAgree) {
       EXPECT_FALSE(r.is_null()) << method << " e = " << e;
     }
   }
+}
+
+TEST(ResetOutflow, AResetOnTheSupportsEdgeIsInsideItUpToRounding) {
+  // The newcomer's workaround on a81ba15, a second support line |p| ≤ 2, failed at e = 1 on
+  // a rounding error: the reset keeps |p| = 2 on the disc's edge and lands at px =
+  // -1.9200000000000004, just outside. The scan now takes an image within 1e-9 of the
+  // box's size of the support (on the way to its crossing point) as inside it; an image
+  // clearly outside still fails (tests/e2e/test_failures.cpp, ResetOutsideTheSupport).
+  const std::string text = hybgen::gen::read_file(std::string(HYBGEN_SOURCE_DIR) +
+                                                  "/tests/validation/models/tilted_floor.model");
+  const std::string with_disc = text.substr(0, text.find("  support y >= k*x")) +
+                                "  support y >= k*x\n  support px^2 + py^2 <= 4\n" +
+                                text.substr(text.find("  grid "));
+  const std::string model =
+      hybgen::testing::write_model_file(kWork, "tilted_floor_disc.model", with_disc);
+  // On 11⁴ nodes the crossing at (x, y, px, py) = (−3, −1.5, −1.6000000000000001, −1.2) was
+  // refused before ("the reset lands outside the support").
+  for (const char* e : {"1", "0.8"}) {
+    const auto r =
+        hybgen_cli("check '" + model + "' --preflight -q --set grid=11x11x11x11 --set e=" + e);
+    EXPECT_EQ(r.code, 0) << "e = " << e << ": " << r.out;
+    EXPECT_NE(r.out.find("pre-flight scan (t = 0, characteristics, grid of 14641 nodes): ok"),
+              std::string::npos)
+        << r.out;
+  }
+  const auto r =
+      hybgen_cli("run '" + model + "' --quiet --out '" + (kWork / "disc").string() +
+                 "' --set grid=11x11x11x11 --set e=1 --set budget=off --set outputs=netcdf");
+  EXPECT_EQ(r.code, 0) << r.out;
 }
 
 }  // namespace

@@ -10,8 +10,9 @@
 ///     with s_g = 0 exactly is one too — and kept when inside `in_support`. At each crossing
 ///     point x* (∇s·X_from(x*) has the firing sign `direction`):
 ///       - X_from(x*) and div X_from(x*) are finite;
-///       - Δ(x*) is finite and in the support. Δ(x*) outside the grid box is no failure: the
-///         mass reset there leaves the computed region and every method counts it as outflow
+///       - Δ(x*) is finite and in the support (or within surface_tol·diam of it on the way to
+///         x*: outside by rounding, `support_within`). Δ(x*) outside the grid box is no failure:
+///         the mass reset there leaves the computed region and every method counts it as outflow
 ///         (the characteristics' budget measures it with forward flows, budget/atom.hpp); the
 ///         first such point of each guard is a note (`reset_outside_box`), which the runner
 ///         prints as a warning;
@@ -186,6 +187,22 @@ bool newton_converges(int g, const std::array<double, state_dim_v<M>>& y, const 
   return newton_reset_inverse<M>(g, y.data(), par, opt.newton_max_iter, opt.newton_tol, z);
 }
 
+/// Whether the support holds a point within `dist` of y on the way to x (in the support): y
+/// is outside it by rounding only. A restitution reset at e = 1 keeps |p|, so on the edge of a
+/// support |p| ≤ 2 it lands at |p| = 2(1 + ε) (tests/validation/test_reset_outflow.cpp).
+template <HybridModel M>
+bool support_within(const std::array<double, state_dim_v<M>>& y,
+                    const std::array<double, state_dim_v<M>>& x, double dist, const double* par) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> d{};
+  for (std::size_t a = 0; a < N; ++a) d[a] = x[a] - y[a];
+  const double len = std::sqrt(dot<N>(d.data(), d.data()));
+  if (!(len > 0.0)) return false;
+  std::array<double, N> z{};
+  for (std::size_t a = 0; a < N; ++a) z[a] = y[a] + std::min(dist, len) / len * d[a];
+  return M::in_support(z.data(), par);
+}
+
 /// All checks at a point x of S_g inside the support; returns the failure (ok() if none), or,
 /// when every check passes and only Δ(x) lies outside the box [lo, hi], `reset_outside_box`
 /// (a note for `check_guard`, not a failure).
@@ -225,7 +242,8 @@ PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, 
   if (!all_finite(y)) return fail(PreflightError::non_finite_reset, 0.0);
   const double J = M::hybrid_jacobian(g, x.data(), par);
   if (!std::isfinite(J) || J == 0.0) return fail(PreflightError::zero_jacobian, J);
-  if (!M::in_support(y.data(), par)) return fail(PreflightError::reset_outside_support, 0.0);
+  if (!M::in_support(y.data(), par) && !support_within<M>(y, x, opt.surface_tol * diam, par))
+    return fail(PreflightError::reset_outside_support, 0.0);
   const bool outside = !in_box<N>(y.data(), lo, hi);
   for (std::size_t h = 0; h < static_cast<std::size_t>(M::n_guard); ++h) {
     const GuardInfo hi_ = guard_info<M>(h);
