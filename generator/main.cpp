@@ -150,16 +150,18 @@ int main(int argc, char** argv) {
   derive->add_option("--format", format, "text, latex or json")
       ->check(CLI::IsMember({"text", "latex", "json"}));
   bool standalone = false;
-  derive->add_flag("--standalone", standalone,
-                   "with --format latex: a whole document for pdflatex (default: a fragment to "
-                   "paste, which needs amsmath)");
+  derive->add_flag(
+      "--standalone", standalone,
+      "with --format latex: a whole document for pdflatex (Debian: texlive-latex-base; "
+      "default: a fragment to paste, which needs amsmath)");
   auto* generate = app.add_subcommand("generate", "write the kernel header and derivation report");
   add_model(generate);
   generate->add_option("-o,--output", out, "output directory (default: generated/<model>)");
   auto* build = app.add_subcommand("build", "generate and compile the runner (cached)");
   add_model(build);
   add_build(build);
-  build->add_flag("-v,--verbose", bopt.verbose, "print the compiler command");
+  build->add_flag("-v,--verbose", bopt.verbose,
+                  "print the compiler command (a cached runner: the command that built it)");
   auto* run = app.add_subcommand("run", "derive, build and run: evolve the initial density");
   add_model(run);
   run->add_option("--out", out,

@@ -376,6 +376,18 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
       if (read_file(stamp) == sha256_hex(read_file(r.executable)) + "\n") {
         r.cached = true;
         r.seconds = elapsed();
+        // -v says what a compile would have run: the command that built this entry, the
+        // first line of its build.log ("$ CMD").
+        if (options.verbose) {
+          std::string built_by = "(its build.log is missing)";
+          if (fs::exists(r.directory + "/build.log", ec)) {
+            const std::string log = read_file(r.directory + "/build.log");
+            built_by = log.substr(0, log.find('\n'));
+            if (built_by.rfind("$ ", 0) == 0) built_by.erase(0, 2);
+          }
+          std::fprintf(stderr, "hybgen: cached runner %s, compiled by: %s\n", r.executable.c_str(),
+                       built_by.c_str());
+        }
         return r;
       }
     } catch (const std::exception&) {

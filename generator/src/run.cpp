@@ -19,6 +19,7 @@
 #include "hybgen/gen/outputs.hpp"
 #include "hybgen/gen/process.hpp"
 #include "hybgen/gen/render.hpp"
+#include "hybgen/rt/io/json_text.hpp"
 #include "hybgen/rt/setting_rules.hpp"
 
 namespace hybgen::gen {
@@ -148,7 +149,7 @@ int run_to_outputs(const Frontend& fe, const RunOptions& options) {
   cfg["seconds"] = {{"derive", fe.seconds}, {"build", b.seconds}};
   const std::string config = (staging / "config.json").string();
   try {
-    write_file_atomic(config, cfg.dump(2) + "\n");
+    write_file_atomic(config, hybgen::rt::json_file_text(cfg));
   } catch (const std::runtime_error& e) {
     throw UsageError(std::string(e.what()) + "; " + tx.unchanged());
   }
@@ -164,7 +165,7 @@ int run_to_outputs(const Frontend& fe, const RunOptions& options) {
   // The config as it applies to OUT (the runner has finished with the staging path).
   cfg["out_dir"] = out;
   try {
-    write_file_atomic(config, cfg.dump(2) + "\n");
+    write_file_atomic(config, hybgen::rt::json_file_text(cfg));
   } catch (const std::runtime_error& e) {
     throw InternalError(std::string(e.what()) + "; " + tx.unchanged());
   }
@@ -191,7 +192,7 @@ int run_preflight(const Frontend& fe, const BuildOptions& build, bool quiet) {
   int rc = 70;
   std::error_code ec;
   try {
-    write_file_atomic(config, cfg.dump(2) + "\n");
+    write_file_atomic(config, hybgen::rt::json_file_text(cfg));
     rc = run_process(runner_command(m.sim.settings, b.executable, config), interrupt_guard);
   } catch (...) {
     fs::remove_all(dir, ec);

@@ -18,6 +18,7 @@
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/outputs.hpp"
 #include "hybgen/gen/process.hpp"
+#include "hybgen/rt/io/json_text.hpp"
 #include "hybgen/rt/method_table.hpp"
 
 namespace hybgen::gen {
@@ -364,7 +365,7 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
     cfg["provenance"] = run_provenance(*p.fe);
     cfg["seconds"] = {{"derive", p.fe->seconds}, {"build", runner.seconds}};
     p.config = (dir / "config.json").string();
-    write_file_atomic(p.config, cfg.dump(2) + "\n");
+    write_file_atomic(p.config, hybgen::rt::json_file_text(cfg));
   }
 
   // Run `jobs` at a time; each line of progress says which point ended how. Whatever ends
@@ -423,7 +424,7 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
       // The runner's config, rewritten for OUT as `hybgen run` does.
       nlohmann::json cfg = nlohmann::json::parse(read_file(p.config));
       cfg["out_dir"] = out + "/" + p.label;
-      write_file_atomic(p.config, cfg.dump(2) + "\n");
+      write_file_atomic(p.config, hybgen::rt::json_file_text(cfg));
       // A summary quantity named like a swept key keeps both: the summary's as run_KEY.
       const nlohmann::ordered_json quantities = sweep_row(p.summary);
       for (const auto& [k, v] : quantities.items()) row[row.contains(k) ? "run_" + k : k] = v;
@@ -448,7 +449,7 @@ int run_sweep(const std::string& path, const SweepSpec& spec, const SweepOptions
   }
   const nlohmann::ordered_json table = {
       {"model", m0.name}, {"fixed", spec.fixed}, {"axes", axes}, {"rows", rows}};
-  write_file_atomic((staging / "sweep.json").string(), table.dump(2) + "\n");
+  write_file_atomic((staging / "sweep.json").string(), hybgen::rt::json_file_text(table));
   write_file_atomic((staging / "sweep.csv").string(), sweep_csv(rows));
   stop_if_interrupted(tx);  // asked to stop after the last runner: no swap
   tx.commit();

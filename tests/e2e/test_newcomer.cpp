@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 #include <string>
 
 #include "hybgen/rt/exit_codes.hpp"
@@ -68,6 +69,13 @@ TEST(Newcomer, OutputsAreNamedAfterTheFileAndLeaveNoLock) {
   EXPECT_FALSE(fs::exists(dir / "out" / "bouncing_ball"));
   for (const auto& e : fs::directory_iterator(dir / "out"))
     EXPECT_NE(e.path().extension(), ".lock") << e.path();
+  // summary.json is for people too: a time series on one line (a81ba15: one number per line,
+  // 709 lines for the shipped ball; hybgen/rt/io/json_text.hpp).
+  std::ifstream in(dir / "out" / "a" / "summary.json");
+  std::size_t lines = 0;
+  for (std::string line; std::getline(in, line);) ++lines;
+  EXPECT_GT(lines, 20u);
+  EXPECT_LT(lines, 150u);
 }
 
 TEST(Newcomer, CheckAgreesWithRun) {
@@ -92,6 +100,13 @@ TEST(Newcomer, ValuesAtTheEdgesAreRefusedOrRunNeverACrash) {
   const auto frames = hybgen("run models/bouncing_ball.model -q --set t_end=1e15 --set dt=1e-9");
   EXPECT_EQ(frames.code, exit_status(ExitCode::UsageError)) << frames.out;
   EXPECT_TRUE(has(frames.out, "output times")) << frames.out;
+  // t_end = 1e300 (a81ba15: killed by SIGSEGV, exit 70) and dt = 1e-9 alone ask for more
+  // output times than a run may have, and say so.
+  for (const char* sets : {"--set t_end=1e300", "--set dt=1e-9"}) {
+    const auto r = hybgen(std::string("run models/bouncing_ball.model -q ") + sets);
+    EXPECT_EQ(r.code, exit_status(ExitCode::UsageError)) << sets << ": " << r.out;
+    EXPECT_TRUE(has(r.out, "output times, more than the")) << r.out;
+  }
   const auto e = hybgen("run models/bouncing_ball.model -q --set e=1e308 --set grid=21x21");
   EXPECT_EQ(e.code, exit_status(ExitCode::Numerical)) << e.out;
   EXPECT_TRUE(has(e.out, "non-finite reset")) << e.out;

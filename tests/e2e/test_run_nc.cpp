@@ -34,13 +34,15 @@ std::string xarray_reads(const std::string& python, const fs::path& out, const s
   return r.code == 0 ? r.out : "exit " + std::to_string(r.code) + ": " + r.out;
 }
 
-/// Run the model `text` (written as NAME.model) into kWork/NAME; returns the directory, or
-/// an empty path with a test failure when the run fails.
-fs::path run_made_up(const std::string& name, const std::string& text, std::string& model) {
+/// Run the model `text` (written as NAME.model) into kWork/NAME, with the options `sets`;
+/// returns the directory, or an empty path with a test failure when the run fails.
+fs::path run_made_up(const std::string& name, const std::string& text, std::string& model,
+                     const std::string& sets = "") {
   model = write_model_file(kWork, name + ".model", text);
   const fs::path out = kWork / name;
   fs::remove_all(out);
-  const auto r = run_hybgen("run '" + model + "' --out '" + out.string() + "'", kWork / "cache");
+  const auto r =
+      run_hybgen("run '" + model + "' --out '" + out.string() + "' " + sets, kWork / "cache");
   EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   return r.code == exit_status(ExitCode::Success) ? out : fs::path();
 }
@@ -81,7 +83,9 @@ simulation {
 
 TEST(RunNc, TwoModesMatchTheClosedFormAndTheXarrayReader) {
   std::string model;
-  const fs::path out = run_made_up("switching_drift", kSwitching, model);
+  // --set c=1.5 (the model's own value): run.nc's history must name it (check_run_nc.py; on
+  // a81ba15 it named the command without its --set options).
+  const fs::path out = run_made_up("switching_drift", kSwitching, model, "--set c=1.5");
   ASSERT_FALSE(out.empty());
   const auto s = read_json_file(out / "summary.json");
   EXPECT_EQ(s["outputs"]["netcdf"], "run.nc");

@@ -15,6 +15,7 @@
 
 #include "hybgen/gen/errors.hpp"
 #include "hybgen/gen/fs.hpp"
+#include "hybgen/rt/io/json_text.hpp"
 
 namespace {
 
@@ -260,6 +261,26 @@ TEST(Outputs, AUsersDirectoryBesideOutIsLeftAlone) {
   EXPECT_EQ(get(d / "run.old-v1" / "u_0000.npy"), "mine");
   EXPECT_EQ(get(d / "run.old-99" / "notes.txt"), "mine too");
   EXPECT_EQ(get(d / "run" / "u_0000.npy"), "new");
+}
+
+TEST(JsonText, ScalarArraysStayOnOneLineAndTheTextParsesBack) {
+  // The files a run writes: dump(2)'s layout, a flat array on one line (a81ba15 wrote
+  // summary.json one number per line, 709 lines for the shipped ball).
+  const nlohmann::json j = {{"times", {0.0, 0.1, 1.0 / 3.0}},
+                            {"model", "ball"},
+                            {"empty", nlohmann::json::array()},
+                            {"none", nlohmann::json::object()},
+                            {"grid", {{"axes", {{{"name", "x"}, {"n", 75}}, {{"name", "p"}}}}}},
+                            {"flags", {true, nullptr, "a\"b"}}};
+  const std::string text = hybgen::rt::json_file_text(j);
+  EXPECT_EQ(nlohmann::json::parse(text), j);  // doubles round-trip: 1/3 exactly
+  EXPECT_NE(text.find("\"times\": [0.0, 0.1, 0.3333333333333333]"), std::string::npos) << text;
+  EXPECT_NE(text.find("\"flags\": [true, null, \"a\\\"b\"]"), std::string::npos) << text;
+  EXPECT_NE(text.find("\"empty\": []"), std::string::npos) << text;
+  EXPECT_NE(text.find("\"none\": {}"), std::string::npos) << text;
+  // Arrays of objects keep one element per line, indented as dump(2) would.
+  EXPECT_NE(text.find("\"axes\": [\n      {\n        \"n\": 75,"), std::string::npos) << text;
+  EXPECT_EQ(text.back(), '\n');
 }
 
 }  // namespace

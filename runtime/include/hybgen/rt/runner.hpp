@@ -34,6 +34,7 @@
 #include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/exit_codes.hpp"
 #include "hybgen/rt/io/atomic_file.hpp"
+#include "hybgen/rt/io/json_text.hpp"
 #include "hybgen/rt/io/run_outputs.hpp"
 #include "hybgen/rt/method_table.hpp"
 #include "hybgen/rt/methods/methods.hpp"
@@ -619,7 +620,7 @@ int run_chain(const RunConfig& config, const Backend& backend = serial_backend()
   nlohmann::json summary = finish_summary(rec, *written, output_s, gathered);
   if (!res.warnings.empty()) summary[summary_key::warnings] = res.warnings;
   write_file_atomic((std::filesystem::path(plan.config.out_dir) / "summary.json").string(),
-                    summary.dump(2) + "\n");
+                    json_file_text(summary));
   durability.commit();
   if (!plan.config.quiet) print_run_report(plan.config, rec, summary, *written);
   return exit_status(ExitCode::Success);
