@@ -3,7 +3,9 @@
 #  1. the installed hybgen builds and runs a model from a directory outside the source tree,
 #     compiling the runner against the installed runtime, not the source tree's;
 #  2. docs/examples/find_package builds with find_package(hybgen) against the installed tree
-#     and the kernels the installed hybgen generates, and its solve matches a closed form.
+#     and the kernels the installed hybgen generates, and its solve matches a closed form;
+#  3. Debian's python3 imports the installed Python package (python/hybgen), which finds the
+#     installed hybgen, not one on PATH: its runs match the closed form, its sweep runs.
 # usage: test_install.sh SOURCE_DIR BUILD_DIR WORK_DIR
 set -euo pipefail
 src=$1 build=$2 work=$3
@@ -21,6 +23,12 @@ fi
 if grep -q -- "$src/runtime" build.log; then
   echo "the runner used the source tree's runtime:"; cat build.log; exit 1
 fi
+# A cache hit says, with -v, the command that built the runner.
+prefix/bin/hybgen build -v decay.model >cached.log 2>&1 || { cat cached.log; exit 1; }
+if ! grep -q -- "cached runner .*compiled by: .*-I'$work/prefix/include'" cached.log; then
+  echo "build -v on a cache hit did not show the command that built the runner:"
+  cat cached.log; exit 1
+fi
 prefix/bin/hybgen run decay.model --out out -q
 for f in run.nc summary.json; do
   [[ -f out/$f ]] || { echo "missing out/$f"; ls out; exit 1; }
@@ -31,4 +39,64 @@ cmake -S "$src/docs/examples/find_package" -B example -DCMAKE_PREFIX_PATH="$work
   -DDECAY_KERNELS="$work/gen" >example.log 2>&1 || { cat example.log; exit 1; }
 cmake --build example >>example.log 2>&1 || { cat example.log; exit 1; }
 ./example/decay_example
+
+# The Python package: found under the prefix (HYBGEN_INSTALL_PYTHONDIR), it must call the
+# hybgen installed beside it (its _install.py), so a hybgen on PATH that fails if called is put
+# first. decay.model: x' = -a x, u(t, x) = u0(x e^{a t}) e^{a t}, u0 = exp(-x^2), a = 0.7.
+init=$(find "$work/prefix" -path '*/hybgen/__init__.py' -print -quit)
+[[ -n $init ]] || { echo "the Python package was not installed under $work/prefix"; exit 1; }
+/usr/bin/python3 -c 'import xarray, pandas, netCDF4' 2>/dev/null ||
+  { echo "Debian's python3 lacks xarray, pandas or netCDF4 (scripts/setup.sh --tests)"; exit 1; }
+mkdir -p decoy tmp
+printf '#!/bin/sh\necho "the hybgen on PATH was called" >&2\nexit 99\n' >decoy/hybgen
+chmod +x decoy/hybgen
+cat >check_package.py <<'EOF'
+import os
+import sys
+
+import numpy as np
+
+import hybgen
+
+
+def check(ok, what):
+    if not ok:
+        sys.exit(f"python: {what}")
+
+
+def closed_form_error(ds, a):
+    """Largest difference from u(t, x) at the last frame, relative to its maximum."""
+    x, t = ds["x"].values, float(ds["time"][-1])
+    exact = np.exp(-(x * np.exp(a * t)) ** 2) * np.exp(a * t)
+    return np.abs(ds["density"].isel(time=-1).values - exact).max() / exact.max()
+
+
+exe = hybgen.find_exe()
+check(os.path.samefile(exe, sys.argv[1]), f"find_exe() is {exe}, not the installed hybgen")
+ds = hybgen.run("decay.model", t_end=1, dt=0.5, grid=121)
+check(dict(ds.sizes) == {"time": 3, "x": 121}, f"run: dimensions {dict(ds.sizes)}")
+err = closed_form_error(ds, 0.7)
+check(err < 1e-6, f"run: relative error {err:.3g} at t = 1 (a = 0.7)")
+ds = hybgen.run("decay.model", t_end=1, dt=0.5, grid=121, a=2.0, domain__x=(-1.5, 1.5))
+err = closed_form_error(ds, 2.0)
+check(err < 1e-6, f"run with a=2.0: relative error {err:.3g} from its closed form")
+ds = hybgen.run("decay.model", "py_out", sets={"grid": 121}, outputs="npy")
+check(ds.attrs.get("hybgen_out_dir") == os.path.abspath("py_out"), "run: no hybgen_out_dir")
+check(os.path.exists("py_out/u_0000.npy") and os.path.exists("py_out/run.nc"),
+      f"run with out: py_out holds {sorted(os.listdir('py_out'))}")
+check(hybgen.summary("py_out")["grid"]["axes"][0]["n"] == 121, "summary: not the run's grid")
+try:
+    hybgen.run("decay.model", method="nope")
+    check(False, "run with method=nope did not fail")
+except hybgen.HybgenError as error:
+    check(error.code == 2 and "nope" in str(error), f"method=nope: exit {error.code}: {error}")
+table = hybgen.sweep("decay.model", a=[0.5, 1.0])
+check(len(table) == 2 and list(table["a"]) == [0.5, 1.0] and (table["status"] == "ok").all(),
+      f"sweep:\n{table}")
+check(os.listdir(os.environ["TMPDIR"]) == [], "temporary directories left behind")
+print("python: ok")
+EOF
+env -u HYBGEN_EXE PATH="$work/decoy:/usr/bin:/bin" PYTHONPATH="$(dirname "$(dirname "$init")")" \
+  TMPDIR="$work/tmp" /usr/bin/python3 check_package.py "$work/prefix/bin/hybgen" ||
+  { echo "the Python package failed"; exit 1; }
 echo "install: ok"
