@@ -16,13 +16,14 @@ if(HYBGEN_SANITIZE AND HYBGEN_FUZZ)
   message(FATAL_ERROR "HYBGEN_SANITIZE and HYBGEN_FUZZ are separate builds; enable one")
 endif()
 
-# UBSan without three of its checks, whose findings ASan makes already and which were most of
-# the sanitized build's time: `null` (a null dereference faults, and ASan reports the fault
-# with its stack), `object-size` (an access past an object is ASan's shadow-memory check) and
-# `alignment` (x86-64 loads misaligned scalars; Eigen's aligned types are allocated aligned).
+# UBSan without three of its checks, whose findings ASan makes already, nearly, and which were
+# most of the sanitized build's time: `null` (a null dereference faults, and ASan reports the
+# fault with its stack; a member access through null that loads nothing goes unseen),
+# `object-size` (an access past an object is ASan's shadow-memory check) and `alignment`
+# (x86-64 loads misaligned scalars; Eigen's aligned types are allocated aligned).
 # GCC 12, -O1 -g1, tests/validation/test_fold.cpp, alone: 65 s with all of UBSan, 34 s
 # without these three, 26 s under ASan alone (docs/hardening.md). float-cast-overflow, which
-# -fsanitize=undefined leaves out, is added: a NaN or huge double cast to a grid index is the
+# GCC's -fsanitize=undefined leaves out, is added: a NaN or huge double cast to a grid index is the
 # runtime's likeliest undefined behaviour (the fuzz build keeps all of UBSan on the front end).
 set(HYBGEN_SANITIZER_FLAGS -fsanitize=address,undefined,float-cast-overflow
                            -fno-sanitize=null,alignment,object-size -fno-omit-frame-pointer

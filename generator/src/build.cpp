@@ -380,10 +380,11 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
         // first line of its build.log ("$ CMD").
         if (options.verbose) {
           std::string built_by = "(its build.log is missing)";
-          if (fs::exists(r.directory + "/build.log", ec)) {
+          try {  // a diagnostic: an unreadable log must not make the entry a miss
             const std::string log = read_file(r.directory + "/build.log");
             built_by = log.substr(0, log.find('\n'));
             if (built_by.rfind("$ ", 0) == 0) built_by.erase(0, 2);
+          } catch (const std::exception&) {
           }
           std::fprintf(stderr, "hybgen: cached runner %s, compiled by: %s\n", r.executable.c_str(),
                        built_by.c_str());

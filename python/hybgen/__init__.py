@@ -121,7 +121,12 @@ def sweep(model, out=None, *, exe=None, sets=None, quiet=True, jobs=None, **axes
     flags = []
     for key, value in values.items():
         items = _items(value)
-        if items and not (key.startswith("domain.") and _numbers(items)):  # an axis
+        # A flat sequence of numbers is one value for a domain ([a,b]) and for the joined
+        # settings (grid=(75, 75): 75x75; outputs, figure_axes); an axis of those is a list of
+        # sequences. Any other sequence is an axis.
+        one_value = (key.startswith("domain.") or key in _JOINERS) and not any(
+            _items(v) is not None for v in items or [])
+        if items and not one_value:  # an axis
             flags += ["--set", f"{key}=" + ",".join(_value(key, v) for v in items)]
         else:
             flags += ["--set", f"{key}={_value(key, value)}"]
@@ -198,11 +203,6 @@ def _directory(out):
         with tempfile.TemporaryDirectory(prefix="hybgen-") as tmp:
             yield os.path.join(tmp, "run")
     return temporary()
-
-
-def _numbers(items):
-    """Whether every element is a number (a domain's pair, not an axis of pairs)."""
-    return all(isinstance(v, numbers.Real) for v in items)
 
 
 def _call(exe, command, model, directory, flags, quiet):

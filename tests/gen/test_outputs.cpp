@@ -281,6 +281,13 @@ TEST(JsonText, ScalarArraysStayOnOneLineAndTheTextParsesBack) {
   // Arrays of objects keep one element per line, indented as dump(2) would.
   EXPECT_NE(text.find("\"axes\": [\n      {\n        \"n\": 75,"), std::string::npos) << text;
   EXPECT_EQ(text.back(), '\n');
+  // An ordered_json keeps its order (sweep.json's rows follow sweep.csv's columns).
+  nlohmann::ordered_json row;
+  row["point"] = 0;
+  row["dir"] = "0_e=0.5";
+  row["e"] = 0.5;
+  EXPECT_EQ(hybgen::rt::json_file_text(row),
+            "{\n  \"point\": 0,\n  \"dir\": \"0_e=0.5\",\n  \"e\": 0.5\n}\n");
 }
 
 }  // namespace

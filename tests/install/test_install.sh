@@ -93,6 +93,9 @@ except hybgen.HybgenError as error:
 table = hybgen.sweep("decay.model", a=[0.5, 1.0])
 check(len(table) == 2 and list(table["a"]) == [0.5, 1.0] and (table["status"] == "ok").all(),
       f"sweep:\n{table}")
+# A sequence for a joined setting is one value (outputs=netcdf+npy), not an axis of two.
+table = hybgen.sweep("decay.model", a=[0.5, 1.0], outputs=["netcdf", "npy"])
+check(len(table) == 2, f"sweep with outputs=[netcdf, npy]: {len(table)} rows")
 check(os.listdir(os.environ["TMPDIR"]) == [], "temporary directories left behind")
 print("python: ok")
 EOF

@@ -23,8 +23,8 @@ namespace hybgen::rt::drawing {
 
 // ------------------------------------------------------------------ numbers on axes
 
-/// Tick values at a 1-2-5 step over [lo, hi], at most about `max_count`, and at least two: a
-/// step that leaves one tick in the span (2 on [−1.5, 1.5]) gives way to the next finer one.
+/// See drawing.hpp. A step that leaves one tick in the span (2 on [−1.5, 1.5]) gives way to
+/// the next finer one.
 std::vector<double> nice_ticks(double lo, double hi, int max_count) {
   const double span = hi - lo;
   if (!(span > 0) || !std::isfinite(span)) return {lo};

@@ -73,7 +73,8 @@ inline constexpr std::array<Rgb, 7> kCurve{{{0.0, 0.45, 0.70},
                                             {0.34, 0.71, 0.91},
                                             {0.94, 0.89, 0.26}}};
 
-/// Tick values at a 1-2-5 step over [lo, hi], at most about `max_count`.
+/// Tick values at a 1-2-5 step over [lo, hi], at most about `max_count` and at least two
+/// (one, lo, for an empty or non-finite span).
 std::vector<double> nice_ticks(double lo, double hi, int max_count);
 /// A tick label: %.4g with compact exponents (1e-5, 2e3).
 std::string tick_label(double v);

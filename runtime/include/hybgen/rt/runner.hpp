@@ -264,7 +264,7 @@ std::optional<int> preflight_run(RunPlan<state_dim_v<M>>& p) {
       std::fprintf(stderr,
                    "%s%s (the first such point): the mass reset outside the box leaves the "
                    "computed region and is counted as outflow; to follow it, widen the "
-                   "domain\n",
+                   "domain, or exclude by a `support` line the states no reset reaches\n",
                    warning_prefix(p.config).c_str(), describe_preflight<M>(note).c_str());
     else
       std::fprintf(stderr,

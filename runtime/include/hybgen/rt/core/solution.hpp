@@ -157,9 +157,11 @@ std::string describe(const TraceFailure<state_dim_v<M>>& f) {
 }
 
 /// The mass budget over a box: for each output time t_k,
-///   mass[k] = Σ_modes ∫_box u(t_k),  outflow[k] = ∫₀^{t_k} Σ_modes ∮_∂box u X·n_out,
-///   atom[k] = mass0 − mass[k] − outflow[k]  (mass neither in the box nor gone through its
-///   faces: concentrated on atoms such as a Zeno point, or reset out of the box from inside).
+///   mass[k] = Σ_modes ∫_box u(t_k),  outflow[k] = ∫₀^{t_k} Σ_modes ∮_∂box u X·n_out (plus,
+///   where measured, what resets carried out of the box), and atom[k], the mass come to rest
+///   at Zeno points in the box: measured (`adaptive_mass_budget`), or for the fixed-rule
+///   budgets of mass_budget.hpp the remainder mass0 − mass[k] − outflow[k], which there also
+///   holds the mass resets carried out of the box.
 struct MassBudget {
   std::vector<double> times;  ///< Output times.
   double mass0 = 0.0;         ///< Σ_modes ∫_box u0.
@@ -170,8 +172,8 @@ struct MassBudget {
   /// The part of `outflow` that resets carried across the box's boundary (the adaptive budget
   /// of characteristics measures it on its own, budget/atom.hpp; empty elsewhere).
   std::vector<double> reset_outflow;
-  /// Mass at atoms: measured at Zeno points by `adaptive_mass_budget` (budget.hpp); for the
-  /// fixed-rule budgets below, the remainder mass0 − mass − outflow.
+  /// Mass at atoms: measured at Zeno points in the box by `adaptive_mass_budget` (budget.hpp);
+  /// for the fixed-rule budgets of mass_budget.hpp, the remainder mass0 − mass − outflow.
   std::vector<double> atom;
   /// Estimated |error| of mass[k] (`adaptive_mass_budget`, budget.hpp); empty for fixed rules.
   std::vector<double> mass_error;

@@ -5,7 +5,8 @@
 /// (numbers, strings, booleans, null) stays on one line. A time series of 51 output times is
 /// one line, not 53; summary.json of the shipped ball is about 100 lines instead of 700.
 /// Every scalar is printed by `dump()` itself, so the text parses back to the same value
-/// (doubles round-trip).
+/// (doubles round-trip; NaN and ±Inf are written null, as by `dump`). The key order is the
+/// value's own: an `ordered_json` (sweep.json) keeps its insertion order.
 
 #include <nlohmann/json.hpp>
 #include <string>
@@ -15,7 +16,8 @@ namespace hybgen::rt {
 namespace detail {
 
 /// Append j at nesting `depth` (2 spaces per level) to `out`.
-inline void append_json_text(std::string& out, const nlohmann::json& j, int depth) {
+template <class Json>
+void append_json_text(std::string& out, const Json& j, int depth) {
   const auto pad = [&out](int d) { out.append(static_cast<std::size_t>(2 * d), ' '); };
   if (j.is_object()) {
     if (j.empty()) {
@@ -28,7 +30,7 @@ inline void append_json_text(std::string& out, const nlohmann::json& j, int dept
       if (!first) out += ",\n";
       first = false;
       pad(depth + 1);
-      out += nlohmann::json(it.key()).dump() + ": ";
+      out += Json(it.key()).dump() + ": ";
       append_json_text(out, it.value(), depth + 1);
     }
     out += "\n";
@@ -61,8 +63,10 @@ inline void append_json_text(std::string& out, const nlohmann::json& j, int dept
 
 }  // namespace detail
 
-/// `j` as the text of a JSON file (see the file comment), ending in a newline.
-inline std::string json_file_text(const nlohmann::json& j) {
+/// `j` (nlohmann::json or nlohmann::ordered_json) as the text of a JSON file (see the file
+/// comment), ending in a newline.
+template <class Json>
+std::string json_file_text(const Json& j) {
   std::string out;
   detail::append_json_text(out, j, 0);
   return out + "\n";

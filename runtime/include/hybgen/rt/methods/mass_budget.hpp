@@ -1,9 +1,10 @@
 #pragma once
 /// \file mass_budget.hpp
-/// The characteristics method's mass budget over the grid box (budget=fast): the mass in the
-/// box by tensor cubature of the exact density, the cumulative outflow through its faces by
-/// the time integral of the flux along characteristics, and the atom as what remains.
-/// budget.hpp refines it adaptively (budget=full) and bounds its error.
+/// Mass budgets over the grid box with fixed tensor rules (tests and their references): the
+/// mass in the box by tensor cubature of the exact density, the cumulative outflow through its
+/// faces by the time integral of the flux along characteristics, and the atom as what remains
+/// (which then also holds what resets carried out of the box). The runs' budgets (budget=fast
+/// and full) are budget.hpp's adaptive ones, every term measured and its error bounded.
 
 #include <algorithm>
 #include <array>

@@ -557,7 +557,8 @@ PreflightFailure<state_dim_v<M>> check_preimages(
 /// With `seeds` (the characteristics method), a guard whose reset has several pre-images
 /// gets the tracer's seeds in (*seeds)[g] (`check_preimages`; empty for the others);
 /// without, it is the failure `several_preimages`.
-/// Re-triggers at isolated points are appended to `notes` (see `check_guard`).
+/// Re-triggers at isolated points, and each guard's first reset out of the box, are appended
+/// to `notes` (see `check_guard`).
 template <HybridModel M>
 PreflightFailure<state_dim_v<M>> preflight(
     const TensorGrid<state_dim_v<M>>& grid, const double* par, const PreflightOptions& opt = {},
@@ -579,9 +580,10 @@ PreflightFailure<state_dim_v<M>> preflight(
   return f;
 }
 
-/// One-line description of a pre-flight failure for an error message (exit code 3), e.g.
-/// "pre-flight scan of guard 'ground' at t = 0: the reset lands outside the domain (the grid
-/// box) at the crossing point (x = 0, p = -2) in mode 'flight': Delta = (x = 0, p = 3)".
+/// One-line description of a pre-flight failure for an error message (exit code 3), or of a
+/// note for a warning, e.g. "pre-flight scan of guard 'ground' at t = 0: the reset lands
+/// outside the support (the state space) at the point (x = 0, p = -2) of its surface in mode
+/// 'flight': Delta = (x = -0.5, p = 2)".
 template <HybridModel M>
 std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
   constexpr std::size_t N = state_dim_v<M>;

@@ -51,7 +51,8 @@ namespace detail {
 /// point by t_k (forward.hpp's Zeno signature), and the reset outflow's
 ///   U[i·2K + K + k] = Σ_m u0(m, x_i)·(number of resets before or at t_k from a state in the
 ///                     box [lo, hi] to one outside it, minus those from outside into it;
-///                     resets from a state on a face are the faces' share: `on_faces`).
+///                     what the faces' integral counts is left to it: `crossing`).
+/// Only Zeno points in the box are atoms: one outside it is mass that has left.
 /// Both are thereby MEASURED where they happen, independently of the backward
 /// characteristics that give the mass and the outflow through the faces, so mass0 − mass −
 /// outflow − atom is a real check of the budget. A forward flow that hits its event cap
@@ -68,16 +69,49 @@ struct ZenoValues {
   const Backend* backend = nullptr;  ///< Ranks sharing the points (null: this process).
   std::string failure;               ///< First failure (describe), or empty.
 
-  /// Whether x lies on a face of the box (to 1e-10 of its width): a guard on a face (the
-  /// bouncing ball's ground at x = 0) resets the mass crossing it there, and the faces'
-  /// integral already counts what it resets out of the box, or into it from outside
-  /// (mass_budget.hpp, face_flux), so the reset outflow leaves such resets out.
-  bool on_faces(const std::array<double, N>& x) const {
+  /// The inward normals of the faces x lies on (to 1e-10 of the box's width), summed: zero
+  /// when x is on none.
+  std::array<double, N> face_inward(const std::array<double, N>& x) const {
+    std::array<double, N> n{};
     for (std::size_t a = 0; a < N; ++a) {
       const double tol = 1e-10 * (hi[a] - lo[a]);
-      if (std::fabs(x[a] - lo[a]) <= tol || std::fabs(x[a] - hi[a]) <= tol) return true;
+      if (std::fabs(x[a] - lo[a]) <= tol) n[a] += 1.0;
+      if (std::fabs(x[a] - hi[a]) <= tol) n[a] -= 1.0;
     }
+    return n;
+  }
+
+  /// Whether x lies on a face of the box: a guard on a face (the bouncing ball's ground at
+  /// x = 0) resets the mass crossing it there, and the faces' integral already counts what it
+  /// resets out of the box, or into it from outside (mass_budget.hpp, face_flux), so the
+  /// reset outflow leaves resets FROM a face out.
+  bool on_faces(const std::array<double, N>& x) const {
+    for (const double v : face_inward(x))
+      if (v != 0.0) return true;
     return false;
+  }
+
+  /// +1 when a reset of guard g from `before` to `after` carries mass out of the box, −1 into
+  /// it, 0 otherwise or when the faces' integral counts it. An image ON a face is inside when
+  /// the target mode's flow enters the box there: the faces' integral takes the limit from
+  /// inside (characteristics.hpp, spawn_from with a face), so it counts such mass reset from
+  /// outside as inflow itself (0 here) and mass reset from inside is an internal transfer;
+  /// where the flow leaves at once the image is outside, mass the faces do not see.
+  int crossing(int g, const std::array<double, N>& before,
+               const std::array<double, N>& after) const {
+    if (on_faces(before)) return 0;
+    const bool from_in = in_box<N>(before.data(), lo, hi);
+    bool to_in = in_box<N>(after.data(), lo, hi);
+    if (to_in) {
+      const std::array<double, N> inward = face_inward(after);
+      if (on_faces(after)) {
+        std::array<double, N> X{};
+        M::flow(guard_info<M>(static_cast<std::size_t>(g)).to, after.data(), par, X.data());
+        if (dot<N>(X.data(), inward.data()) > 0.0) return 0;
+        to_in = false;
+      }
+    }
+    return from_in == to_in ? 0 : (from_in ? 1 : -1);
   }
 
   /// U[i·2K + j] as above, OpenMP over the points.
@@ -106,13 +140,12 @@ struct ZenoValues {
           if (u0 == 0.0) continue;  // no mass: its fate does not matter
           // A reset across the box's boundary at time t counts from the first t_k ≥ t on
           // (trajectories are right-continuous: forward.hpp).
-          auto on_reset = [&](double t, int, const std::array<double, N>& before,
+          auto on_reset = [&](double t, int g, const std::array<double, N>& before,
                               const std::array<double, N>& after) {
-            if (on_faces(before)) return;  // the faces' integral counts it (face_flux)
-            const bool from_in = in_box<N>(before.data(), lo, hi);
-            if (from_in == in_box<N>(after.data(), lo, hi)) return;
-            const double w = from_in ? u0 : -u0;
-            for (std::size_t k = K; k-- > 0 && times[k] >= t;) reset_out[k] += w;
+            const int c = crossing(g, before, after);
+            if (c == 0) return;
+            for (std::size_t k = K; k-- > 0 && times[k] >= t;)
+              reset_out[k] += static_cast<double>(c) * u0;
           };
           const ForwardResult<N> r = flow.run(
               m, x, times, [](std::size_t, int, const std::array<double, N>&) {}, on_reset);
@@ -126,7 +159,9 @@ struct ZenoValues {
             }
             break;
           }
-          if (r.status != ForwardStatus::zeno) continue;
+          // An atom outside the box is mass that left it through a face or by a reset, which
+          // the outflow counts already (as the particles count it: particles.hpp).
+          if (r.status != ForwardStatus::zeno || !in_box<N>(r.x.data(), lo, hi)) continue;
           for (std::size_t k = 0; k < K; ++k)
             if (times[k] >= r.t_stop) atom[k] += u0;
         }
