@@ -805,12 +805,11 @@ TEST(TransientClosedForms, ATieAtTheInitialTimeKeepsAHistory) {
   // at the last time t = 1, whose ties fall at the END of their traces, where the image's
   // event rounds to 0 without a root to decide (docs/methods.md, known limits: 3.1e-4 under
   // the sanitized -O1 build, exact at -O3).
-  expect_exact({"wrap_decay",
-                {{0.0, 1.0, 81}, {-2.0, 2.0, 81}},
-                wrap_decay_density,
-                [](const Point& p, double t) {
-                  return t == 1.0 && (p[0] < 1e-9 || p[0] > 1.0 - 1e-9);
-                }});
+  expect_exact(
+      {"wrap_decay",
+       {{0.0, 1.0, 81}, {-2.0, 2.0, 81}},
+       wrap_decay_density,
+       [](const Point& p, double t) { return t == 1.0 && (p[0] < 1e-9 || p[0] > 1.0 - 1e-9); }});
 }
 
 }  // namespace
