@@ -37,14 +37,16 @@ echo "ci-hardening: test suite under ASan + UBSan" >&2
 # each compile one more sanitized runner (20-60 s) to check a number, a message or an exit
 # code whose code paths run sanitized here or in tests/rt; they run unsanitized in the first
 # stage. The differential test of derive runs 20 random models here instead of 300 (GiNaC
-# under ASan: 300 took 516 s; tests/gen/test_derive_random.cpp, HYBGEN_RANDOM_MODELS).
+# under ASan: 300 took 516 s; tests/gen/test_derive_random.cpp, HYBGEN_RANDOM_MODELS), and the
+# density-level differential campaign 2 random models instead of 16 (each compiles a sanitized
+# runner; tests/validation/test_differential.cpp, HYBGEN_DIFFERENTIAL_MODELS).
 t0=$SECONDS
 # (The end-to-end executables left unbuilt above each register a placeholder test,
 # <target>_NOT_BUILT, without a label: -E leaves them out. So are the two bouncing-ball runs of
 # the time-stepped generator on 257² nodes, which measure its order: the same code runs
 # sanitized on the 1-D and 3-D models of TheTimeSteppedGeneratorOnCyclesWallsAndSwitches and in
 # tests/rt/test_generator.cpp.)
-HYBGEN_RANDOM_MODELS=20 ctest --preset asan --output-on-failure -LE e2e \
+HYBGEN_RANDOM_MODELS=20 HYBGEN_DIFFERENTIAL_MODELS=2 ctest --preset asan --output-on-failure -LE e2e \
   -E '_NOT_BUILT$|TheTimeSteppedGeneratorOnTheBall|TheTimeSteppedGeneratorSaysHowFarOff'
 ctest --preset asan --output-on-failure --no-tests=error -L e2e -R \
   "^(Cli\.RunEveryShippedModelOnASmallGrid|Cli\.BouncingBallPaperConfigurationMatchesClosedForm|NothingLost\.OutputsOfARunKilledMidSwapAreRestored|NumericalFailure\.NonFiniteFlowAndDivergence|LieCli\.RunHeisenbergOnATinyGrid)$"

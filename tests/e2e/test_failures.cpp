@@ -144,6 +144,36 @@ TEST(NumericalFailure, ResetOutsideTheSupport) {
                   "mode 'flight': Delta = (x = -0.5, p = 2)"});
 }
 
+TEST(NumericalFailure, TwoGuardsOfOneModeThatFireAtTheSameStates) {
+  // 2x + 2 = 0 decreasing and −x − 1 = 0 increasing are the line x = −1 crossed leftwards:
+  // every crossing fires both, so neither reset is the model's. The first edge crossing in C
+  // order (x slowest) is on the first node row y = 0.
+  expect_failure("guards_overlap",
+                 {"pre-flight scan of guard 'left' at t = 0: two guards of one mode fire at the "
+                  "same state at the point (x = -1, y = 0) of its surface in mode 'drift': guard "
+                  "'also_left' fires there too, so the model does not say which reset applies",
+                  "give the guards surfaces that do not overlap, or make them one guard"});
+  // In 1-D the guard is that point: the whole guard overlaps.
+  expect_failure("guards_overlap_1d", {"two guards of one mode fire at the same state at the "
+                                       "point (x = -1) of its surface in mode 'drift': guard "
+                                       "'also_left' fires there too"});
+  // By every method: the forward ones would take one guard, the characteristics both.
+  expect_failure("guards_overlap", {"guard 'also_left' fires there too"}, "--set method=particles");
+}
+
+TEST(NumericalFailure, GuardsThatMeetAtACornerAreANote) {
+  // x = 0 and y = 0 both fire at (0, 0) only: measure zero on each wall, so a warning.
+  const fs::path out = fresh_out("corner_walls");
+  const Result r =
+      hybgen("run tests/data/corner_walls.model --set outputs=npy --out '" + out.string() + "'");
+  EXPECT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  EXPECT_NE(r.out.find("two guards of one mode fire at the same state at the point (x = 0, y = "
+                       "0)"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("at an isolated point only"), std::string::npos) << r.out;
+}
+
 TEST(NumericalFailure, ResetBackOnItsGuard) {
   // p ↦ −p/2 − 1/2 keeps p < 0 for p > −1. The ground nodes are p_j = −2 + 4j/19; the first
   // one above −1 is p_5 = −18/19, sent to −1/38, still moving down through x = 0.

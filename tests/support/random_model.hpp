@@ -403,11 +403,37 @@ struct RandomModel {
 
 namespace detail {
 
-/// The generator behind random_model (one object per model).
-class ModelGenerator {
+/// The random draws of the model generators (random_model, random_run_model.hpp): no std
+/// distributions, whose output is implementation-defined, so a seed gives the same model on
+/// every platform.
+class RandomDraws {
  public:
   /// Seed the engine.
-  explicit ModelGenerator(std::uint64_t seed) : rng_(seed) { m_.seed = seed; }
+  explicit RandomDraws(std::uint64_t seed) : rng_(seed) {}
+
+ protected:
+  /// Uniform in [0, 1).
+  double uniform() { return static_cast<double>(rng_() >> 11) * 0x1p-53; }
+  /// True with probability p.
+  bool chance(double p) { return uniform() < p; }
+  /// An integer in [lo, hi].
+  int integer(int lo, int hi) {
+    return lo + static_cast<int>(rng_() % static_cast<std::uint64_t>(hi - lo + 1));
+  }
+  /// A decimal ±[lo, hi]·10^(−decimals) in units, sign random.
+  Tree signed_decimal(int lo_units, int hi_units, int decimals) {
+    const long long u = integer(lo_units, hi_units);
+    return constant(chance(0.5) ? -u : u, decimals);
+  }
+
+  std::mt19937_64 rng_;  ///< The engine.
+};
+
+/// The generator behind random_model (one object per model).
+class ModelGenerator : RandomDraws {
+ public:
+  /// Seed the engine.
+  explicit ModelGenerator(std::uint64_t seed) : RandomDraws(seed) { m_.seed = seed; }
 
   /// Draw the whole model and print its text.
   RandomModel run() {
@@ -441,17 +467,6 @@ class ModelGenerator {
   }
 
  private:
-  // ---- random numbers (no std distributions: their output is implementation-defined)
-  double uniform() { return static_cast<double>(rng_() >> 11) * 0x1p-53; }
-  bool chance(double p) { return uniform() < p; }
-  int integer(int lo, int hi) {
-    return lo + static_cast<int>(rng_() % static_cast<std::uint64_t>(hi - lo + 1));
-  }
-  /// A decimal ±[lo, hi]·10^(−decimals) in units, sign random.
-  Tree signed_decimal(int lo_units, int hi_units, int decimals) {
-    const long long u = integer(lo_units, hi_units);
-    return constant(chance(0.5) ? -u : u, decimals);
-  }
   void add_parameter(const std::string& name, long long units, int decimals) {
     const Tree c = constant(units, decimals);
     m_.params.push_back({name, c->text, c->value});
@@ -813,7 +828,6 @@ class ModelGenerator {
     return s;
   }
 
-  std::mt19937_64 rng_;
   RandomModel m_;
   int n_ = 1;
   int base_params_ = 0;

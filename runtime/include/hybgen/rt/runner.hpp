@@ -266,6 +266,11 @@ std::optional<int> preflight_run(RunPlan<state_dim_v<M>>& p) {
                    "computed region and is counted as outflow; to follow it, widen the "
                    "domain, or exclude by a `support` line the states no reset reaches\n",
                    warning_prefix(p.config).c_str(), describe_preflight<M>(note).c_str());
+    else if (note.error == PreflightError::guards_overlap)
+      std::fprintf(stderr,
+                   "%s%s, at an isolated point only (a corner where the two surfaces meet: "
+                   "measure zero, no mass is there); the run goes on\n",
+                   warning_prefix(p.config).c_str(), describe_preflight<M>(note).c_str());
     else
       std::fprintf(stderr,
                    "%s%s, at an isolated point only (measure zero: no mass is there); the scan "
@@ -275,7 +280,10 @@ std::optional<int> preflight_run(RunPlan<state_dim_v<M>>& p) {
   }
   if (!pf.ok()) {
     if (backend.root())
-      std::fprintf(stderr, "hybgen: numerical failure: %s\n", describe_preflight<M>(pf).c_str());
+      std::fprintf(stderr, "hybgen: numerical failure: %s%s\n", describe_preflight<M>(pf).c_str(),
+                   pf.error == PreflightError::guards_overlap
+                       ? "; give the guards surfaces that do not overlap, or make them one guard"
+                       : "");
     return exit_status(ExitCode::Numerical);
   }
   if (!p.config.preflight_only) return std::nullopt;
@@ -286,7 +294,7 @@ std::optional<int> preflight_run(RunPlan<state_dim_v<M>>& p) {
                 std::string(p.method->name).c_str(), p.grid.size(), M::n_guard);
     if (enumerated > 0)
       std::printf(", %zu with several pre-images (enumerated by the characteristics)", enumerated);
-    if (retriggers > 0) std::printf(", %zu isolated re-trigger point(s)", retriggers);
+    if (retriggers > 0) std::printf(", %zu isolated re-trigger or overlap point(s)", retriggers);
     if (outside > 0) std::printf(", %zu resetting mass out of the box", outside);
     std::printf("\n");
   }

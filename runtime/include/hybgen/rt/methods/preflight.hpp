@@ -19,6 +19,10 @@
 ///       - Δ(x*) is not on a guard h of the target mode that fires there at once
 ///         (|s_h(Δx*)| ≤ surface_tol·|∇s_h|·diam and sign(∇s_h·X_to(Δx*)) = direction_h:
 ///         an instantaneous re-trigger, the paper's H.5);
+///       - no other guard h of the same mode fires at x* (|s_h(x*)| ≤ surface_tol·|∇s_h|·diam and
+///         sign(∇s_h·X_from(x*)) = direction_h): the model would not say which reset applies,
+///         and each would carry the whole flux (the characteristics would sum both images and
+///         create mass; the forward methods would take the first guard);
 ///       - J_g(x*) is finite and ≠ 0;
 ///       - for a numeric inverse (Newton) and the backward characteristics (`backward`), Newton
 ///         from Δ(x*) — started at Δ(x*) itself, as the characteristics do — converges, and
@@ -69,6 +73,7 @@ enum class PreflightError {
   reset_outside_support,  ///< Δ(x*) outside `in_support`.
   reset_outside_box,      ///< Δ(x*) outside the grid box: a note, never a failure.
   reset_retriggers,       ///< Δ(x*) on a guard of the target mode that fires at once.
+  guards_overlap,         ///< Another guard of the same mode fires at x* too.
   zero_jacobian,          ///< J(x*) = 0 or not finite.
   inverse_failed,         ///< Newton for Δ⁻¹ at Δ(x*) did not converge.
   grazing,                ///< The flow is tangent to the guard where the orbit crosses it.
@@ -97,6 +102,8 @@ inline const char* preflight_error_name(PreflightError e) {
       return "the reset carries mass out of the domain (the grid box)";
     case PreflightError::reset_retriggers:
       return "the reset lands on a guard that fires again at once (instantaneous re-trigger)";
+    case PreflightError::guards_overlap:
+      return "two guards of one mode fire at the same state";
     case PreflightError::zero_jacobian:
       return "zero or non-finite hybrid Jacobian";
     case PreflightError::inverse_failed:
@@ -138,9 +145,9 @@ struct PreflightOptions {
 template <std::size_t N>
 struct PreflightFailure {
   PreflightError error = PreflightError::none;  ///< What.
-  int mode = -1;                  ///< Mode of the node (density) or source mode (guards).
-  int guard = -1;                 ///< Guard scanned, or −1 for the density.
-  int other_guard = -1;           ///< The re-triggered guard (reset_retriggers), else −1.
+  int mode = -1;         ///< Mode of the node (density) or source mode (guards).
+  int guard = -1;        ///< Guard scanned, or −1 for the density.
+  int other_guard = -1;  ///< The re-triggered (reset_retriggers) or overlapping guard, else −1.
   std::array<double, N> state{};  ///< The grid node or the crossing point x*.
   std::array<double, N> image{};  ///< Δ(x*) (reset errors), else unused.
   std::array<double, N> other{};  ///< The second pre-image (several_preimages), else unused.
@@ -236,6 +243,19 @@ PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, 
                                   [diam](double speed) { return 1e-3 * diam / speed; });
   if (ratio >= 0.0) return fail(PreflightError::grazing, ratio);
   if (!(rate * gi.direction > 0.0)) return f;  // the guard does not fire here
+  for (std::size_t h = 0; h < static_cast<std::size_t>(M::n_guard); ++h) {
+    const GuardInfo other = guard_info<M>(h);
+    const int hh = static_cast<int>(h);
+    if (hh == g || other.from != gi.from) continue;
+    std::array<double, N> gh{};
+    M::guard_gradient(hh, x.data(), par, gh.data());
+    const double ghn = std::sqrt(dot<N>(gh.data(), gh.data()));
+    if (!(std::fabs(M::guard_surface(hh, x.data(), par)) <= opt.surface_tol * ghn * diam)) continue;
+    if (dot<N>(gh.data(), X.data()) * other.direction > 0.0) {
+      f.other_guard = hh;
+      return fail(PreflightError::guards_overlap, 0.0);
+    }
+  }
   std::array<double, N> y{};
   M::reset(g, x.data(), par, y.data());
   f.image = y;
@@ -307,7 +327,9 @@ PreflightFailure<state_dim_v<M>> check_initial_density(const TensorGrid<state_di
 /// one — a corner where two guards' surfaces meet, as in a water-tank model at (r1, r2) — the
 /// set has measure zero on S_g: no mass is there, the point is excluded, and the re-trigger is
 /// a note in `notes` (the runner prints it as a warning) instead of the failure. A re-trigger
-/// on a stretch of S_g (several cells apart) stays the failure.
+/// on a stretch of S_g (several cells apart) stays the failure. So do overlapping guards
+/// (`guards_overlap`): two surfaces that meet at a corner pass with a note, two that coincide
+/// along a stretch (or at the point that a 1-D guard is) fail.
 ///
 /// Resets out of the box: a crossing whose reset lands outside the grid box passes (its mass
 /// is outflow); the first such crossing (smallest index) is a note in `notes`.
@@ -329,7 +351,7 @@ PreflightFailure<state_dim_v<M>> check_guard(
   };
   // A failure at edge/node index i: re-triggers are held back (see above).
   auto offer = [&](detail::FirstFailure<N>& first, std::size_t i, const PreflightFailure<N>& f) {
-    if (f.error == PreflightError::reset_retriggers) {
+    if (f.error == PreflightError::reset_retriggers || f.error == PreflightError::guards_overlap) {
 #pragma omp critical(hybgen_rt_preflight_retriggers)
       retriggers.emplace_back(i, f);
       return;
@@ -415,7 +437,9 @@ PreflightFailure<state_dim_v<M>> check_guard(
       if (!f.ok()) {
         f.node = i;
         offer(first, i, f);
-        if (f.error != PreflightError::reset_retriggers) break;
+        if (f.error != PreflightError::reset_retriggers &&
+            f.error != PreflightError::guards_overlap)
+          break;
         continue;
       }
       if (crossings != nullptr) {
@@ -436,7 +460,9 @@ PreflightFailure<state_dim_v<M>> check_guard(
   for (const auto& [i, f] : retriggers) {
     double d = 0.0;
     for (std::size_t a = 0; a < N; ++a) d = std::max(d, std::fabs(f.state[a] - r0.state[a]));
-    isolated = isolated && d <= kIsolatedCells * h;
+    // (In 1-D a guard is a point: two guards firing there overlap on the whole guard.)
+    isolated = isolated && d <= kIsolatedCells * h &&
+               (N >= 2 || f.error != PreflightError::guards_overlap);
   }
   if (!isolated) {
     if (first.wanted(retriggers.front().first)) return r0;
@@ -637,6 +663,11 @@ std::string describe_preflight(const PreflightFailure<state_dim_v<M>>& f) {
          << " points of the guard misses, so the characteristics method cannot sum over all "
             "pre-images; use method="
          << forward_methods() << " (they push mass forward and need no inverse)";
+      break;
+    case PreflightError::guards_overlap:
+      os << ": guard '" << guard_name<M>(f.other_guard)
+         << "' fires there too, so the model does not say which reset applies there (each "
+            "would carry the whole flux)";
       break;
     case PreflightError::reset_retriggers: {
       const auto to = detail::guard_info<M>(static_cast<std::size_t>(f.guard)).to;
