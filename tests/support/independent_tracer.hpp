@@ -70,6 +70,52 @@ class IndependentTracer {
     return trace(mode, z, t, 0, flags);
   }
 
+  /// Where the state (mode, x) is after time t FORWARD: the hybrid flow itself (RK4 at 200
+  /// steps per unit time; a guard of the current mode crossed its way fires: the state jumps
+  /// to Δ(x*) in the target mode). Returns false if the state leaves the support (its mass
+  /// leaves the state space) or meets more than 1000 resets. For the budget's independent
+  /// check (test_differential.cpp: the mass in the box by Monte Carlo), which needs neither
+  /// Δ⁻¹ nor J.
+  bool push(int& mode, std::vector<double>& x, double t) const {
+    if (!in_support(x)) return false;
+    const int steps = std::max(4, static_cast<int>(std::ceil(t * 200)));
+    const double h = t / steps;
+    double tau = 0;
+    int resets = 0;
+    while (t - tau > 1e-12 * t) {
+      const double hs = std::min(h, t - tau);
+      const State s1 = rk4(mode, State{x, 0.0}, -hs);  // rk4 integrates −X: a step of −hs
+      // The first guard of this mode that the step crosses its way, by bisection.
+      double first = 2 * hs;
+      std::size_t which = 0;
+      for (std::size_t g = 0; g < r_.model.guards.size(); ++g) {
+        if (guard(g).from != mode) continue;
+        const Tree& sf = guard(g).surface;
+        const double a = evaluate(sf, x, p_), b = evaluate(sf, s1.z, p_);
+        if ((a < 0) == (b < 0)) continue;
+        double lo = 0, hi = hs;
+        for (int it = 0; it < 60; ++it) {
+          const double mid = 0.5 * (lo + hi);
+          ((evaluate(sf, rk4(mode, State{x, 0.0}, -mid).z, p_) < 0) == (a < 0) ? lo : hi) = mid;
+        }
+        const Vec at = rk4(mode, State{x, 0.0}, -hi).z;
+        TraceFlags ignore;
+        if (hi < first && fires(g, mode, at, ignore)) first = hi, which = g;
+      }
+      if (first > hs) {
+        x = s1.z;
+        tau += hs;
+      } else {
+        if (++resets > 1000) return false;
+        x = reset(which, rk4(mode, State{x, 0.0}, -first).z);
+        mode = guard(which).to;
+        tau += first;
+      }
+      if (!in_support(x)) return false;
+    }
+    return true;
+  }
+
   /// Whether z is in the state space (the support, ≥ 0).
   bool in_support(const std::vector<double>& z) const {
     return !r_.support || evaluate(r_.support, z, p_) >= 0.0;

@@ -31,6 +31,8 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <numbers>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -87,8 +89,76 @@ std::string first_error_line(const std::string& text) {
   return "";
 }
 
-/// Run model `seed` through hybgen and compare every decidable node with the tracer.
-Outcome check_model(std::uint64_t seed) {
+/// The budget's mass in the box at each output time against Monte Carlo of the forward flow
+/// (IndependentTracer::push: no Δ⁻¹, no J, no cubature): u0 = exp(−Σ k_i (x_i − c_i)²) is
+/// Z times the normal density N(c, 1/(2k)), Z = Π √(π/k_i), so the mass in the box at t is
+/// Z·P(φ_t(x0) in the box) over x0 ~ N(c, 1/(2k)) in the support (the initial mode by the
+/// `where` split), with standard deviation Z·√(p(1 − p)/n). hybgen's `initial_mass` and
+/// `mass` must lie within 5 of those plus 3 of its own mass errors; returns the
+/// disagreements and appends a summary to `line`.
+int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const nlohmann::json& s,
+               std::string& line) {
+  const auto& m = r.model;
+  const std::size_t n = m.states.size();
+  const int samples = 20000;
+  double Z = 1;
+  for (double k : r.rate) Z *= std::sqrt(std::numbers::pi / k);
+  std::mt19937_64 rng(m.seed + 7);
+  auto uniform = [&rng] { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1p-53; };
+  const std::size_t frames = s["times"].size();
+  std::vector<long> inside(frames, 0);
+  for (int j = 0; j < samples; ++j) {
+    std::vector<double> x(n);
+    for (std::size_t i = 0; i < n; ++i) {  // Box–Muller
+      const double g =
+          std::sqrt(-2 * std::log(uniform())) * std::cos(2 * std::numbers::pi * uniform());
+      x[i] = r.centre[i] + g / std::sqrt(2 * r.rate[i]);
+    }
+    if (!tracer.in_support(x)) continue;
+    int mode = 0;
+    if (r.where) mode = hybgen::testing::evaluate(r.where, x, m.parameter_values()) > 0 ? 0 : 1;
+    double t = 0;
+    for (std::size_t k = 0; k < frames; ++k) {
+      const double tk = s["times"][k].get<double>();
+      if (tk > t && !tracer.push(mode, x, tk - t)) break;
+      t = tk;
+      bool in = true;
+      for (std::size_t i = 0; i < n; ++i) in = in && x[i] >= m.lo[i] && x[i] <= m.hi[i];
+      inside[k] += in ? 1 : 0;
+    }
+  }
+  int bad = 0;
+  double worst = 0;  // the largest |difference| / bound
+  for (std::size_t k = 0; k < frames; ++k) {
+    const double p = static_cast<double>(inside[k]) / samples;
+    const double mc = Z * p, sd = Z * std::sqrt(p * (1 - p) / samples);
+    const double h = k == 0 ? s["initial_mass"].get<double>() : s["mass"][k].get<double>();
+    const double herr = s["budget"]["mass_error"][k].get<double>();
+    const double bound = 5 * sd + 3 * herr + 1e-12;
+    worst = std::max(worst, std::fabs(h - mc) / bound);
+    if (!(std::fabs(h - mc) <= bound)) {
+      ++bad;
+      std::printf(
+          "\n  disagreement: the mass in the box at t = %g is %.6g +/- %.2g by hybgen's "
+          "budget, %.6g +/- %.2g by Monte Carlo of the forward flow",
+          s["times"][k].get<double>(), h, herr, mc, sd);
+    }
+  }
+  char b[160];
+  std::snprintf(b, sizeof b, ", masses within %.2f of their bound", worst);
+  line += b;
+  return bad;
+}
+
+/// Trapezoid weight of index i of n nodes (the spacing cancels in a relative norm).
+double trapezoid(int n, int i) {
+  return i == 0 || i == n - 1 ? 0.5 : 1.0;
+}
+
+/// Run model `seed` through hybgen by `method` and compare every decidable node with the
+/// tracer: characteristics node by node (see the file comment); transfer by its relative L1
+/// error per frame (max over modes, as its estimate), which its estimate must cover.
+Outcome check_model(std::uint64_t seed, const std::string& method) {
   const auto t0 = std::chrono::steady_clock::now();
   const RandomRunModel r = hybgen::testing::random_run_model(seed);
   const auto& m = r.model;
@@ -97,7 +167,7 @@ Outcome check_model(std::uint64_t seed) {
   const fs::path out = kWork / "runs" / name;
   fs::remove_all(out);
   const auto res = hybgen_cli("run '" + path + "' --quiet --out '" + out.string() +
-                                  "' --set method=characteristics --set outputs=npy",
+                                  "' --set method=" + method + " --set outputs=npy",
                               "timeout 600 env");
   std::string kinds;
   for (const auto k : r.kinds) kinds += std::string(kinds.empty() ? "" : "+") + kind_name(k);
@@ -133,8 +203,12 @@ Outcome check_model(std::uint64_t seed) {
   long compared = 0, unsure = 0, resets = 0;
   std::map<std::string, long> why;  // the tracer's reasons for leaving nodes out
   double worst = 0;
+  const bool transfer = method == "transfer";
+  std::string errors;  // transfer: per frame, the true relative L1 error and the estimate
   for (std::size_t k = 0; k < s["times"].size(); ++k) {
     const double t = s["times"][k].get<double>();
+    double frame_error = 0;  // transfer: max over modes of the relative L1 error
+    std::string by_mode;     // transfer: each mode's
     for (std::size_t mode = 0; mode < m.modes.size(); ++mode) {
       char frame[96];
       if (m.modes.size() == 1)
@@ -166,6 +240,27 @@ Outcome check_model(std::uint64_t seed) {
         if (f.unsure) ++why[f.why];
         if (!f.unsure) scale = std::max(scale, std::fabs(ur[node]));
       }
+      if (transfer) {
+        double num = 0, den = 0;
+        for (std::size_t node = 0; node < total; ++node) {
+          if (skip[node]) continue;
+          std::size_t rem = node;
+          double w = 1;
+          for (std::size_t a = n; a-- > 0;) {
+            const int i = static_cast<int>(rem % static_cast<std::size_t>(r.grid[a]));
+            rem /= static_cast<std::size_t>(r.grid[a]);
+            w *= trapezoid(r.grid[a], i);
+          }
+          num += w * std::fabs(uh[node] - ur[node]);
+          den += w * std::fabs(ur[node]);
+        }
+        frame_error = std::max(frame_error, den > 0 ? num / den : num);
+        char b[96];
+        std::snprintf(b, sizeof b, "%s%s %.2e", mode == 0 ? "" : ", ", m.modes[mode].name.c_str(),
+                      den > 0 ? num / den : num);
+        by_mode += b;
+        continue;
+      }
       int shown = 0;
       for (std::size_t node = 0; node < total; ++node) {
         if (skip[node]) {
@@ -195,17 +290,41 @@ Outcome check_model(std::uint64_t seed) {
         }
       }
     }
+    if (transfer && k > 0) {
+      const nlohmann::json& tr = s["transfer"];
+      const double est = tr["errors"][k].get<double>();
+      const bool reliable = tr["errors_reliable"][k].get<bool>();
+      char b[128];
+      std::snprintf(b, sizeof b, "%st = %g: %.2e est %.2e%s", errors.empty() ? "" : "; ", t,
+                    frame_error, est, reliable ? "" : " (unreliable)");
+      errors += b + (m.modes.size() > 1 ? " [" + by_mode + "]" : std::string());
+      worst = std::max(worst, frame_error);
+      if (reliable && !(est >= frame_error)) {
+        ++o.disagreements;
+        std::printf("\n  disagreement: at t = %g the estimate %.3e does not cover the error %.3e",
+                    t, est, frame_error);
+      }
+    }
   }
+  std::string mass_line;
+  if (!transfer) o.disagreements += check_mass(r, tracer, s, mass_line);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (o.disagreements > 0) std::printf("\n  (%s)\n  ", path.c_str());
   std::string reasons;
   for (const auto& [reason, count] : why)
     reasons += (reasons.empty() ? " (" : "; ") + std::to_string(count) + ": " + reason;
   if (!reasons.empty()) reasons += ")";
+  if (transfer) {
+    std::printf("transfer (%s): relative L1 error %s, %d disagreements, %.1f s\n",
+                s["transfer"]["scheme"].get<std::string>().c_str(), errors.c_str(), o.disagreements,
+                secs);
+    std::fflush(stdout);
+    return o;
+  }
   std::printf(
       "%ld nodes compared, %ld left out%s, %ld resets crossed, largest difference "
-      "%.1e of the frame's maximum, %d disagreements, %.1f s\n",
-      compared, unsure, reasons.c_str(), resets, worst, o.disagreements, secs);
+      "%.1e of the frame's maximum%s, %d disagreements, %.1f s\n",
+      compared, unsure, reasons.c_str(), resets, worst, mass_line.c_str(), o.disagreements, secs);
   std::fflush(stdout);
   return o;
 }
@@ -213,10 +332,14 @@ Outcome check_model(std::uint64_t seed) {
 TEST(Differential, RandomModelsAgreeWithAnIndependentTracer) {
   const long count = env_or("HYBGEN_DIFFERENTIAL_MODELS", 16);
   const long first = env_or("HYBGEN_DIFFERENTIAL_SEED", 1);
+  const char* method_env = std::getenv("HYBGEN_DIFFERENTIAL_METHOD");
+  const std::string method =
+      method_env != nullptr && *method_env != '\0' ? method_env : "characteristics";
+  ASSERT_TRUE(method == "characteristics" || method == "transfer") << method;
   ASSERT_GE(count, 1);
   long bad = 0, refused = 0;
   for (long i = 0; i < count; ++i) {
-    const Outcome o = check_model(static_cast<std::uint64_t>(first + i));
+    const Outcome o = check_model(static_cast<std::uint64_t>(first + i), method);
     bad += o.disagreements > 0 ? 1 : 0;
     refused += o.refused ? 1 : 0;
   }
