@@ -28,6 +28,11 @@
 /// lines, in the mode whose region holds the point (`initial` names no mode:
 /// docs/model-language.md).
 ///
+/// With `box` set the tracer follows the FORWARD methods' semantics instead (transfer,
+/// particles: docs/model-language.md, "support and where"): the grid box is the computed
+/// region, mass that leaves it is gone, none enters it, and u0 is 0 outside it — a history
+/// that leaves the box backward ends there, and a pre-image outside it starts no branch.
+///
 /// The tracer says when it cannot decide (TraceFlags::unsure): an event within 1e-7 of either
 /// end of a trace (the node sits on a jump of u), a crossing at which the flow is nearly
 /// tangent to the surface (|∇s·X| < 1e-3 |∇s||X|: a root that either code may miss or
@@ -61,12 +66,15 @@ struct TraceFlags {
 class IndependentTracer {
  public:
   /// The tracer of `r` (kept by reference: it must outlive the tracer).
-  explicit IndependentTracer(const RandomRunModel& r)
-      : r_(r), p_(r.model.parameter_values()), n_(static_cast<int>(r.model.states.size())) {}
+  explicit IndependentTracer(const RandomRunModel& r, bool box = false)
+      : r_(r),
+        p_(r.model.parameter_values()),
+        n_(static_cast<int>(r.model.states.size())),
+        box_(box) {}
 
   /// u(t, z) in `mode` (0 outside the support).
   double density(int mode, const std::vector<double>& z, double t, TraceFlags& flags) const {
-    if (!in_support(z)) return 0.0;
+    if (!in_state_space(z)) return 0.0;
     return trace(mode, z, t, 0, flags);
   }
 
@@ -116,6 +124,15 @@ class IndependentTracer {
     return true;
   }
 
+  /// Whether z is where histories live: the support, and with `box` the grid box too.
+  bool in_state_space(const std::vector<double>& z) const {
+    if (!in_support(z)) return false;
+    if (!box_) return true;
+    for (int a = 0; a < n_; ++a)
+      if (z[a] < r_.model.lo[a] || z[a] > r_.model.hi[a]) return false;
+    return true;
+  }
+
   /// Whether z is in the state space (the support, ≥ 0).
   bool in_support(const std::vector<double>& z) const {
     return !r_.support || evaluate(r_.support, z, p_) >= 0.0;
@@ -133,9 +150,12 @@ class IndependentTracer {
   }
   /// ∂t/∂x_j at z (dual numbers: exact up to rounding).
   double partial(const Tree& t, const Vec& z, int j) const {
-    std::vector<Dual<double>> x, p;
-    for (int i = 0; i < n_; ++i) x.push_back({z[i], i == j ? 1.0 : 0.0});
-    for (double v : p_) p.push_back({v, 0.0});
+    // Scratch vectors kept between calls: the tracer evaluates millions of partials.
+    thread_local std::vector<Dual<double>> x, p;
+    x.resize(static_cast<std::size_t>(n_));
+    p.resize(p_.size());
+    for (int i = 0; i < n_; ++i) x[i] = {z[i], i == j ? 1.0 : 0.0};
+    for (std::size_t i = 0; i < p_.size(); ++i) p[i] = {p_[i], 0.0};
     return evaluate(t, x, p).d;
   }
   double divergence(int m, const Vec& z) const {
@@ -288,7 +308,8 @@ class IndependentTracer {
   struct Event {
     std::size_t guard;     ///< The guard.
     bool image;            ///< true: its reset's image (g into m); false: the guard (g out of m).
-    bool support = false;  ///< The support's function instead (guard and image unused).
+    bool support = false;  ///< The support's function, or a face, instead of a guard.
+    int face = -1;         ///< With `box` and `support`: face 2a (x_a = lo) or 2a + 1 (hi).
   };
   std::vector<Event> events_of(int m) const {
     std::vector<Event> ev;
@@ -297,11 +318,17 @@ class IndependentTracer {
       if (guard(g).from == m) ev.push_back({g, false});
     }
     if (r_.support) ev.push_back({0, false, true});
+    if (box_)
+      for (int f = 0; f < 2 * n_; ++f) ev.push_back({0, false, true, f});
     return ev;
   }
   /// The event's function at z (NaN where an inverse fails); `y` is the warm start of the
   /// image's inverse (updated).
   double value(const Event& e, const Vec& z, Vec& y) const {
+    if (e.support && e.face >= 0) {
+      const int a = e.face / 2;
+      return e.face % 2 == 0 ? z[a] - r_.model.lo[a] : r_.model.hi[a] - z[a];
+    }
     if (e.support) return evaluate(r_.support, z, p_);
     const Tree& s = guard(e.guard).surface;
     if (!e.image) return evaluate(s, z, p_);
@@ -377,7 +404,7 @@ class IndependentTracer {
               flags.doubt("a reset's inverse did not converge");
               continue;
             }
-            if (!fires(g, guard(g).from, y, flags) || !in_support(y)) continue;
+            if (!fires(g, guard(g).from, y, flags) || !in_state_space(y)) continue;
             const double J = jump(g, y);
             if (!(std::fabs(J) > 1e-9) || !std::isfinite(J)) {
               flags.doubt("a reset whose J vanishes");
@@ -416,6 +443,7 @@ class IndependentTracer {
   const RandomRunModel& r_;
   Vec p_;
   int n_;
+  bool box_;  ///< The forward methods' semantics (see the file comment).
 };
 
 }  // namespace hybgen::testing
