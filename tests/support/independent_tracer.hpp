@@ -28,10 +28,11 @@
 /// lines, in the mode whose region holds the point (`initial` names no mode:
 /// docs/model-language.md).
 ///
-/// With `box` set the tracer follows the FORWARD methods' semantics instead (transfer,
-/// particles: docs/model-language.md, "support and where"): the grid box is the computed
-/// region, mass that leaves it is gone, none enters it, and u0 is 0 outside it — a history
-/// that leaves the box backward ends there, and a pre-image outside it starts no branch.
+/// With `box` set the tracer follows the FORWARD methods' initial density instead (transfer
+/// and particles start from u0 on the grid box's nodes): u0 is 0 outside the box. The flow
+/// stays the whole space's — a particle that leaves the box and comes back is counted again,
+/// and so is a transfer sample within one step (mass outside the box at a step's end is lost
+/// to transfer: a step error, not a different model).
 ///
 /// The tracer says when it cannot decide (TraceFlags::unsure): an event within 1e-7 of either
 /// end of a trace (the node sits on a jump of u), a crossing at which the flow is nearly
@@ -74,7 +75,7 @@ class IndependentTracer {
 
   /// u(t, z) in `mode` (0 outside the support).
   double density(int mode, const std::vector<double>& z, double t, TraceFlags& flags) const {
-    if (!in_state_space(z)) return 0.0;
+    if (!in_support(z)) return 0.0;
     return trace(mode, z, t, 0, flags);
   }
 
@@ -124,10 +125,8 @@ class IndependentTracer {
     return true;
   }
 
-  /// Whether z is where histories live: the support, and with `box` the grid box too.
-  bool in_state_space(const std::vector<double>& z) const {
-    if (!in_support(z)) return false;
-    if (!box_) return true;
+  /// Whether z is in the grid box.
+  bool in_box(const std::vector<double>& z) const {
     for (int a = 0; a < n_; ++a)
       if (z[a] < r_.model.lo[a] || z[a] > r_.model.hi[a]) return false;
     return true;
@@ -308,8 +307,7 @@ class IndependentTracer {
   struct Event {
     std::size_t guard;     ///< The guard.
     bool image;            ///< true: its reset's image (g into m); false: the guard (g out of m).
-    bool support = false;  ///< The support's function, or a face, instead of a guard.
-    int face = -1;         ///< With `box` and `support`: face 2a (x_a = lo) or 2a + 1 (hi).
+    bool support = false;  ///< The support's function instead (guard and image unused).
   };
   std::vector<Event> events_of(int m) const {
     std::vector<Event> ev;
@@ -318,17 +316,11 @@ class IndependentTracer {
       if (guard(g).from == m) ev.push_back({g, false});
     }
     if (r_.support) ev.push_back({0, false, true});
-    if (box_)
-      for (int f = 0; f < 2 * n_; ++f) ev.push_back({0, false, true, f});
     return ev;
   }
   /// The event's function at z (NaN where an inverse fails); `y` is the warm start of the
   /// image's inverse (updated).
   double value(const Event& e, const Vec& z, Vec& y) const {
-    if (e.support && e.face >= 0) {
-      const int a = e.face / 2;
-      return e.face % 2 == 0 ? z[a] - r_.model.lo[a] : r_.model.hi[a] - z[a];
-    }
     if (e.support) return evaluate(r_.support, z, p_);
     const Tree& s = guard(e.guard).surface;
     if (!e.image) return evaluate(s, z, p_);
@@ -404,7 +396,7 @@ class IndependentTracer {
               flags.doubt("a reset's inverse did not converge");
               continue;
             }
-            if (!fires(g, guard(g).from, y, flags) || !in_state_space(y)) continue;
+            if (!fires(g, guard(g).from, y, flags) || !in_support(y)) continue;
             const double J = jump(g, y);
             if (!(std::fabs(J) > 1e-9) || !std::isfinite(J)) {
               flags.doubt("a reset whose J vanishes");
@@ -437,13 +429,14 @@ class IndependentTracer {
       if (std::fabs(w) < 1e-7) flags.doubt("a history that ends on a `where` boundary");
       holds = m == 0 ? w > 0 : w < 0;
     }
+    if (box_ && !in_box(s.z)) holds = false;  // the forward methods' u0 is the box's
     return holds ? u + std::exp(-s.L) * evaluate(r_.initial, s.z, p_) : u;
   }
 
   const RandomRunModel& r_;
   Vec p_;
   int n_;
-  bool box_;  ///< The forward methods' semantics (see the file comment).
+  bool box_;  ///< u0 is the box's (the forward methods': see the file comment).
 };
 
 }  // namespace hybgen::testing

@@ -17,8 +17,8 @@
 // One line per model (seed, states, modes, guards, reset families, nodes compared and left
 // out, resets the tracer crossed, the largest difference), one line per disagreement, and
 // the last line `N models, K disagreements`. HYBGEN_DIFFERENTIAL_METHOD=transfer runs the
-// models by method=transfer instead, against the tracer in the box's semantics (mass that
-// leaves the box is gone, none enters), and holds transfer's error estimate (summary.json
+// models by method=transfer instead, against the tracer with u0 restricted to the box (as the
+// forward methods start), and holds transfer's error estimate (summary.json
 // transfer.errors: per output time, the relative L1 error, max over modes) to the true one,
 // each mode's measured against at least 1e-3 of the whole density's L1 norm: a disagreement
 // is an estimate marked reliable that does not cover it (not part of CI: docs/hardening.md).
@@ -99,8 +99,10 @@ std::string first_error_line(const std::string& text) {
 /// Z times the normal density N(c, 1/(2k)), Z = Π √(π/k_i), so the mass in the box at t is
 /// Z·P(φ_t(x0) in the box) over x0 ~ N(c, 1/(2k)) in the support (the initial mode by the
 /// `where` split), with standard deviation Z·√(p(1 − p)/n). hybgen's `initial_mass` and
-/// `mass` must lie within 5 of those plus 3 of its own mass errors; returns the
-/// disagreements and appends a summary to `line`.
+/// `mass` must lie within 5 of those plus 3 of its own mass errors, or hybgen must have said
+/// that its budget does not close at that time (|defect| > 2·defect_error: a warning, so the
+/// answer is not silent; counted and shown apart). Returns the disagreements and appends a
+/// summary to `line`.
 int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const nlohmann::json& s,
                std::string& line) {
   const auto& m = r.model;
@@ -132,7 +134,7 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
       inside[k] += in ? 1 : 0;
     }
   }
-  int bad = 0;
+  int bad = 0, warned = 0;
   double worst = 0;  // the largest |difference| / bound
   for (std::size_t k = 0; k < frames; ++k) {
     const double p = static_cast<double>(inside[k]) / samples;
@@ -141,7 +143,15 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
     const double herr = s["budget"]["mass_error"][k].get<double>();
     const double bound = 5 * sd + 3 * herr + 1e-12;
     worst = std::max(worst, std::fabs(h - mc) / bound);
-    if (!(std::fabs(h - mc) <= bound)) {
+    const double defect = s["budget"]["defect"][k].get<double>();
+    const double defect_error = s["budget"]["defect_error"][k].get<double>();
+    if (!(std::fabs(h - mc) <= bound) && std::fabs(defect) > 2 * defect_error) {
+      ++warned;
+      std::printf(
+          "\n  (warned: the mass in the box at t = %g is %.6g +/- %.2g by hybgen's budget, "
+          "%.6g +/- %.2g by Monte Carlo, and hybgen said its budget does not close)",
+          s["times"][k].get<double>(), h, herr, mc, sd);
+    } else if (!(std::fabs(h - mc) <= bound)) {
       ++bad;
       std::printf(
           "\n  disagreement: the mass in the box at t = %g is %.6g +/- %.2g by hybgen's "
@@ -149,8 +159,10 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
           s["times"][k].get<double>(), h, herr, mc, sd);
     }
   }
+  if (warned > 0 && bad == 0) std::printf("\n  ");
   char b[160];
-  std::snprintf(b, sizeof b, ", masses within %.2f of their bound", worst);
+  std::snprintf(b, sizeof b, ", masses within %.2f of their bound%s", worst,
+                warned > 0 ? " (beyond it where hybgen warned)" : "");
   line += b;
   return bad;
 }
@@ -202,7 +214,7 @@ Outcome check_model(std::uint64_t seed, const std::string& method) {
   }
   const nlohmann::json s = hybgen::testing::read_json_file(out / "summary.json");
   const bool transfer = method == "transfer";
-  // transfer keeps the box's mass only (none enters it): the tracer follows it there.
+  // transfer starts from u0 on the box's nodes: the tracer's u0 is the box's too.
   const IndependentTracer tracer(r, transfer);
   const std::size_t n = m.states.size();
   std::size_t total = 1;
