@@ -188,21 +188,26 @@ class IndependentTracer {
   static double norm(const Vec& a) { return std::sqrt(dot(a, a)); }
 
   /// Solve A x = b (Gaussian elimination with partial pivoting); false if A is singular.
-  static bool solve(std::vector<Vec> A, Vec b, Vec& x) {
+  /// `det`, if given, receives det A (the pivots' product, signed by the row swaps).
+  static bool solve(std::vector<Vec> A, Vec b, Vec& x, double* det = nullptr) {
     const std::size_t n = b.size();
+    double d = 1;
     for (std::size_t c = 0; c < n; ++c) {
       std::size_t piv = c;
       for (std::size_t r = c + 1; r < n; ++r)
         if (std::fabs(A[r][c]) > std::fabs(A[piv][c])) piv = r;
       if (!(std::fabs(A[piv][c]) > 1e-300)) return false;
+      if (piv != c) d = -d;
       std::swap(A[c], A[piv]);
       std::swap(b[c], b[piv]);
+      d *= A[c][c];
       for (std::size_t r = c + 1; r < n; ++r) {
         const double f = A[r][c] / A[c][c];
         for (std::size_t k = c; k < n; ++k) A[r][k] -= f * A[c][k];
         b[r] -= f * b[c];
       }
     }
+    if (det != nullptr) *det = d;
     x.assign(n, 0.0);
     for (std::size_t c = n; c-- > 0;) {
       double s = b[c];
@@ -246,23 +251,8 @@ class IndependentTracer {
     const std::vector<Vec> D = reset_jacobian(g, y);
     // adj(D) X⁺ = det(D) D⁻¹ X⁺.
     Vec w;
-    if (!solve(D, xp, w)) return std::nan("");
-    double det = 1;
-    {
-      std::vector<Vec> A = D;
-      const std::size_t n = A.size();
-      for (std::size_t c = 0; c < n; ++c) {
-        std::size_t piv = c;
-        for (std::size_t r = c + 1; r < n; ++r)
-          if (std::fabs(A[r][c]) > std::fabs(A[piv][c])) piv = r;
-        if (piv != c) std::swap(A[c], A[piv]), det = -det;
-        det *= A[c][c];
-        for (std::size_t r = c + 1; r < n; ++r) {
-          const double f = A[r][c] / A[c][c];
-          for (std::size_t k = c; k < n; ++k) A[r][k] -= f * A[c][k];
-        }
-      }
-    }
+    double det = 0;
+    if (!solve(D, xp, w, &det)) return std::nan("");
     return det * dot(ds, w) / dot(ds, xm);
   }
 

@@ -42,6 +42,7 @@
 #include <vector>
 
 #include "hybgen/rt/io/npy.hpp"
+#include "support/cycle_closed_forms.hpp"
 #include "support/e2e.hpp"
 #include "support/independent_tracer.hpp"
 #include "support/random_run_model.hpp"
@@ -167,9 +168,23 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
   return bad;
 }
 
-/// Trapezoid weight of index i of n nodes (the spacing cancels in a relative norm).
-double trapezoid(int n, int i) {
-  return i == 0 || i == n - 1 ? 0.5 : 1.0;
+/// The grid indices of node `node` (C order: the last axis fastest).
+std::vector<int> node_indices(const RandomRunModel& r, std::size_t node) {
+  std::vector<int> idx(r.grid.size());
+  for (std::size_t a = r.grid.size(); a-- > 0;) {
+    idx[a] = static_cast<int>(node % static_cast<std::size_t>(r.grid[a]));
+    node /= static_cast<std::size_t>(r.grid[a]);
+  }
+  return idx;
+}
+
+/// The point of node `node`.
+std::vector<double> node_point(const RandomRunModel& r, std::size_t node) {
+  const std::vector<int> idx = node_indices(r, node);
+  std::vector<double> x(idx.size());
+  for (std::size_t a = 0; a < idx.size(); ++a)
+    x[a] = hybgen::testing::grid_node(r.model.lo[a], r.model.hi[a], r.grid[a], idx[a]);
+  return x;
 }
 
 /// Run model `seed` through hybgen by `method` and compare every decidable node with the
@@ -244,16 +259,9 @@ Outcome check_model(std::uint64_t seed, const std::string& method) {
       std::vector<double> ur(total, 0.0);
       std::vector<char> skip(total, 0);
       double scale = 0;
-      std::vector<double> x(n);
       for (std::size_t node = 0; node < total; ++node) {
-        std::size_t rem = node;
-        for (std::size_t a = n; a-- > 0;) {
-          const int i = static_cast<int>(rem % static_cast<std::size_t>(r.grid[a]));
-          rem /= static_cast<std::size_t>(r.grid[a]);
-          x[a] = m.lo[a] + (m.hi[a] - m.lo[a]) * i / (r.grid[a] - 1);
-        }
         TraceFlags f;
-        ur[node] = tracer.density(static_cast<int>(mode), x, t, f);
+        ur[node] = tracer.density(static_cast<int>(mode), node_point(r, node), t, f);
         resets += f.resets;
         skip[node] = f.unsure ? 1 : 0;
         if (f.unsure) ++why[f.why];
@@ -263,13 +271,10 @@ Outcome check_model(std::uint64_t seed, const std::string& method) {
         double num = 0, den = 0;
         for (std::size_t node = 0; node < total; ++node) {
           if (skip[node]) continue;
-          std::size_t rem = node;
+          const std::vector<int> idx = node_indices(r, node);
           double w = 1;
-          for (std::size_t a = n; a-- > 0;) {
-            const int i = static_cast<int>(rem % static_cast<std::size_t>(r.grid[a]));
-            rem /= static_cast<std::size_t>(r.grid[a]);
-            w *= trapezoid(r.grid[a], i);
-          }
+          for (std::size_t a = 0; a < n; ++a)
+            w *= hybgen::testing::trapezoid_weight(r.grid[a], idx[a]);
           num += w * std::fabs(uh[node] - ur[node]);
           den += w * std::fabs(ur[node]);
         }
@@ -289,16 +294,13 @@ Outcome check_model(std::uint64_t seed, const std::string& method) {
         if (d > 1e-6 * scale + 1e-6 * std::fabs(ur[node]) || !std::isfinite(uh[node])) {
           ++o.disagreements;
           if (shown++ < 3) {
-            std::size_t rem = node;
+            const std::vector<double> x = node_point(r, node);
             std::string at;
-            for (std::size_t a = n; a-- > 0;) {
-              const int i = static_cast<int>(rem % static_cast<std::size_t>(r.grid[a]));
-              rem /= static_cast<std::size_t>(r.grid[a]);
+            for (std::size_t a = 0; a < n; ++a) {
               char b[48];
-              std::snprintf(b, sizeof b, "%s=%.6g%s", m.states[a].c_str(),
-                            m.lo[a] + (m.hi[a] - m.lo[a]) * i / (r.grid[a] - 1),
-                            at.empty() ? "" : ", ");
-              at = b + at;
+              std::snprintf(b, sizeof b, "%s%s=%.6g", a == 0 ? "" : ", ", m.states[a].c_str(),
+                            x[a]);
+              at += b;
             }
             std::printf("\n  disagreement: mode %s, t = %g, (%s): hybgen %.10g, tracer %.10g",
                         m.modes[mode].name.c_str(), t, at.c_str(), uh[node], ur[node]);
