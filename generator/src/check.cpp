@@ -12,14 +12,17 @@
 #include "hybgen/gen/check.hpp"
 
 #include "check_internal.hpp"
+#include "lexer.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <set>
+#include <sstream>
 
 #include "hybgen/gen/hash.hpp"
 #include "hybgen/gen/limits.hpp"
+#include "hybgen/gen/parse.hpp"
 #include "hybgen/gen/tex.hpp"
 #include "hybgen/rt/setting_rules.hpp"
 
@@ -237,6 +240,48 @@ bool depends_on_any(const ex& e, const std::vector<ex>& syms) {
   for (const auto& s : syms)
     if (e.has(s)) return true;
   return false;
+}
+
+/// The names of the states and parameters of `m` as its symbols: what an observable may use.
+std::map<std::string, ex> model_scope(const Model& m) {
+  std::map<std::string, ex> scope;
+  for (std::size_t i = 0; i < m.state.size(); ++i) scope[m.state[i]] = m.state_symbols[i];
+  for (const Parameter& p : m.params) scope[p.name] = p.symbol;
+  return scope;
+}
+
+/// `observe NAME = [MODE:] EXPR` of `src` as an Observable of `m` (its modes and symbols):
+/// f = EXPR in MODE, or in every mode without one, and 0 in the others. Throws ModelError,
+/// located: an unknown mode, an expression that does not convert.
+Observable checked_observable(const Model& m, const ObserveDecl& d, const SourceText& src) {
+  Observable o;
+  o.name = d.name.name;
+  o.loc = d.name.loc;
+  const Converter conv(src, model_scope(m), "the observable '" + o.name + "'");
+  const ex f = conv.convert(d.value);
+  std::ostringstream text;
+  text << f;
+  o.text = text.str();
+  std::vector<std::string> names;
+  for (const ModeSpec& md : m.modes) names.push_back(md.name);
+  std::size_t only = m.modes.size();
+  if (d.mode) {
+    const auto it = std::find(names.begin(), names.end(), d.mode->name);
+    if (it == names.end()) {
+      std::string hint = suggestion(d.mode->name, names);
+      if (hint.empty()) {
+        for (const std::string& n : names) hint += (hint.empty() ? " (the modes: " : ", ") + n;
+        hint += ")";
+      }
+      throw src.error(d.mode->loc, "unknown mode '" + d.mode->name + "'" + hint);
+    }
+    only = static_cast<std::size_t>(it - names.begin());
+    o.mode = static_cast<int>(only);
+    o.text = d.mode->name + ": " + o.text;
+  }
+  for (std::size_t k = 0; k < m.modes.size(); ++k)
+    o.per_mode.push_back(d.mode && k != only ? ex(0) : f);
+  return o;
 }
 
 }  // namespace
@@ -612,6 +657,13 @@ struct Checker {
       if (s.initial.empty())
         throw src.error(s.loc,
                         "the simulation block has no initial density (write 'initial EXPR')");
+      for (const ObserveDecl& d : s.observe) {
+        for (const Observable& o : sim.observables)
+          if (o.name == d.name.name)
+            throw src.error(d.name.loc, "observable '" + o.name + "' is given twice (first at " +
+                                            lexing::loc_str(o.loc) + ")");
+        sim.observables.push_back(checked_observable(m, d, src));
+      }
       Converter sconv(src, full_scope, "a 'support' condition");
       for (const auto& r : s.support)
         sim.support.push_back({sconv.convert(r.lhs) - sconv.convert(r.rhs), r.op, r.loc});
@@ -841,6 +893,23 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets) {
       param->value = v;
       continue;
     }
+    if (key.rfind("observe.", 0) == 0) {
+      // The argument itself, its '.' read as a space, is the source of one observe item, so
+      // that an error's column is the argument's (parse.hpp, parse_observe). A name the model
+      // observes already is replaced.
+      std::string text = kv;
+      text[std::string("observe").size()] = ' ';
+      const SourceText arg("--set", text);
+      Observable o = checked_observable(model, parse_observe(arg), arg);
+      auto& list = sim.observables;
+      const auto same = std::find_if(list.begin(), list.end(),
+                                     [&](const Observable& x) { return x.name == o.name; });
+      if (same != list.end())
+        *same = std::move(o);
+      else
+        list.push_back(std::move(o));
+      continue;
+    }
     if (key == "grid") {
       auto g = parse_grid(value);
       if (g.size() != model.state.size())
@@ -873,6 +942,7 @@ void apply_overrides(Model& model, const std::vector<std::string>& sets) {
       for (const auto& s : setting_names()) keys.push_back(s);
       keys.emplace_back("grid");
       for (const auto& st : model.state) keys.push_back("domain." + st);
+      keys.emplace_back("observe.NAME");
       std::string known;
       for (const auto& k : keys) known += (known.empty() ? "" : ", ") + k;
       throw UsageError("--set " + key + ": unknown key" + suggestion(key, keys) +

@@ -356,8 +356,16 @@ class HeaderBuilder {
          << (gd.direction == Direction::Decreasing ? -1 : 1) << ", "
          << (gd.has_inverse ? "true" : "false") << ", " << gd.image_axis << "}";
     }
-    os << "}};\n\n";
-    os << kernels_;
+    os << "}};\n";
+    if (const auto& obs = m_.sim.observables; !obs.empty()) {
+      std::vector<std::string> onames;
+      for (const Observable& o : obs) onames.push_back(o.name);
+      os << "  /// Number of observables (`observe` lines).\n  static constexpr int n_observable = "
+         << obs.size() << ";\n";
+      os << "  /// Observable names.\n  static constexpr std::array<const char*, " << obs.size()
+         << "> observable_names{" << names(onames) << "};\n";
+    }
+    os << "\n" << kernels_;
     os << "};\n\n";
     os << "static_assert(hybgen::rt::HybridModel<" << sname << ">);\n\n";
     os << "}  // namespace hybgen_model\n";
@@ -432,6 +440,17 @@ std::string report_markdown(const HybridSystem& sys, ExprPrinter& pr) {
        << pr.latex(m.params[j].value) << "$";
   os << ".\n\n";
   os << derive_latex(sys) << "\n";
+  if (!m.sim.observables.empty()) {
+    // What the runs report the mean of (runtime/include/hybgen/rt/methods/observables.hpp).
+    os << "## Observables\n\n";
+    for (const Observable& o : m.sim.observables) {
+      const auto k = static_cast<std::size_t>(std::max(o.mode, 0));
+      os << "- `" << o.name << "` $= " << pr.latex(o.per_mode.at(k)) << "$";
+      if (o.mode >= 0) os << " in mode `" << m.modes[k].name << "`, 0 in the others";
+      os << "\n";
+    }
+    os << "\n";
+  }
   if (!sys.warnings.empty()) {
     os << "## Warnings\n\n";
     for (const auto& w : sys.warnings) os << "- " << w.text << "\n";
@@ -468,6 +487,19 @@ GeneratedFiles emit(const HybridSystem& sys) {
   hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian",
                    guards, [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
   hb.density_kernels();
+  if (!m.sim.observables.empty()) {
+    // One case per observable and mode, at index i·n_mode + k (runtime/include/hybgen/rt/
+    // model.hpp, `observable_value`).
+    KernelCases cases{"index", {}};
+    std::vector<ex> values;
+    for (const Observable& o : m.sim.observables)
+      for (std::size_t k = 0; k < sys.modes.size(); ++k) {
+        cases.labels.push_back("observable " + o.name + " in mode " + sys.modes[k].name);
+        values.push_back(o.per_mode[k]);
+      }
+    hb.scalar_kernel("Observable i in mode k at x, at index i * n_mode + k (`observe` lines).",
+                     "observable", cases, [&](std::size_t c) { return values[c]; });
+  }
   GeneratedFiles files;
   files.header_name = m.name + ".hpp";
   files.header = hb.assemble();

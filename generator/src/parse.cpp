@@ -73,6 +73,14 @@ class Parser {
     return ast;
   }
 
+  // The whole text is one observe item (`--set observe.NAME=EXPR`, with the '.' read as a
+  // space): observe_item END.
+  ObserveDecl parse_observe_only() {
+    ObserveDecl d = parse_observe_item();
+    if (tok().kind != Tok::End) unexpected("the end of the observable's expression");
+    return d;
+  }
+
  private:
   // --- Tokens ------------------------------------------------------------
 
@@ -575,21 +583,26 @@ class Parser {
   //           | 'grid' GRID
   //           | 'initial' [ IDENT ':' ] expr
   //           | 'support' relation
+  //           | observe_item
   //           | IDENT ( expr | IDENT )
   void parse_sim_item(SimulationDecl& sim, SourceLoc open) {
     if (tok().kind != Tok::Ident)
-      unexpected("an item of the simulation block (domain, grid, initial, support or a setting)");
+      unexpected(
+          "an item of the simulation block (domain, grid, initial, support, observe or a "
+          "setting)");
     const Token t = tok();
     if (t.text == "domain") return parse_domain(sim);
     if (t.text == "grid") return parse_grid(sim);
     if (t.text == "initial") return parse_initial(sim);
+    if (t.text == "observe") return sim.observe.push_back(parse_observe_item());
     if (t.text == "support") {
       take();
       sim.support.push_back(parse_relation("'support'"));
       return;
     }
     if (is_statement_keyword(t.text))
-      unknown_item(t, "the simulation block", "domain, grid, initial, support or a setting", open);
+      unknown_item(t, "the simulation block",
+                   "domain, grid, initial, support, observe or a setting", open);
     parse_setting(sim);
   }
 
@@ -654,6 +667,20 @@ class Parser {
     }
     initial.density = parse_expr().node;
     sim.initial.push_back(std::move(initial));
+  }
+
+  // observe_item := 'observe' IDENT '=' [ IDENT ':' ] expr
+  ObserveDecl parse_observe_item() {
+    ObserveDecl d;
+    d.loc = take().loc;
+    d.name = expect_name("the observable's name after 'observe'");
+    expect_punct("=", "after 'observe " + d.name.name + "'");
+    if (tok().kind == Tok::Ident && is_punct(peek(1), ":")) {
+      d.mode = expect_name("a mode name");
+      take();
+    }
+    d.value = parse_expr().node;
+    return d;
   }
 
   /// Whether `t` continues an expression after an operand (an operator or '(').
@@ -852,6 +879,10 @@ class Parser {
 
 ModelAst parse(const SourceText& src) {
   return Parser(src).parse_model();
+}
+
+ObserveDecl parse_observe(const SourceText& src) {
+  return Parser(src).parse_observe_only();
 }
 
 }  // namespace hybgen::gen

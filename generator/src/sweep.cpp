@@ -276,6 +276,12 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
     put_number(row, "escape_rate", s[k::escape], "rate");
     put_number(row, "escape_rate_error", s[k::escape], "rate_error");
   }
+  // Each observable's mean at the final time and its error (E_NAME, E_NAME_error).
+  if (s.contains(k::observables) && s[k::observables].is_object())
+    for (const auto& [name, o] : s[k::observables].items()) {
+      put_last(row, "E_" + name, o, "values");
+      put_last(row, "E_" + name + "_error", o, "errors");
+    }
   // The warnings of the run (their texts: the point's summary.json, and stderr with the
   // point's name).
   row["warnings"] = warning_count(s);

@@ -54,6 +54,12 @@ def main():
                 problems.append(f"{name}: strings differ")
             continue
         x, y = np.ma.filled(x, np.nan), np.ma.filled(y, np.nan)
+        # The observables' errors of transfer and invariant come from coarse answers that a
+        # run over ranks does not keep (runtime/include/hybgen/rt/methods/observables.hpp):
+        # NaN there, compared where both runs estimated them.
+        if name.startswith("observable_") and name.endswith("_error") and (
+                np.all(np.isnan(x)) or np.all(np.isnan(y))):
+            continue
         if rtol == 0.0:
             if not np.array_equal(x, y, equal_nan=True):
                 diff = np.nanmax(np.abs(x - y)) if x.size else 0.0

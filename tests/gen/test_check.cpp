@@ -103,6 +103,46 @@ TEST(Check, Overrides) {
   EXPECT_THROW(apply_overrides(m, {"e=1e999"}), UsageError);
 }
 
+// `observe NAME = [MODE:] EXPR`: f in the mode named (0 in the others) or in every mode;
+// `--set observe.NAME=EXPR` adds one or replaces the model's, its errors located in the
+// argument itself.
+TEST(Check, Observables) {
+  const std::string two_modes =
+      "state T\nmode heat { T' = 4 - T }\nmode cool { T' = -T }\n"
+      "guard off { from heat to cool; when T = 2 increasing; reset identity }\n"
+      "simulation {\n  domain T in [0, 3]\n  initial heat: 1\n";
+  Model m = check_text(two_modes + "  observe T2 = T^2\n  observe heating = heat: 1\n}\n");
+  ASSERT_EQ(m.sim.observables.size(), 2U);
+  const GiNaC::ex T = m.state_symbols[0];
+  EXPECT_EQ(m.sim.observables[0].name, "T2");
+  EXPECT_TRUE((m.sim.observables[0].per_mode[0] - T * T).is_zero());
+  EXPECT_TRUE((m.sim.observables[0].per_mode[1] - T * T).is_zero());
+  EXPECT_TRUE((m.sim.observables[1].per_mode[0] - 1).is_zero());
+  EXPECT_TRUE(m.sim.observables[1].per_mode[1].is_zero());  // heat only
+  EXPECT_EQ(m.sim.observables[1].text, "heat: 1");
+  apply_overrides(m, {"observe.T2=cool: 2*T", "observe.mean=T"});
+  ASSERT_EQ(m.sim.observables.size(), 3U);
+  EXPECT_TRUE(m.sim.observables[0].per_mode[0].is_zero());  // replaced: cool only
+  EXPECT_TRUE((m.sim.observables[0].per_mode[1] - 2 * T).is_zero());
+  EXPECT_EQ(m.sim.observables[2].name, "mean");
+  // Located errors in the file, and in the --set argument (its columns).
+  expect_error(two_modes + "  observe f = warm: T\n}\n", 8, 15,
+               "unknown mode 'warm' (the modes: heat, cool)");
+  expect_error(two_modes + "  observe f = hat: T\n}\n", 8, 15,
+               "unknown mode 'hat' (did you mean 'heat'?)");
+  expect_error(two_modes + "  observe f = T + y\n}\n", 8, 19, "unknown name 'y'");
+  expect_error(two_modes + "  observe f = T\n  observe f = 1\n}\n", 9, 11,
+               "observable 'f' is given twice (first at 8:11)");
+  expect_error(two_modes + "  observe = T\n}\n", 8, 11, "expected the observable's name");
+  try {
+    apply_overrides(m, {"observe.g=T + q"});
+    ADD_FAILURE() << "no error for an unknown name in --set observe";
+  } catch (const ModelError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("--set:1:15: error: unknown name 'q'", 0), 0U)
+        << e.what();
+  }
+}
+
 TEST(Check, Errors) {
   expect_error("state x\nmode a { x' = y }\n", 2, 15, "unknown name 'y'");
   expect_error("state x\nmode a { x' = sinn(x) }\n", 2, 15,

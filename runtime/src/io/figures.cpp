@@ -312,6 +312,27 @@ void draw_budget(cairo_t* cr, const RunRecord& run, double width, double height)
               run.times, curves, "t", "mass");
 }
 
+/// The observables' means over time (methods/observables.hpp), each with its error as a band.
+void draw_observables(cairo_t* cr, const RunRecord& run, double width, double height) {
+  cairo_set_source_rgb(cr, 1, 1, 1);
+  cairo_paint(cr);
+  draw_title(cr, width,
+             run.model + "  ·  observables, mean under the density (" + run.method + ")");
+  std::vector<Curve> curves;
+  std::size_t c = 0;
+  for (const auto& [name, o] : run.summary[summary_key::observables].items()) {
+    Curve curve{"E[" + name + "]", {}, kCurve[c++ % std::size(kCurve)], 2.0, {}};
+    for (const auto& v : o["values"])
+      curve.y.push_back(v.is_number() ? v.get<double>() : std::nan(""));
+    for (const auto& e : o["errors"]) curve.band.push_back(e.is_number() ? e.get<double>() : 0.0);
+    if (curve.y.size() != run.times.size()) continue;
+    if (curve.band.size() != curve.y.size()) curve.band.clear();
+    curves.push_back(std::move(curve));
+  }
+  draw_curves(cr, {kLeft + 10, kTop, width - kLeft - 30 - kLegend, height - kTop - kBottom - 10},
+              run.times, curves, "t", curves.size() == 1 ? curves.front().label : "mean");
+}
+
 /// Eigenvalues of the transfer operator in the complex plane, with the unit circle.
 void draw_spectrum(cairo_t* cr, const RunRecord& run, double width, double height) {
   cairo_set_source_rgb(cr, 1, 1, 1);
@@ -511,15 +532,21 @@ void write_figures(const RunRecord& run, FigureRequest& request, const std::stri
   // The budget and the spectrum, in each format asked for.
   const bool budget = !run.times.empty() && run.budget.mass.size() == run.times.size();
   const bool spectrum = run.summary.is_object() && run.summary.contains(summary_key::invariant);
+  // The observables over time (a time series of two frames or more).
+  const bool observables = run.times.size() > 1 && run.summary.is_object() &&
+                           run.summary.contains(summary_key::observables);
   for (const auto& [name, wanted] :
-       {std::pair{std::string("budget"), budget}, std::pair{std::string("spectrum"), spectrum}}) {
+       {std::pair{std::string("budget"), budget}, std::pair{std::string("spectrum"), spectrum},
+        std::pair{std::string("observables"), observables}}) {
     if (!wanted) continue;
     const double w = 760, h = 480;
     const auto draw = [&](cairo_t* cr) {
       if (name == "budget")
         draw_budget(cr, run, w, h);
-      else
+      else if (name == "spectrum")
         draw_spectrum(cr, run, w, h);
+      else
+        draw_observables(cr, run, w, h);
     };
     if (request.png) {
       Raster raster;

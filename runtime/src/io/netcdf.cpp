@@ -324,6 +324,27 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
       nc.text(s.var, "units", "1");
     }
   }
+  // The observables' expectations and their errors per frame (methods/observables.hpp;
+  // scalars for a one-frame answer). NaN where there is none.
+  std::vector<Series> observed;
+  if (run.summary.is_object() && run.summary.contains(summary_key::observables))
+    for (const auto& [name, o] : run.summary[summary_key::observables].items())
+      for (const bool error : {false, true}) {
+        const std::string base = "observable_" + name + (error ? "_error" : "");
+        Series v{names(base),
+                 error ? "estimated error of observable_" + name
+                       : "mean of the observable " + name +
+                             " under the density in the grid box (normalised to unit mass)",
+                 nullptr,
+                 {},
+                 -1};
+        for (const auto& x : o[error ? "errors" : "values"])
+          v.owned.push_back(x.is_number() ? x.get<double>() : std::nan(""));
+        if (v.owned.size() != std::max<std::size_t>(K, 1)) continue;
+        v.var = nc.var(v.name, NC_DOUBLE, series ? std::vector<int>{time_dim} : std::vector<int>{});
+        nc.text(v.var, "long_name", v.long_name);
+        observed.push_back(std::move(v));
+      }
   int mass0_var = -1;
   if (series && !b.mass.empty()) {
     mass0_var = nc.var(names("initial_mass"), NC_DOUBLE, {});
@@ -462,6 +483,7 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
       }
   }
   for (const Series& s : budget) nc.put(s.var, s.values ? *s.values : s.owned);
+  for (const Series& s : observed) nc.put(s.var, s.owned);
   if (mass0_var >= 0) nc.put(mass0_var, std::vector<double>{b.mass0});
   if (re_var >= 0) {
     nc.put(re_var, re);

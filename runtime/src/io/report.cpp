@@ -205,6 +205,27 @@ img { max-width: 100%; } .muted { color: #666; }
           << "</p>\n";
     }
   }
+  // The observables at the last frame, with their errors (methods/observables.hpp).
+  if (run.summary.is_object() && run.summary.contains(summary_key::observables) &&
+      !run.summary[summary_key::observables].empty()) {
+    h << "<h2>Observables</h2>\n";
+    if (has(files, "observables.png"))
+      h << "<img src=\"observables.png\" alt=\"the observables' means over time\">\n";
+    h << "<table>\n<tr><th>mean under the density"
+      << (series ? " at t = " + number(run.times.back()) : std::string())
+      << "</th><th>value</th><th>± estimate</th></tr>\n";
+    for (const auto& [name, o] : run.summary[summary_key::observables].items()) {
+      const nlohmann::json& v = o["values"];
+      const nlohmann::json& e = o["errors"];
+      if (v.empty()) continue;
+      h << "<tr><td>E[" << html(name) << "]</td><td class=\"n\">"
+        << (v.back().is_number() ? number(v.back().get<double>()) : "undefined")
+        << "</td><td class=\"n\">" << (e.back().is_number() ? number(e.back().get<double>()) : "")
+        << "</td></tr>\n";
+    }
+    h << "</table>\n<p>" << html(run.summary[summary_key::observables].begin()->value("note", ""))
+      << "</p>\n";
+  }
   if (run.summary.is_object() && run.summary.contains(summary_key::invariant)) {
     const nlohmann::json& inv = run.summary[summary_key::invariant];
     h << "<h2>Spectrum</h2>\n";

@@ -140,6 +140,16 @@ struct GridDecl {
   SourceLoc loc;             ///< Position of the grid literal.
 };
 
+/// `observe NAME = [MODE:] EXPR` inside `simulation` (or `--set observe.NAME=EXPR`): a
+/// quantity in the states and parameters whose expectation over the density every method
+/// reports per output time; with MODE, EXPR in that mode and 0 in the others.
+struct ObserveDecl {
+  Name name;                 ///< The observable's name.
+  std::optional<Name> mode;  ///< The one mode it is EXPR in (else every mode).
+  ExprPtr value;             ///< Its expression.
+  SourceLoc loc;             ///< Position of the `observe` keyword.
+};
+
 /// `simulation { ... }`.
 struct SimulationDecl {
   SourceLoc loc;                     ///< Position of the `simulation` keyword.
@@ -148,6 +158,7 @@ struct SimulationDecl {
   std::vector<InitialDecl> initial;  ///< Initial densities.
   std::vector<Relation> support;     ///< `support REL`: state space restriction.
   std::vector<Setting> settings;     ///< t_end, dt, method, tol, ...
+  std::vector<ObserveDecl> observe;  ///< Observables, in order.
 };
 
 /// A matrix literal `[[e11, e12], [e21, e22]]`, rows in order.

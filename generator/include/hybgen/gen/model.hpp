@@ -66,14 +66,26 @@ struct GuardSpec {
   SourceLoc reset_loc;           ///< Where `reset` was written.
 };
 
+/// An observable (`observe NAME = [MODE:] EXPR`, or `--set observe.NAME=EXPR`): f(x, mode),
+/// whose expectation over the density the runner reports per output time
+/// (runtime/include/hybgen/rt/methods/observables.hpp).
+struct Observable {
+  std::string name;                 ///< Its name (summary.json, run.nc, the report).
+  std::vector<GiNaC::ex> per_mode;  ///< f in each mode (0 in the modes it is not given in).
+  std::string text;                 ///< As written, for the outputs (`heat: T`, `p^2/2`).
+  int mode = -1;                    ///< The one mode it is given in (`MODE:`), or -1: every mode.
+  SourceLoc loc;                    ///< Where it was written.
+};
+
 /// Simulation settings (defaults from the model, overridable by --set).
 struct Simulation {
-  bool present = false;            ///< Whether the model had a block.
-  SourceLoc loc;                   ///< Where it was written.
-  std::vector<double> lo, hi;      ///< Domain per state variable.
-  std::vector<long> grid;          ///< Nodes per axis.
-  std::vector<GiNaC::ex> initial;  ///< Initial density per mode (0 if none).
-  std::vector<Condition> support;  ///< State-space restriction.
+  bool present = false;                 ///< Whether the model had a block.
+  SourceLoc loc;                        ///< Where it was written.
+  std::vector<double> lo, hi;           ///< Domain per state variable.
+  std::vector<long> grid;               ///< Nodes per axis.
+  std::vector<GiNaC::ex> initial;       ///< Initial density per mode (0 if none).
+  std::vector<Condition> support;       ///< State-space restriction.
+  std::vector<Observable> observables;  ///< Observables, in order.
   /// Method, times and every method setting (runtime/include/hybgen/rt/settings.hpp: the
   /// table both sides share). dt is resolved (t_end/10 unless given) after the block.
   rt::Settings settings;

@@ -38,4 +38,8 @@ namespace hybgen::gen {
 /// Stage 1 (parse): .model text -> AST. Throws ModelError at the first error.
 ModelAst parse(const SourceText& src);
 
+/// One `observe NAME = [MODE:] EXPR` item as the whole text (`--set observe.NAME=EXPR`, its
+/// '.' read as a space, so that columns are the argument's). Throws ModelError.
+ObserveDecl parse_observe(const SourceText& src);
+
 }  // namespace hybgen::gen

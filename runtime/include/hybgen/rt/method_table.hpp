@@ -42,6 +42,8 @@ inline constexpr const char* atom = "atom";                  ///< Mass at a Zeno
 inline constexpr const char* atom_error = "atom_error";      ///< Its estimated error.
 inline constexpr const char* warnings = "warnings";          ///< The method's warnings.
 inline constexpr const char* output_warnings = "output_warnings";  ///< The outputs' warnings.
+/// Per observable (`observe`): its expectation per frame (`values`) and error (`errors`).
+inline constexpr const char* observables = "observables";
 /// The blocks of the methods' own fields (MethodSpec::summary_key).
 inline constexpr const char* budget = "budget";        ///< characteristics: the mass budget.
 inline constexpr const char* transfer = "transfer";    ///< transfer: the operator and march.

@@ -99,4 +99,35 @@ bool in_mode_region(int m, const double* x, const double* par) {
     return true;
 }
 
+/// The number of M's observables (`observe` lines of the model's simulation block): the
+/// generator emits `n_observable`, `observable_names` and
+/// `observable(i * n_mode + k, x, par)` = f_i(x) in mode k only for a model that has some.
+template <HybridModel M>
+int observable_count() {
+  if constexpr (requires { M::n_observable; })
+    return static_cast<int>(M::n_observable);
+  else
+    return 0;
+}
+
+/// The name of M's observable i (i < observable_count<M>()).
+template <HybridModel M>
+const char* observable_name(int i) {
+  if constexpr (requires { M::observable_names; })
+    return M::observable_names[static_cast<std::size_t>(i)];
+  else
+    return "";
+}
+
+/// f_i(x) in mode k: M's observable i (i < observable_count<M>()).
+template <HybridModel M>
+double observable_value(int i, int k, const double* x, const double* par) {
+  if constexpr (requires(const double* y, const double* q) {
+                  { M::observable(0, y, q) } -> std::same_as<double>;
+                })
+    return M::observable(i * M::n_mode + k, x, par);
+  else
+    return 0.0;
+}
+
 }  // namespace hybgen::rt

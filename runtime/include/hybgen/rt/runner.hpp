@@ -363,6 +363,55 @@ void record_geometry(const RunPlan<state_dim_v<M>>& p, RunRecord& rec) {
   }
 }
 
+/// summary.json's `observables` (methods/observables.hpp): per observable its expectation and
+/// error per frame, and how the error was estimated; null when the model observes nothing.
+/// Collective (a distributed solution's sums).
+template <HybridModel M>
+nlohmann::json observables_summary(const RunPlan<state_dim_v<M>>& p,
+                                   const MethodResult<state_dim_v<M>>& res) {
+  if (observable_count<M>() == 0) return nullptr;
+  std::vector<ObservableSeries> series;
+  if (res.observable_errors == ObservableErrorKind::samples)
+    series = res.sampled_observables;
+  else if (res.solution.n_time > 0)
+    series = observable_expectations<M>(p.grid, res.solution, p.config.params.data(),
+                                        res.observable_errors, res.coarse, res.order, *p.backend);
+  const char* how = "";
+  switch (res.observable_errors) {
+    case ObservableErrorKind::quadrature:
+      how =
+          "twice the Richardson estimate from the trapezoid rule on every second and every "
+          "fourth node (the node values are exact)";
+      break;
+    case ObservableErrorKind::coarse:
+      how =
+          "twice the Richardson estimate from the same scheme on the halved and quartered "
+          "grids";
+      break;
+    case ObservableErrorKind::samples:
+      how = "twice the standard error of the samples' mean";
+      break;
+    case ObservableErrorKind::none:
+      how = "none";
+      break;
+  }
+  nlohmann::json j = nlohmann::json::object();
+  for (const ObservableSeries& o : series) {
+    nlohmann::json values = nlohmann::json::array(), errors = nlohmann::json::array();
+    for (std::size_t k = 0; k < o.values.size(); ++k) {
+      values.push_back(detail::number_or_null(o.values[k]));
+      errors.push_back(detail::number_or_null(o.errors[k]));
+    }
+    j[o.name] = {
+        {"values", values},
+        {"errors", errors},
+        {"note", std::string("values: the mean of the observable under the density in the box "
+                             "(normalised to unit mass; Zeno atoms left out) per frame; errors: ") +
+                     how + " (docs/methods.md, \"Observables\")"}};
+  }
+  return j;
+}
+
 /// summary.json as far as the solve knows it (docs/design.md run contract, extended with the
 /// atom, the runner's resources and the method's own block, `MethodSpec::summary_key`): built
 /// once, here; the writers read it, and `finish_summary` adds what the outputs add.
@@ -399,6 +448,8 @@ nlohmann::json run_summary(const RunPlan<state_dim_v<M>>& p,
   s[k::atom] = mb.atom;
   s[k::atom_error] = res.atom_error;
   for (const auto& [key, value] : res.summary.items()) s[key] = value;
+  if (nlohmann::json obs = observables_summary<M>(p, res); !obs.is_null())
+    s[k::observables] = std::move(obs);
   nlohmann::json secs = c.seconds.is_object() ? c.seconds : nlohmann::json::object();
   secs["solve"] = res.solve_s;
   secs["budget"] = res.budget_s;
@@ -584,6 +635,28 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
                                           "fall with the grid spacing (summary.json, "
                                           "transfer.errors_reliable)");
   }
+  // The observables at the last frame (summary.json has every frame).
+  if (s.contains(k::observables) && s[k::observables].is_object())
+    for (const auto& [name, o] : s[k::observables].items()) {
+      const auto& v = o["values"];
+      const auto& e = o["errors"];
+      if (v.empty()) continue;
+      // A time series: the last time; one frame: its name (invariant, escape).
+      std::string at = rec.frame_names.empty() ? "" : "(" + rec.frame_names.front() + ")";
+      if (!rec.times.empty()) {
+        char b[48];
+        std::snprintf(b, sizeof b, "at t = %g", rec.times.back());
+        at = b;
+      }
+      if (v.back().is_number() && e.back().is_number())
+        std::printf("E[%s] %s: %.10g +/- %.1e\n", name.c_str(), at.c_str(), v.back().get<double>(),
+                    e.back().get<double>());
+      else if (v.back().is_number())
+        std::printf("E[%s] %s: %.10g (no error estimate)\n", name.c_str(), at.c_str(),
+                    v.back().get<double>());
+      else
+        std::printf("E[%s] %s: undefined (no mass in the box)\n", name.c_str(), at.c_str());
+    }
   std::printf("outputs in %s: %s, summary.json%s\n", c.final_dir.c_str(),
               written.describe(rec.frame_names).c_str(), took);
 }

@@ -54,6 +54,10 @@ struct ModelTable {
   bool (*in_support)(const double*, const double*) = nullptr;                    ///< support.
   /// Mode regions (`where`); null when the model has none (every mode everywhere).
   bool (*in_region)(int, const double*, const double*) = nullptr;
+  int n_observable = 0;                           ///< Observables (`observe`; model.hpp).
+  const char* const* observable_names = nullptr;  ///< n_observable names.
+  /// f_i in mode k at index i·n_mode + k; null when the model has no observable.
+  double (*observable)(int, const double*, const double*) = nullptr;
 };
 
 /// The table of the generated model struct M (its static members, by address).
@@ -85,6 +89,11 @@ ModelTable make_table() {
                   { M::in_region(m, x, p) } -> std::same_as<bool>;
                 })
     t.in_region = &M::in_region;
+  if constexpr (requires { M::observable_names; }) {
+    t.n_observable = M::n_observable;
+    t.observable_names = M::observable_names.data();
+    t.observable = &M::observable;
+  }
   return t;
 }
 
@@ -97,18 +106,20 @@ constexpr bool table_fits(int n_state, int n_guard) {
 /// `HybridModel`; n_param, n_mode and n_guard are run-time values.
 template <int N>
 struct TableModel {
-  static constexpr int n_state = N;                        ///< State dimension.
-  static inline int n_param = 0;                           ///< Parameters.
-  static inline int n_mode = 0;                            ///< Modes.
-  static inline int n_guard = 0;                           ///< Guards (≤ kTableMaxGuards).
-  static inline const char* name = "";                     ///< Model name.
-  static inline std::span<const char* const> state_names;  ///< State names.
-  static inline std::span<const char* const> param_names;  ///< Parameter names.
-  static inline std::span<const double> param_defaults;    ///< Parameter defaults.
-  static inline std::span<const char* const> mode_names;   ///< Mode names.
-  static inline std::span<const char* const> guard_names;  ///< Guard names.
-  static inline std::span<const GuardInfo> guards;         ///< Guards.
-  static inline const ModelTable* table = nullptr;         ///< The installed table.
+  static constexpr int n_state = N;                             ///< State dimension.
+  static inline int n_param = 0;                                ///< Parameters.
+  static inline int n_mode = 0;                                 ///< Modes.
+  static inline int n_guard = 0;                                ///< Guards (≤ kTableMaxGuards).
+  static inline const char* name = "";                          ///< Model name.
+  static inline std::span<const char* const> state_names;       ///< State names.
+  static inline std::span<const char* const> param_names;       ///< Parameter names.
+  static inline std::span<const double> param_defaults;         ///< Parameter defaults.
+  static inline std::span<const char* const> mode_names;        ///< Mode names.
+  static inline std::span<const char* const> guard_names;       ///< Guard names.
+  static inline std::span<const GuardInfo> guards;              ///< Guards.
+  static inline int n_observable = 0;                           ///< Observables (model.hpp).
+  static inline std::span<const char* const> observable_names;  ///< Observable names.
+  static inline const ModelTable* table = nullptr;              ///< The installed table.
 
   /// X_k(x) into out.
   static void flow(int k, const double* x, const double* p, double* out) {
@@ -153,6 +164,11 @@ struct TableModel {
     return table->in_region == nullptr || table->in_region(m, x, p);
   }
 
+  /// Observable i in mode k at index i·n_mode + k (0 where the model has none).
+  static double observable(int index, const double* x, const double* p) {
+    return table->observable == nullptr ? 0.0 : table->observable(index, x, p);
+  }
+
   /// Make `t` (kept by pointer; it must outlive every solver) the model of this process.
   static void install(const ModelTable& t) {
     table = &t;
@@ -167,6 +183,8 @@ struct TableModel {
     mode_names = {t.mode_names, static_cast<std::size_t>(t.n_mode)};
     guard_names = {t.guard_names, static_cast<std::size_t>(t.n_guard)};
     guards = {t.guards, static_cast<std::size_t>(t.n_guard)};
+    n_observable = t.observable == nullptr ? 0 : t.n_observable;
+    observable_names = {t.observable_names, static_cast<std::size_t>(n_observable)};
   }
 };
 

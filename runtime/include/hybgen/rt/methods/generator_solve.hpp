@@ -102,6 +102,9 @@ struct FvInvariantResult {
   SpectrumErrors spectrum;             ///< The rates of λ and their errors (two_grid.hpp).
   double seconds_fine = 0.0, seconds_coarse = 0.0;  ///< Wall time per part.
   std::vector<std::string> notes;                   ///< What the summary should say.
+  /// The densities on the halved and quartered grids (detail::fv_half_grid; empty where not
+  /// solved), for the observables' errors (observables.hpp).
+  std::vector<double> coarse_density, quarter_density;
 };
 
 /// Solve the generator of M on `grid` (see the file comment).
@@ -261,6 +264,7 @@ FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const dou
                              M::n_mode, per_mode);
   };
   const double D = difference(grid, r.fine, *half, c, &r.mode_errors);
+  r.coarse_density = c.density;
   r.error = factor * D;
   for (double& e : r.mode_errors) e *= factor;
   std::vector<std::complex<double>> coarse_lambda;
@@ -277,6 +281,7 @@ FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const dou
     if (q.failure.empty()) {
       const double D2 = difference(*half, c, *quarter, q, nullptr);
       if (D > 0.0 && D2 > 0.0) r.observed_order = std::log2(D2 / D);
+      r.quarter_density = q.density;
     }
   }
   if (std::isfinite(r.observed_order)) r.error_reliable = order_near(r.observed_order, o.order);

@@ -49,6 +49,7 @@
 #include "hybgen/rt/methods/characteristics.hpp"
 #include "hybgen/rt/methods/escape.hpp"
 #include "hybgen/rt/methods/mass_budget.hpp"
+#include "hybgen/rt/methods/observables.hpp"
 #include "hybgen/rt/methods/particles.hpp"
 #include "hybgen/rt/model.hpp"
 #include "hybgen/rt/settings.hpp"
@@ -116,6 +117,13 @@ struct MethodResult {
   /// particles with density=marginals: the pairs and moments (then `solution` is empty).
   Marginals marginals;
   std::vector<double> atom_error;  ///< Estimated |error| of budget.atom (may be empty).
+  /// How the observables' errors are estimated (observables.hpp), and from what: the same
+  /// answer on the halved and quartered grids (`coarse`) of a scheme of order `order`, or
+  /// the samples' own expectations (`sampled_observables`, particles).
+  ObservableErrorKind observable_errors = ObservableErrorKind::none;
+  std::vector<CoarseAnswer<N>> coarse;                ///< See observable_errors.
+  int order = 1;                                      ///< See observable_errors.
+  std::vector<ObservableSeries> sampled_observables;  ///< See observable_errors.
   nlohmann::json summary = nlohmann::json::object();  ///< Method fields for summary.json.
   std::vector<std::string> warnings;                  ///< Printed, not fatal.
   std::string failure;    ///< Non-empty: a numerical failure (exit 3), what/where/when.
@@ -226,6 +234,17 @@ void set_eigenvector_frame(MethodResult<N>& r, const TransferOperator<N>& op,
   r.frame_names = {std::string(method.frame)};
 }
 
+/// A coarser grid's one-frame answer (an eigenvector, [mode][node]) for the observables'
+/// errors (observables.hpp); nothing when it is empty (not computed, or distributed).
+template <std::size_t N>
+void keep_coarse_frame(MethodResult<N>& r, const TensorGrid<N>& grid, std::vector<double> u,
+                       std::size_t n_mode) {
+  if (u.size() != n_mode * grid.size()) return;
+  Solution<N> c;
+  c.n_time = 1, c.n_mode = n_mode, c.n_point = grid.size(), c.u = std::move(u);
+  r.coarse.push_back({grid, std::move(c)});
+}
+
 /// The eigenvalues of `inv` as summary.json lists them: re, im, abs.
 inline nlohmann::json eigenvalues_json(const InvariantResult& inv) {
   nlohmann::json eig = nlohmann::json::array();
@@ -296,6 +315,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   constexpr std::size_t N = state_dim_v<M>;
   MethodResult<N> r;
   detail::set_time_frames(r, times);
+  r.observable_errors = ObservableErrorKind::quadrature;  // exact node values
   CharacteristicsOptions opt = detail::trace_options(s);
   const auto t0 = detail::MethodClock::now();
   {
@@ -403,9 +423,12 @@ namespace detail {
 /// estimate whose p_k is below 1/4 or missing is flagged unreliable. Over several processes
 /// nothing is estimated (the frames are distributed).
 template <std::size_t N, class SolveOn>
-void add_transfer_errors(nlohmann::json& t, const TensorGrid<N>& grid, const Solution<N>& sol,
+void add_transfer_errors(nlohmann::json& t, MethodResult<N>& r, const TensorGrid<N>& grid,
                          std::span<const double> times, int order, const MethodSettings& s,
                          SolveOn&& solve_on) {
+  const Solution<N>& sol = r.solution;
+  r.observable_errors = ObservableErrorKind::coarse;
+  r.order = order;
   if (sol.distributed || (s.backend && s.backend->ranks() > 1)) {
     t["errors"] = nullptr;
     t["error_note"] = "no error estimate over several processes";
@@ -413,8 +436,8 @@ void add_transfer_errors(nlohmann::json& t, const TensorGrid<N>& grid, const Sol
   }
   const auto t0 = MethodClock::now();
   const TensorGrid<N> half = halved_grid(grid), quarter = halved_grid(half);
-  const Solution<N> c = solve_on(half, "transfer: halved grid");
-  const Solution<N> q = solve_on(quarter, "transfer: quartered grid");
+  Solution<N> c = solve_on(half, "transfer: halved grid");
+  Solution<N> q = solve_on(quarter, "transfer: quartered grid");
   const auto frame = [](const Solution<N>& u, std::size_t k) {
     return std::span<const double>(u.u.data() + u.index(k, 0, 0), u.n_mode * u.n_point);
   };
@@ -459,6 +482,9 @@ void add_transfer_errors(nlohmann::json& t, const TensorGrid<N>& grid, const Sol
   t["error_reliable"] = all_reliable;
   t["coarse_grid"] = coarse_nodes;
   t["error_seconds"] = seconds_since(t0);
+  // The observables' errors take the same coarse answers (observables.hpp).
+  r.coarse.push_back({half, std::move(c)});
+  r.coarse.push_back({quarter, std::move(q)});
   t["error_note"] =
       std::string(
           "errors: per output time, the estimated relative L1 error of the density (max "
@@ -530,7 +556,7 @@ MethodResult<state_dim_v<M>> solve_by_transfer_fv(const TensorGrid<state_dim_v<M
                   run.min_value, top);
     r.warnings.push_back(b);
   }
-  detail::add_transfer_errors(t, grid, r.solution, times, fo.order, s,
+  detail::add_transfer_errors(t, r, grid, times, fo.order, s,
                               [&](const TensorGrid<N>& g, const char*) {
                                 // The same planes: they are the model's within the same box,
                                 // whatever the grid.
@@ -577,7 +603,7 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
       "outflow and atom are counted per column of the operator (where the forward flow of each "
       "cell's samples ends); mass + outflow + atom = initial mass to budget_defect";
   detail::add_transfer_errors(
-      t, grid, r.solution, times, 1, s, [&](const TensorGrid<N>& g, const char* title) {
+      t, r, grid, times, 1, s, [&](const TensorGrid<N>& g, const char* title) {
         const TransferOperator<N> cop = detail::assemble<M>(g, par, o, s.quiet, title);
         if (!cop.ok()) return Solution<N>{};
         TransferRun<N> crun = march(cop, initial_vector<M>(g, par), times, nullptr);
@@ -654,6 +680,12 @@ template <HybridModel M>
   r.solution.n_point = grid.size();
   r.solution.u = inv.fine.density;
   r.frame_names = {std::string(method_spec(Method::invariant).frame)};
+  r.observable_errors = ObservableErrorKind::coarse, r.order = o.order;
+  if (const auto half = detail::fv_half_grid(grid)) {
+    detail::keep_coarse_frame(r, *half, inv.coarse_density, r.solution.n_mode);
+    if (const auto quarter = detail::fv_half_grid(*half); quarter && r.coarse.size() == 1)
+      detail::keep_coarse_frame(r, *quarter, inv.quarter_density, r.solution.n_mode);
+  }
   double low = std::numeric_limits<double>::infinity();
   for (const double u : inv.fine.density) low = std::min(low, u);
   nlohmann::json j = {{"scheme", "fv"},
@@ -747,6 +779,11 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   r.solve_s = detail::seconds_since(t0);
   detail::set_eigenvector_frame(r, op, inv, method_spec(Method::invariant));
   constexpr int kOrder = 1;  // the sampled schemes are first order at best (docs/methods.md)
+  r.observable_errors = ObservableErrorKind::coarse, r.order = kOrder;
+  if (!op.distributed) {
+    detail::keep_coarse_frame(r, half, c.density, op.n_mode);
+    if (r.coarse.size() == 1) detail::keep_coarse_frame(r, quarter, q.density, op.n_mode);
+  }
   const double factor = error_factor(kOrder);
   const SpectrumErrors spec =
       spectrum_errors(inv.eigenvalues, c.eigenvalues, o.step, factor, io.tol);
@@ -853,6 +890,8 @@ MethodResult<state_dim_v<M>> solve_by_escape(const TensorGrid<state_dim_v<M>>& g
   }
   const EscapeRate e = escape_rate(inv, coarse, o.step, io.tol);
   detail::set_eigenvector_frame(r, op, inv, method_spec(Method::escape));
+  r.observable_errors = ObservableErrorKind::coarse, r.order = 1;
+  if (!op.distributed) detail::keep_coarse_frame(r, halved_grid(grid), coarse.density, op.n_mode);
   nlohmann::json j = detail::operator_summary(o, op);
   j["file"] = r.frame_names.front() + ".npy";
   j["rate"] = e.rate;
@@ -916,6 +955,8 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   }
   r.solution = std::move(run.solution);
   r.marginals = std::move(run.marginals);
+  r.observable_errors = ObservableErrorKind::samples;
+  r.sampled_observables = std::move(run.observables);
   r.budget = std::move(run.budget);
   r.atom_error = run.atom_error;
   r.summary[summary_key::particles] = {

@@ -90,6 +90,7 @@
 #include "hybgen/rt/core/solution.hpp"
 #include "hybgen/rt/io/progress.hpp"
 #include "hybgen/rt/methods/forward.hpp"
+#include "hybgen/rt/methods/observables.hpp"
 #include "hybgen/rt/model.hpp"
 
 #ifdef _OPENMP
@@ -442,6 +443,9 @@ struct ParticleRun {
   double sampled_mass = 0.0;       ///< Σ w: estimate of Σ_m ∫ u0_m over the sampling domain.
   std::vector<double> atom_error;  ///< 2σ̂ of budget.atom[k] (as budget.mass_error for mass).
   Marginals marginals;             ///< With opt.marginals: the pairs and moments (solution empty).
+  /// The expectations of M's observables over the samples in the box per output time, and
+  /// twice their standard errors (observables.hpp); on rank 0.
+  std::vector<ObservableSeries> observables;
   /// Whether every trajectory succeeded.
   bool ok() const { return failure.ok(); }
 };
@@ -633,6 +637,12 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   constexpr std::size_t S = 1 + N + N * (N + 1) / 2;
   const std::size_t moment_size = opt.marginals ? K * S : 0;
   std::vector<double> moments(chunks.size() * moment_size, 0.0);
+  // Observables: per chunk and frame, Σ w, Σ w², then per observable Σ w f, Σ w² f, Σ w² f²
+  // over the samples in the box (observables.hpp); like the moments, summed in chunk order.
+  const int n_obs = observable_count<M>();
+  const std::size_t obs_stride = 2 + 3 * static_cast<std::size_t>(n_obs);
+  const std::size_t obs_size = n_obs > 0 ? K * obs_stride : 0;
+  std::vector<double> obs_sums(chunks.size() * obs_size, 0.0);
 
   if (K > 0) {
 #pragma omp parallel
@@ -652,6 +662,7 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
 #pragma omp for schedule(dynamic, 1)
       for (std::size_t c = chunks.begin; c < chunks.end; ++c) {
         double* mom = moments.data() + (c - chunks.begin) * moment_size;
+        double* obs = obs_sums.data() + (c - chunks.begin) * obs_size;
         const auto c_end = static_cast<long long>(std::min((c + 1) * chunk, opt.particles));
         for (auto ii = static_cast<long long>(c * chunk); ii < c_end; ++ii) {
           if (opt.progress) opt.progress->advance();
@@ -684,6 +695,15 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
             L[k] += W;
             L[3 * K + k] += W2;
             L[2 * K + k] += (b0 ? W : 0) - W;
+            if (obs_size > 0) {
+              double* o = obs + k * obs_stride;
+              const double w = s.weight, w2 = w * w;
+              o[0] += w, o[1] += w2;
+              for (int j = 0; j < n_obs; ++j) {
+                const double f = observable_value<M>(j, mode, x.data(), par);
+                o[2 + 3 * j] += w * f, o[3 + 3 * j] += w2 * f, o[4 + 3 * j] += w2 * f * f;
+              }
+            }
             // Cloud-in-cell weights along every axis: the cell and the offset in it.
             std::array<std::size_t, N> base{};
             std::array<double, N> f{};
@@ -765,6 +785,31 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   // moments onto rank 0 in chunk order, and the failure of the smallest index.
   backend.sum(std::span<std::int64_t>(sums));
   if (opt.marginals) backend.sum_to_root(std::span<std::int64_t>(acc));
+  if (obs_size > 0) {
+    // E = Σ w f / Σ w; its variance by the delta method, (Σ w²f² − 2E Σ w²f + E² Σ w²)/(Σ w)².
+    const std::vector<double> all = backend.gather(obs_sums);
+    std::vector<double> total(obs_size, 0.0);
+    if (backend.root())
+      for (std::size_t c = 0; c < n_chunk; ++c)
+        for (std::size_t j = 0; j < obs_size; ++j) total[j] += all[c * obs_size + j];
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    for (int j = 0; j < n_obs; ++j) {
+      ObservableSeries series{observable_name<M>(j), {}, {}};
+      for (std::size_t k = 0; k < K; ++k) {
+        const double* o = total.data() + k * obs_stride;
+        const auto ju = static_cast<std::size_t>(j);
+        if (!(o[0] > 0.0)) {
+          series.values.push_back(nan), series.errors.push_back(nan);
+          continue;
+        }
+        const double e = o[2 + 3 * ju] / o[0];
+        const double var = (o[4 + 3 * ju] - 2.0 * e * o[3 + 3 * ju] + e * e * o[1]) / (o[0] * o[0]);
+        series.values.push_back(e);
+        series.errors.push_back(2.0 * std::sqrt(std::max(var, 0.0)));
+      }
+      run.observables.push_back(std::move(series));
+    }
+  }
   mass0 = backend.sum(mass0);
   sampled = backend.sum(sampled);
   if (backend.any(non_finite_weight))

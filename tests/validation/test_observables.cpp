@@ -1,0 +1,156 @@
+// Validation of the observables (`observe NAME = [MODE:] EXPR`, `--set observe.NAME=EXPR`;
+// runtime/include/hybgen/rt/methods/observables.hpp) through the whole pipeline: `hybgen run`
+// on .model files, summary.json's `observables.NAME.values` / `.errors` read back, against
+// references that do not come from hybgen:
+//  * the thermostat's invariant density (heat T' = 4 − T until T = 2, cool T' = −T until
+//    T = 1; tests/validation/models/thermostat_fv.model): u = c/|T'| on [1, 2] in each mode,
+//    one flux c for both, so with ∫₁² dT/(4 − T) = ln(3/2) and ∫₁² dT/T = ln 2
+//        P[heat] = ln(3/2)/ln 3,
+//        E[T]    = (∫₁² T/(4 − T) dT + ∫₁² dT)/ln 3 = (4 ln(3/2) − 1 + 1)/ln 3 = 4 ln(3/2)/ln 3
+//    (∫ T/(4 − T) = ∫ 4/(4 − T) − 1);
+//  * the same thermostat started in `heat` from exp(−20 (T − 1.5)²)
+//    (tests/validation/models/thermostat_transient.model), whose expectations up to t = 0.6
+//    the test integrates itself over the initial states with the exact flow: heating
+//    T(t) = 4 − (4 − T₀)e^{−t} reaches 2 at t* = ln((4 − T₀)/2) (for T₀ < 2), cooling
+//    T = 2e^{−(t − t*)} after it; nothing completes the cooling branch before t = ln 2. A
+//    heating state that starts at T₀ ≥ 2 is past its guard and leaves the box at T = 2.2.
+// Each method's error must cover its true error, and not by more than a factor the test
+// states. Particles' errors are twice a standard error: the bound there is twice the error
+// (four standard errors).
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "support/e2e.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using hybgen::testing::run_hybgen;
+using nlohmann::json;
+
+const fs::path kWork = hybgen::testing::e2e_dir("validation_observables");
+const fs::path kCache = kWork / "cache";
+const std::string kModels = std::string(HYBGEN_SOURCE_DIR) + "/tests/validation/models/";
+
+/// `hybgen run MODEL --quiet EXTRA` into its own directory: summary.json (null when the run
+/// failed; the output is in the test's message).
+json run(const std::string& model, const std::string& tag, const std::string& extra) {
+  const fs::path dir = kWork / tag;
+  fs::remove_all(dir);
+  const auto res = run_hybgen("run '" + kModels + model + "' --quiet --out '" + dir.string() +
+                                  "' --set outputs=netcdf " + extra,
+                              kCache);
+  EXPECT_EQ(res.code, 0) << res.out;
+  if (res.code != 0) return nullptr;
+  return hybgen::testing::read_json_file(dir / "summary.json");
+}
+
+/// The observables every run of the thermostat adds (the heating fraction is a mode piece).
+const std::string kThermostatObservables =
+    "--set 'observe.T=T' --set 'observe.heating=heat: 1' --set 'observe.T2=T^2'";
+
+/// ∫_a^b g by the composite Simpson rule on 20,000 panels (0 when a ≥ b).
+template <class G>
+double simpson(G g, double a, double b) {
+  constexpr int kPanels = 20000;
+  if (!(a < b)) return 0.0;
+  const double h = (b - a) / kPanels;
+  double sum = g(a) + g(b);
+  for (int i = 1; i < kPanels; ++i) sum += g(a + i * h) * (i % 2 ? 4.0 : 2.0);
+  return sum * h / 3.0;
+}
+
+/// The thermostat's transient expectations at time t ≤ 0.6 (file comment): E[T], P[heat],
+/// E[T²] over the states in the box [0.8, 2.2]. Heating from T₀ < 2 reaches the guard at
+/// t* = ln((4 − T₀)/2), so by time t the states T₀ ∈ [4 − 2eᵗ, 2) have switched. The initial
+/// states fall in three intervals on which the flow is smooth, each integrated by Simpson's
+/// rule:
+///  * still heating below the guard, T₀ ∈ [4 − 3.2eᵗ, 4 − 2eᵗ): T = 4 − (4 − T₀)e^{−t}
+///    (from 0.8 up: the part of it below 0.8 at t = 0 has heated into the box);
+///  * heating past the guard, T₀ ∈ [2, 4 − 1.8eᵗ]: the same T, up to the face 2.2;
+///  * switched, T₀ ∈ [4 − 2eᵗ, 2): cooling since t*, T = 2e^{−(t − t*)} = (4 − T₀)e^{−t} ≥ 1.
+std::vector<double> transient_reference(double t) {
+  const double et = std::exp(t);
+  const auto u0 = [](double t0) { return std::exp(-20.0 * (t0 - 1.5) * (t0 - 1.5)); };
+  const double lo = 0.0;  // u0 < 1e-19 below
+  const auto heating = [&](double t0) { return 4.0 - (4.0 - t0) / et; };
+  const auto cooling = [&](double t0) { return (4.0 - t0) / et; };
+  const double below_a = std::max(lo, 4.0 - 3.2 * et), switched_a = 4.0 - 2.0 * et;
+  const double past_b = 4.0 - 1.8 * et;
+  std::vector<double> moment(3, 0.0);  // ∫ u0 Tᵖ over the states in the box, p = 0, 1, 2
+  double heat_mass = 0.0;
+  for (int power = 0; power < 3; ++power) {
+    const auto heat_part = [&](double t0) { return u0(t0) * std::pow(heating(t0), power); };
+    const auto cool_part = [&](double t0) { return u0(t0) * std::pow(cooling(t0), power); };
+    const double heat = simpson(heat_part, below_a, switched_a) + simpson(heat_part, 2.0, past_b);
+    moment[static_cast<std::size_t>(power)] = heat + simpson(cool_part, switched_a, 2.0);
+    if (power == 0) heat_mass = heat;
+  }
+  return {moment[1] / moment[0], heat_mass / moment[0], moment[2] / moment[0]};
+}
+
+/// Check run `s`'s observables against `reference(k)` (E[T], P[heat], E[T²] at frame k):
+/// each error covers the true one (`cover` times the error, plus 1e-12 for rounding), and is at
+/// most `widest` times it or `floor` relative to the value (an estimate of no consequence to
+/// the digits a user reads: where the true error is small by cancellation, as the mean of a
+/// density whose diffusion is symmetric, or a front between nodes falls luckily for the grid
+/// and not for the coarser ones that estimate it).
+template <class Reference>
+void expect_covered(const json& s, const std::string& what, Reference reference, double widest,
+                    double floor, double cover = 1.0) {
+  ASSERT_TRUE(s.is_object()) << what;
+  ASSERT_TRUE(s.contains("observables")) << what;
+  const json& o = s["observables"];
+  const std::vector<std::string> names = {"T", "heating", "T2"};
+  const std::size_t frames = o["T"]["values"].size();
+  ASSERT_GE(frames, 1U) << what;
+  for (std::size_t k = 0; k < frames; ++k) {
+    const std::vector<double> ref = reference(k);
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      const json& v = o[names[i]]["values"][k];
+      const json& e = o[names[i]]["errors"][k];
+      ASSERT_TRUE(v.is_number() && e.is_number()) << what << " " << names[i] << " frame " << k;
+      const double value = v.get<double>(), error = e.get<double>();
+      const double actual = std::fabs(value - ref[i]);
+      std::printf("%s E[%s] frame %zu: %.10f (reference %.10f) true error %.2e, estimate %.2e\n",
+                  what.c_str(), names[i].c_str(), k, value, ref[i], actual, error);
+      EXPECT_LE(actual, cover * error + 1e-12) << what << " E[" << names[i] << "] frame " << k;
+      EXPECT_LE(error, std::max(widest * actual, floor * std::fabs(ref[i])) + 1e-12)
+          << what << " E[" << names[i] << "] frame " << k;
+    }
+  }
+}
+
+// The invariant density by both schemes: fv (order 3, jumps at the guards) and hat (first
+// order, the box wider than the cycle).
+TEST(Observables, TheThermostatsInvariantMeansHaveErrorsThatCoverThem) {
+  const double l3 = std::log(3.0), l32 = std::log(1.5);
+  // E[T²] = (∫₁² T²/(4 − T) dT + ∫₁² T dT)/ln 3, ∫ T²/(4 − T) = 16 ln(3/2) − ∫₁² (T + 4) dT.
+  const std::vector<double> exact = {4.0 * l32 / l3, l32 / l3, (16.0 * l32 - 5.5 + 1.5) / l3};
+  const auto reference = [&](std::size_t) { return exact; };
+  expect_covered(run("thermostat_fv.model", "fv", kThermostatObservables), "fv", reference, 10.0,
+                 1e-9);
+  expect_covered(run("thermostat_fv.model", "hat", kThermostatObservables + " --set scheme=hat"),
+                 "hat", reference, 10.0, 1e-6);
+}
+
+TEST(Observables, TheThermostatsTransientMeansByEveryMethodAgreeWithTheFlow) {
+  const std::vector<double> times = {0.0, 0.2, 0.4, 0.6};
+  const auto reference = [&](std::size_t k) { return transient_reference(times.at(k)); };
+  expect_covered(run("thermostat_transient.model", "characteristics", kThermostatObservables),
+                 "characteristics", reference, 10.0, 1e-4);
+  expect_covered(run("thermostat_transient.model", "transfer",
+                     kThermostatObservables + " --set method=transfer"),
+                 "transfer", reference, 10.0, 1e-4);
+  expect_covered(run("thermostat_transient.model", "particles",
+                     kThermostatObservables + " --set method=particles --set particles=200000"),
+                 "particles", reference, 1e9, 0.0, 2.0);
+}
+
+}  // namespace
