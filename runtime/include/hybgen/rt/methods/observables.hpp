@@ -23,9 +23,14 @@
 ///    density jumps (a guard, the support, a mode's region);
 ///  * a scheme of order p with coarse answers (transfer and invariant: the same scheme on the
 ///    halved and quartered grids that their density errors use, two_grid.hpp): E₁, E₂ on those
-///    grids, q ∈ [1/4, max(p, 1)], as the density's estimate clamps its observed order;
+///    grids, q ∈ [1/4, min(max(p, 1), 2)]: the density's order p, but a mean is a trapezoid sum
+///    of node values on each grid, second order at most (fv's third-order u0 at t = 0 is
+///    integrated at second order);
 ///  * samples (particles): E = Σ wᵢ fᵢ / Σ wᵢ over the samples in the box, its error twice the
-///    delta-method standard error √(Σ wᵢ²(fᵢ − E)²)/Σ wᵢ (particles.hpp).
+///    delta-method standard error of the stratified sample (each particle draws from its own
+///    slice of the proposal, particles.hpp): with zᵢ = wᵢ(fᵢ − E)·[in box], √(Σ_pairs
+///    (z_a − z_b)²)/Σ wᵢ over the pairs of neighbouring strata (collapsed strata), which
+///    overestimates the variance by the neighbours' differences of mean only.
 /// No error is estimated where a method keeps no coarser answer: `transfer` and `invariant`
 /// over several processes.
 
@@ -191,7 +196,8 @@ std::vector<ObservableSeries> observable_expectations(
       level1 = detail::observable_sums<M>(grid, sol, k, 2, par, backend);
       level2 = detail::observable_sums<M>(grid, sol, k, 4, par, backend);
     } else if (kind == ObservableErrorKind::coarse) {
-      q_lo = 0.25, q_hi = std::max(order, 1);
+      // The means are trapezoid sums of node values on every grid: second order at most.
+      q_lo = 0.25, q_hi = std::clamp(order, 1, 2);
       if (!coarse.empty() && coarse[0].solution.n_time == sol.n_time)
         level1 = detail::observable_sums<M>(coarse[0].grid, coarse[0].solution, k, 1, par, backend);
       if (coarse.size() > 1 && coarse[1].solution.n_time == sol.n_time)
