@@ -169,7 +169,9 @@ int main(int argc, char** argv) {
   add_build(run);
   run->footer(
       "\nSettings (--set KEY=VALUE, or KEY VALUE in the model's simulation block; also\n"
-      "grid=N1xN2..., domain.<state>=[a,b] and any parameter; docs/settings.md):\n" +
+      "grid=N1xN2..., domain.<state>=[a,b], any parameter, and observe.NAME=[MODE:]EXPR,\n"
+      "an observable whose mean every method reports with an error; docs/settings.md,\n"
+      "docs/methods.md):\n" +
       hybgen::rt::settings_help());
   run->add_flag("-q,--quiet", quiet, "no progress output");
   int ranks = 0;
