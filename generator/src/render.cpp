@@ -338,6 +338,16 @@ std::string derive_text(const HybridSystem& sys) {
     }
     os << "   for " << point << " in Delta(S)\n";
   }
+  if (!m.sim.observables.empty()) {
+    // What a run reports the mean of (runtime/include/hybgen/rt/methods/observables.hpp).
+    os << "\nobservables (their means under the density, per output time)\n";
+    for (const Observable& o : m.sim.observables) {
+      const auto k = static_cast<std::size_t>(std::max(o.mode, 0));
+      os << "  " << o.name << " = " << pr.ginac(o.per_mode.at(k));
+      if (o.mode >= 0) os << "   in mode " << m.modes[k].name << ", 0 in the others";
+      os << "\n";
+    }
+  }
   if (!sys.warnings.empty()) {
     os << "\nwarnings\n";
     for (const auto& w : sys.warnings) os << "  " << w.text << "\n";

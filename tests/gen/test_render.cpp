@@ -76,4 +76,18 @@ TEST(Render, TheJumpIsWrittenAtTheStatesNotAtAGenericPoint) {
   EXPECT_FALSE(has(l, "& x \\in")) << l;
 }
 
+// The observables close derive's text, each as the function it is in every mode, or in the one
+// mode it is given in (`observe NAME = MODE: EXPR`).
+TEST(Render, TextListsTheObservables) {
+  hybgen::gen::FrontendOptions options;
+  options.sets = {"observe.Tsq=T^2", "observe.warm=heat: a*T"};
+  const Frontend fe(SourceText("thermo.model", kThermostat), options);
+  const std::string t = hybgen::gen::derive_text(fe.sys);
+  EXPECT_TRUE(has(t, "\nobservables (their means under the density, per output time)\n")) << t;
+  EXPECT_TRUE(has(t, "  Tsq = T^2\n")) << t;
+  EXPECT_TRUE(has(t, "  warm = T*a   in mode heat, 0 in the others\n")) << t;
+  const Frontend plain(SourceText("thermo.model", kThermostat));
+  EXPECT_FALSE(has(hybgen::gen::derive_text(plain.sys), "observables")) << t;
+}
+
 }  // namespace
