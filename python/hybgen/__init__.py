@@ -8,8 +8,9 @@ Keyword arguments are hybgen's settings and the model's parameters (``hybgen run
 docs/settings.md); each becomes one ``--set KEY=VALUE``. Numbers are passed exactly (a float as
 its ``repr``, which reads back to the same double), ``grid=(75, 75)`` as ``75x75``, a sequence for
 ``outputs`` or ``figure_axes`` joined by ``+``, any other sequence (a domain) as ``[a,b]``, strings
-as they are. ``domain__x=(0, 2)`` is ``domain.x=[0,2]``; ``sets={"domain.x": (0, 2)}`` takes
-any key.
+as they are. ``domain__x=(0, 2)`` is ``domain.x=[0,2]``, ``observe__E="p^2/2 + x"`` an observable
+(its mean per output time is ``ds["observable_E"]``, its error ``ds["observable_E_error"]``);
+``sets={"domain.x": (0, 2)}`` takes any key. A bool is refused: no setting is true or false.
 
 Importing needs only the standard library; ``run`` needs xarray (Debian's python3-xarray and
 python3-netcdf4), ``sweep`` pandas. ``cmake --install`` puts this package beside ``bin/hybgen``
@@ -182,6 +183,9 @@ def _value(key, value):
     """One --set value as hybgen reads it (module docstring)."""
     if isinstance(value, str):
         return value
+    if isinstance(value, bool):  # an Integral too, which would pass as 1 or 0
+        raise TypeError(f"setting {key!r}: hybgen has no true/false setting; pass a number or a "
+                        f"word (hybgen run --help), not {value!r}")
     if isinstance(value, numbers.Integral):
         return str(int(value))
     if isinstance(value, numbers.Real):

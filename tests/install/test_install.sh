@@ -52,6 +52,7 @@ printf '#!/bin/sh\necho "the hybgen on PATH was called" >&2\nexit 99\n' >decoy/h
 chmod +x decoy/hybgen
 cat >check_package.py <<'EOF'
 import os
+import math
 import sys
 
 import numpy as np
@@ -80,6 +81,20 @@ check(err < 1e-6, f"run: relative error {err:.3g} at t = 1 (a = 0.7)")
 ds = hybgen.run("decay.model", t_end=1, dt=0.5, grid=121, a=2.0, domain__x=(-1.5, 1.5))
 err = closed_form_error(ds, 2.0)
 check(err < 1e-6, f"run with a=2.0: relative error {err:.3g} from its closed form")
+# An observable (observe__NAME): in the box |x| <= 1.5 at t = 1, u(1, x) = u0(x e^{at}) e^{at}
+# with u0 = exp(-y^2) restricted to |y| <= Y = 1.5 e^{at}, so the mean of x^2 there is
+# e^{-2at} (1/2 - Y e^{-Y^2} / (sqrt(pi) erf(Y))) (integrating y^2 e^{-y^2} by parts).
+ds = hybgen.run("decay.model", t_end=1, dt=0.5, grid=121, observe__x2="x^2")
+x2, x2_error = float(ds["observable_x2"][-1]), float(ds["observable_x2_error"][-1])
+Y = 1.5 * np.exp(0.7)
+exact = np.exp(-1.4) * (0.5 - Y * np.exp(-Y * Y) / (np.sqrt(np.pi) * math.erf(Y)))
+check(abs(x2 - exact) <= x2_error + 1e-12 and x2_error < 1e-3,
+      f"run with observe__x2: E[x^2] = {x2} +/- {x2_error}, exact {exact}")
+try:
+    hybgen.run("decay.model", seed=True)
+    check(False, "run with seed=True did not fail")
+except TypeError as error:
+    check("true/false" in str(error), f"seed=True: {error}")
 ds = hybgen.run("decay.model", "py_out", sets={"grid": 121}, outputs="npy")
 check(ds.attrs.get("hybgen_out_dir") == os.path.abspath("py_out"), "run: no hybgen_out_dir")
 check(os.path.exists("py_out/u_0000.npy") and os.path.exists("py_out/run.nc"),
