@@ -18,7 +18,6 @@
 #include <cmath>
 #include <cstdio>
 #include <set>
-#include <sstream>
 
 #include "hybgen/gen/hash.hpp"
 #include "hybgen/gen/limits.hpp"
@@ -259,12 +258,8 @@ Observable checked_observable(const Model& m, const ObserveDecl& d, const Source
   o.loc = d.name.loc;
   const Converter conv(src, model_scope(m), "the observable '" + o.name + "'");
   const ex f = conv.convert(d.value);
-  std::ostringstream text;
-  text << f;
-  o.text = text.str();
   std::vector<std::string> names;
   for (const ModeSpec& md : m.modes) names.push_back(md.name);
-  std::size_t only = m.modes.size();
   if (d.mode) {
     const auto it = std::find(names.begin(), names.end(), d.mode->name);
     if (it == names.end()) {
@@ -275,12 +270,10 @@ Observable checked_observable(const Model& m, const ObserveDecl& d, const Source
       }
       throw src.error(d.mode->loc, "unknown mode '" + d.mode->name + "'" + hint);
     }
-    only = static_cast<std::size_t>(it - names.begin());
-    o.mode = static_cast<int>(only);
-    o.text = d.mode->name + ": " + o.text;
+    o.mode = static_cast<int>(it - names.begin());
   }
-  for (std::size_t k = 0; k < m.modes.size(); ++k)
-    o.per_mode.push_back(d.mode && k != only ? ex(0) : f);
+  for (int k = 0; k < static_cast<int>(m.modes.size()); ++k)
+    o.per_mode.push_back(o.mode >= 0 && k != o.mode ? ex(0) : f);
   return o;
 }
 

@@ -119,7 +119,8 @@ TEST(Check, Observables) {
   EXPECT_TRUE((m.sim.observables[0].per_mode[1] - T * T).is_zero());
   EXPECT_TRUE((m.sim.observables[1].per_mode[0] - 1).is_zero());
   EXPECT_TRUE(m.sim.observables[1].per_mode[1].is_zero());  // heat only
-  EXPECT_EQ(m.sim.observables[1].text, "heat: 1");
+  EXPECT_EQ(m.sim.observables[0].mode, -1);                 // every mode
+  EXPECT_EQ(m.sim.observables[1].mode, 0);                  // `heat:`
   apply_overrides(m, {"observe.T2=cool: 2*T", "observe.mean=T"});
   ASSERT_EQ(m.sim.observables.size(), 3U);
   EXPECT_TRUE(m.sim.observables[0].per_mode[0].is_zero());  // replaced: cool only

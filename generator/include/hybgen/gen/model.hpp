@@ -72,7 +72,6 @@ struct GuardSpec {
 struct Observable {
   std::string name;                 ///< Its name (summary.json, run.nc, the report).
   std::vector<GiNaC::ex> per_mode;  ///< f in each mode (0 in the modes it is not given in).
-  std::string text;                 ///< As written, for the outputs (`heat: T`, `p^2/2`).
   int mode = -1;                    ///< The one mode it is given in (`MODE:`), or -1: every mode.
   SourceLoc loc;                    ///< Where it was written.
 };
