@@ -85,7 +85,9 @@ TEST(RunNc, TwoModesMatchTheClosedFormAndTheXarrayReader) {
   std::string model;
   // --set c=1.5 (the model's own value): run.nc's history must name it (check_run_nc.py; on
   // a81ba15 it named the command without its --set options).
-  const fs::path out = run_made_up("switching_drift", kSwitching, model, "--set c=1.5");
+  // values=nodes: the node values against the closed form (not cell averages).
+  const fs::path out =
+      run_made_up("switching_drift", kSwitching, model, "--set c=1.5 --set values=nodes");
   ASSERT_FALSE(out.empty());
   const auto s = read_json_file(out / "summary.json");
   EXPECT_EQ(s["outputs"]["netcdf"], "run.nc");
@@ -209,8 +211,10 @@ namespace {
 
 // x' = -5x, y' = -5y: a Gaussian of width 1 shrinks to width e^{-5} by t = 1, far below
 // the spacing 0.1 of a 21 x 21 grid. The characteristics' node samples (the peak e^{10} at
-// the origin) then sum to 220 while the mass is π: the run says the grid under-resolves the
-// density and names the cell-average methods; transfer with cells says nothing.
+// the origin) then sum to 220 while the mass is π. By default (values=auto) the run then
+// reports the dual cells' averages instead, whose masses sum to the mass; with values=nodes
+// it says the grid under-resolves the density and names the cell averages and the cell-mass
+// methods; transfer with cells says nothing.
 constexpr const char* kSink = R"(model sink
 state x, y
 mode only {
@@ -231,15 +235,34 @@ TEST(RunOutputs, AConcentratingFlowIsFlaggedAsUnderResolved) {
   const std::string model = write_model_file(kWork, "sink.model", kSink);
   const fs::path out = kWork / "sink";
   fs::remove_all(out);
-  auto r = run_hybgen("run '" + model + "' --out '" + out.string() + "'", kWork / "cache");
+  auto r = run_hybgen("run '" + model + "' --out '" + out.string() + "' --set outputs=npy",
+                      kWork / "cache");
+  ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
+  EXPECT_EQ(r.out.find("under-resolves"), std::string::npos) << r.out;
+  auto s = read_json_file(out / "summary.json");
+  EXPECT_EQ(s["values"]["kind"], "cells") << s["values"].dump();
+  EXPECT_FALSE(s.contains("output_warnings")) << s.dump();
+  // The cells' masses (trapezoid weights are the dual cells' volumes) sum to π erf(e^5)² = π.
+  const std::vector<double> u = hybgen::rt::read_npy((out / "u_0002.npy").string()).data;
+  double sum = 0.0;
+  for (std::size_t i = 0; i < u.size(); ++i) {
+    const std::size_t ix = i / 21, iy = i % 21;
+    sum += u[i] * 0.1 * 0.1 * (ix == 0 || ix == 20 ? 0.5 : 1.0) * (iy == 0 || iy == 20 ? 0.5 : 1.0);
+  }
+  EXPECT_NEAR(sum, std::numbers::pi, 0.01 * std::numbers::pi);
+  EXPECT_LE(s["values"]["error"].back().get<double>(), 0.02) << s["values"].dump();
+
+  r = run_hybgen("run '" + model + "' --out '" + out.string() + "' --set values=nodes",
+                 kWork / "cache");
   ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_NE(r.out.find("warning: the grid under-resolves the density: at t = 1 "),
             std::string::npos)
       << r.out;
-  EXPECT_NE(r.out.find("--set method=transfer (the dual cells' masses"), std::string::npos)
-      << r.out;
-  const auto s = read_json_file(out / "summary.json");
+  EXPECT_NE(r.out.find("--set values=cells (the exact density's mean"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("method=transfer (cell masses)"), std::string::npos) << r.out;
+  s = read_json_file(out / "summary.json");
   ASSERT_TRUE(s.contains("output_warnings"));
+  EXPECT_EQ(s["values"]["kind"], "nodes");
   EXPECT_NEAR(s["mass"].back().get<double>(), std::numbers::pi, 0.05);
   r = run_hybgen("run '" + model + "' --set method=transfer --out '" + out.string() + "'",
                  kWork / "cache");

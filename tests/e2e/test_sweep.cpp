@@ -121,7 +121,9 @@ TEST(Sweep, AWarningSaysWhichPointItIsAboutAndCountsInTheTable) {
   // progress line says it has one, and its row counts it.
   const fs::path out = kWork / "warned";
   const auto r =
-      run_ball("sweep", "--set e=0.5,1 --set grid=21x21 --set t_end=6 --set dt=2 --set outputs=npy",
+      run_ball("sweep",
+               "--set e=0.5,1 --set grid=21x21 --set t_end=6 --set dt=2 --set outputs=npy "
+               "--set values=nodes",
                out, kWork / "cache");
   ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
   EXPECT_NE(r.out.find("hybgen: warning: [0_e=0.5] the grid under-resolves the density"),

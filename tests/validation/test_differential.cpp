@@ -198,9 +198,12 @@ Outcome check_model(std::uint64_t seed, const std::string& method) {
   const std::string path = hybgen::testing::write_model_file(kWork, name + ".model", m.text);
   const fs::path out = kWork / "runs" / name;
   fs::remove_all(out);
-  const auto res = hybgen_cli("run '" + path + "' --quiet --out '" + out.string() +
-                                  "' --set method=" + method + " --set outputs=npy",
-                              "timeout 600 env");
+  // The node values are compared (values=nodes: not the cell averages that values=auto
+  // gives where the nodes under-resolve the density).
+  const auto res =
+      hybgen_cli("run '" + path + "' --quiet --out '" + out.string() + "' --set method=" + method +
+                     " --set outputs=npy --set values=nodes",
+                 "timeout 600 env");
   std::string kinds;
   for (const auto k : r.kinds) kinds += std::string(kinds.empty() ? "" : "+") + kind_name(k);
   std::printf("model %llu: %zu-D, %zu modes, %zu guards (%s), t_end %g: ",

@@ -120,7 +120,8 @@ std::string frame_title(const RunRecord& run, std::size_t k) {
   return run.model + "  ·  " +
          (run.times.empty()
               ? (method != nullptr ? std::string(method->frame_what) : std::string("density"))
-              : run.method + "  ·  t = " + fixed3(run.times[k]));
+              : run.method + (run.cell_averages ? ", cell averages" : "") +
+                    "  ·  t = " + fixed3(run.times[k]));
 }
 
 // Layout of a frame figure, in points (1 px in PNG).

@@ -215,9 +215,21 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     if (deflate > 0) nc.check(nc_def_var_deflate(nc.id(), v, 1, 1, deflate), "compress a variable");
     nc.text(v, "long_name", long_name);
     nc.text(v, "units", "1");
-    nc.text(v, "description",
-            "probability density with respect to the Lebesgue measure of the state "
-            "variables, sampled at the grid nodes");
+    if (run.cell_averages) {
+      // CF: the value is a mean over the cell around the node along every state axis.
+      std::string methods;
+      for (const std::string& a : run.axis_names) methods += a + ": ";
+      nc.text(v, "cell_methods", methods + "mean");
+      nc.text(v, "description",
+              "probability density with respect to the Lebesgue measure of the state "
+              "variables, averaged over each node's dual cell (the box of half the grid "
+              "spacing around it, clipped to the grid box), by adaptive cubature of the exact "
+              "density (summary.json values.error: its estimated L1 error)");
+    } else {
+      nc.text(v, "description",
+              "probability density with respect to the Lebesgue measure of the state "
+              "variables, sampled at the grid nodes");
+    }
     return v;
   };
   // A one-frame method's frame says what it is (method_table.hpp, frame_what).

@@ -95,24 +95,19 @@ std::string resolution_warning(const RunRecord& run, const std::vector<double>& 
   const MassBudget& b = run.budget;
   const std::size_t K = run.times.size();
   if (!resolution_checked(run) || sums.size() != K) return "";
-  double worst = 0, worst_sum = 0;
-  std::size_t worst_k = K;
-  for (std::size_t k = 0; k < K; ++k) {
-    const double sum = sums[k];
-    const double gap = std::fabs(sum - b.mass[k]);
-    if (gap > 0.05 * b.mass0 && gap > 10 * b.mass_error[k] && gap > worst)
-      worst = gap, worst_sum = sum, worst_k = k;
-  }
-  if (worst_k == K) return "";
-  char msg[640];
+  const std::size_t k = under_resolved_frame(b, sums);
+  if (k == K) return "";
+  char msg[760];
   std::snprintf(msg, sizeof msg,
-                "the grid under-resolves the density: at t = %g the nodes' trapezoid sum is %.4g "
+                "the grid under-resolves the density: at t = %g the %s trapezoid sum is %.4g "
                 "but the mass is %.4g +/- %.2g (adaptive cubature), so the density has features "
-                "narrower than the grid's spacing and the pictures and run.nc show node samples "
-                "of them (speckle), not their shape; refine the grid, or use cell masses: "
-                "--set method=transfer (the dual cells' masses over their volumes), or "
+                "narrower than the grid's spacing and the pictures and run.nc show samples of "
+                "them (speckle), not their shape; refine the grid, or use cell averages: --set "
+                "values=cells (the exact density's mean over each node's dual cell; "
+                "budget=full refines them further), method=transfer (cell masses), or "
                 "method=particles",
-                run.times[worst_k], worst_sum, b.mass[worst_k], b.mass_error[worst_k]);
+                run.times[k], run.cell_averages ? "cell averages'" : "nodes'", sums[k], b.mass[k],
+                b.mass_error[k]);
   return msg;
 }
 

@@ -45,7 +45,9 @@ inline constexpr const char* output_warnings = "output_warnings";  ///< The outp
 /// Per observable (`observe`): its expectation per frame (`values`) and error (`errors`).
 inline constexpr const char* observables = "observables";
 /// The blocks of the methods' own fields (MethodSpec::summary_key).
-inline constexpr const char* budget = "budget";        ///< characteristics: the mass budget.
+inline constexpr const char* budget = "budget";  ///< characteristics: the mass budget.
+/// characteristics: what the grid's values are (nodes or cell averages) and their error.
+inline constexpr const char* values = "values";
 inline constexpr const char* transfer = "transfer";    ///< transfer: the operator and march.
 inline constexpr const char* invariant = "invariant";  ///< invariant: density and spectrum.
 inline constexpr const char* particles = "particles";  ///< particles: the samples.

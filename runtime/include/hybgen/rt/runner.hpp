@@ -371,7 +371,8 @@ nlohmann::json observables_summary(const RunPlan<state_dim_v<M>>& p,
                                    const MethodResult<state_dim_v<M>>& res) {
   if (observable_count<M>() == 0) return nullptr;
   std::vector<ObservableSeries> series;
-  if (res.observable_errors == ObservableErrorKind::samples)
+  if (res.observable_errors == ObservableErrorKind::samples ||
+      res.observable_errors == ObservableErrorKind::cells)
     series = res.sampled_observables;
   else if (res.solution.n_time > 0)
     series = observable_expectations<M>(p.grid, res.solution, p.config.params.data(),
@@ -390,6 +391,12 @@ nlohmann::json observables_summary(const RunPlan<state_dim_v<M>>& p,
       break;
     case ObservableErrorKind::samples:
       how = "twice the standard error of the samples' mean";
+      break;
+    case ObservableErrorKind::cells:
+      how =
+          "the observable's oscillation over each dual cell times the cell's mass, plus the "
+          "cell masses' estimated L1 error times the observable's spread (the values are cell "
+          "averages)";
       break;
     case ObservableErrorKind::none:
       how = "none";
@@ -476,6 +483,7 @@ RunRecord record_run(const RunPlan<state_dim_v<M>>& p, const MethodResult<state_
   rec.frame_names = res.frame_names;
   rec.density = std::span<const double>(res.solution.u.data(), res.solution.u.size());
   rec.distributed = res.solution.distributed;
+  rec.cell_averages = res.cell_averages;
   rec.owned = res.solution.owned;
   rec.backend = p.backend;
   if (!res.marginals.empty()) rec.marginals = &res.marginals;

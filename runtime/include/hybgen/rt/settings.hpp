@@ -85,6 +85,11 @@ inline constexpr std::array kSettings = {
                 "mass budget: fast (capped, about the solve's cost), full (to budget_tol), off"},
     SettingSpec{"budget_tol", SettingType::real, 3e-4, "", 1e-12, 0.1, false, "", "characteristics",
                 "relative tolerance of the full mass budget's cubatures"},
+    SettingSpec{"values", SettingType::word, 0.0, "auto", 0, 0, false, "auto|nodes|cells",
+                "characteristics",
+                "what the grid holds: nodes (the exact density at each node), cells (its mean "
+                "over each node's dual cell, by adaptive cubature, with an L1 error estimate), "
+                "or auto (cells when the nodes under-resolve the density, by the mass budget)"},
     SettingSpec{"step", SettingType::real, 0.0, "", 0.0, 1e300, false, "",
                 "transfer invariant escape",
                 "time step of the transfer operator (0: dt); scheme=fv of transfer: a cap of its "

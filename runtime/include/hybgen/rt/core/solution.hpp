@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <iomanip>
 #include <span>
@@ -197,6 +198,24 @@ inline std::vector<double> budget_defect_error(const MassBudget& b) {
   for (std::size_t k = 0; k < e.size(); ++k)
     e[k] = at(b.mass_error, k) + b.mass0_error + at(b.outflow_error, k) + at(b.atom_error, k);
   return e;
+}
+
+/// The frame at which node values under-resolve the density worst, or `node_sums.size()` when
+/// none does: where the trapezoid sum of the node values (`node_sums[k]`) differs from the
+/// adaptive budget's mass by more than 5 % of the initial mass and 10 times the mass's error
+/// bar. Node samples of a density narrower than the grid's spacing are speckle, not its shape
+/// (docs/outputs.md); characteristics then report cell averages (`values=auto`), and the
+/// outputs warn when what they hold still fails the test (io/run_outputs.hpp).
+inline std::size_t under_resolved_frame(const MassBudget& b, std::span<const double> node_sums) {
+  const std::size_t K = node_sums.size();
+  if (b.mass.size() != K || b.mass_error.size() != K || !(b.mass0 > 0)) return K;
+  double worst = 0;
+  std::size_t worst_k = K;
+  for (std::size_t k = 0; k < K; ++k) {
+    const double gap = std::fabs(node_sums[k] - b.mass[k]);
+    if (gap > 0.05 * b.mass0 && gap > 10 * b.mass_error[k] && gap > worst) worst = gap, worst_k = k;
+  }
+  return worst_k;
 }
 
 /// What a run whose grid is too large to hold keeps of the density (the particles with

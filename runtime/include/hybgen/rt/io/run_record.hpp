@@ -201,6 +201,9 @@ struct RunRecord {
   std::span<const double> density;       ///< [frame][mode][node] (see the invariant above).
   /// Whether `density` holds only this rank's pairs `owned` of each frame (several ranks).
   bool distributed = false;
+  /// Whether `density` holds means over each node's dual cell (characteristics with
+  /// values=cells, budget/cell_averages.hpp), not values at the nodes.
+  bool cell_averages = false;
   Block owned{};  ///< This rank's (mode, node) pairs, flat m·n_node + i, when distributed.
   /// The ranks that write the files together when `distributed` (core/backend.hpp).
   const Backend* backend = nullptr;

@@ -46,6 +46,7 @@
 #include "hybgen/rt/io/progress.hpp"
 #include "hybgen/rt/method_table.hpp"
 #include "hybgen/rt/methods/budget.hpp"
+#include "hybgen/rt/methods/budget/cell_averages.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
 #include "hybgen/rt/methods/escape.hpp"
 #include "hybgen/rt/methods/mass_budget.hpp"
@@ -119,11 +120,14 @@ struct MethodResult {
   std::vector<double> atom_error;  ///< Estimated |error| of budget.atom (may be empty).
   /// How the observables' errors are estimated (observables.hpp), and from what: the same
   /// answer on the halved and quartered grids (`coarse`) of a scheme of order `order`, or
-  /// the samples' own expectations (`sampled_observables`, particles).
+  /// the samples' own expectations (`sampled_observables`, particles; or, computed by the
+  /// method too, the cell averages' bound: budget/cell_averages.hpp, cell_observables).
   ObservableErrorKind observable_errors = ObservableErrorKind::none;
   std::vector<CoarseAnswer<N>> coarse;                ///< See observable_errors.
   int order = 1;                                      ///< See observable_errors.
   std::vector<ObservableSeries> sampled_observables;  ///< See observable_errors.
+  /// Whether `solution` holds cell averages (characteristics, values=cells).
+  bool cell_averages = false;
   nlohmann::json summary = nlohmann::json::object();  ///< Method fields for summary.json.
   std::vector<std::string> warnings;                  ///< Printed, not fatal.
   std::string failure;    ///< Non-empty: a numerical failure (exit 3), what/where/when.
@@ -305,6 +309,153 @@ inline void spectrum_warnings(const SpectrumErrors& e, std::vector<std::string>&
         "error");
 }
 
+/// The cell averages' point cap per traced point of their first pass (each dual cell's
+/// Gauss nodes and its halves'): budget=fast refines to 4 times that work, full to 16 times.
+inline constexpr std::size_t kCellWorkFast = 4, kCellWorkFull = 16;
+/// The largest memory the cell averages may take (their per-root and per-leaf sums).
+inline constexpr double kCellAverageBytes = 4.0 * (1 << 30);
+
+/// Characteristics' last stage (the setting `values`): with values=cells, or values=auto where
+/// the nodes' trapezoid sums under-resolve the density (core/solution.hpp,
+/// under_resolved_frame), r.solution's node values become the dual cells' averages
+/// (budget/cell_averages.hpp), to the budget's tolerance; summary.json's `values` block says
+/// which and why, with the averages' estimated relative L1 error per frame.
+template <HybridModel M>
+void cell_average_stage(const TensorGrid<state_dim_v<M>>& grid, std::span<const double> times,
+                        const double* par, const CharacteristicsOptions& opt,
+                        const MethodSettings& s, MethodResult<state_dim_v<M>>& r) {
+  constexpr std::size_t N = state_dim_v<M>;
+  const std::string& want = s.settings.word<"values">();
+  const Backend& backend = s.backend ? *s.backend : serial_backend();
+  const std::size_t K = times.size(), Mn = static_cast<std::size_t>(M::n_mode);
+  nlohmann::json& j = r.summary[summary_key::values];
+  j = {{"kind", "nodes"}, {"setting", want}};
+  if (want == "nodes") return;
+  std::string why = "values=cells";
+  std::vector<double> sums(K, 0.0);
+  for (std::size_t k = 0; k < K; ++k)
+    sums[k] = observable_sums<M>(grid, r.solution, k, 1, par, backend).back();
+  if (want == "auto") {
+    const std::size_t k = under_resolved_frame(r.budget, sums);
+    if (k == K) return;
+    char b[200];
+    std::snprintf(b, sizeof b,
+                  "values=auto: at t = %g the nodes' trapezoid sum is %.4g but the mass is %.4g",
+                  times[k], sums[k], r.budget.mass[k]);
+    why = b;
+  }
+  const auto refuse = [&](const std::string& what) {
+    j["reason"] = what;
+    r.warnings.push_back("cell averages: " + what + "; the grid holds the node values");
+  };
+  for (std::size_t a = 0; a < N; ++a)
+    if (grid.axes[a].n < 2) return refuse("an axis with one node has no dual cells");
+  const bool full = s.settings.word<"budget">() == "full";
+  AdaptiveOptions aopt;
+  aopt.rel_tol = full ? s.settings.real<"budget_tol">()
+                      : std::max(s.settings.real<"budget_tol">(), kFastBudgetTol);
+  double scale = 0.0;
+  for (const double m : r.budget.mass) scale = std::max(scale, m);
+  for (const double m : sums) scale = r.budget.mass.empty() ? std::max(scale, m) : scale;
+  scale = std::max(scale, r.budget.mass0);
+  // Each dual cell in 1, then 2, then 4 parts per axis, until the cells' masses agree with the
+  // budget's (budget/cell_averages.hpp: what the first pass can miss).
+  CellAverages<N> ca;
+  std::vector<double> gap(K, 0.0);
+  double secs = 0.0;
+  int parts_used = 1;
+  bool agrees = true;
+  for (int parts = 1; parts <= 4; parts *= 2) {
+    const double split = std::pow(static_cast<double>(parts), static_cast<double>(N));
+    const double pass = 3.0 * std::pow(kCellAverageOrder, static_cast<double>(N)) * split *
+                        static_cast<double>(grid.size());  // the rule's nodes, split once
+    const double bytes =
+        8.0 * 5.0 * static_cast<double>(K * Mn) * 3.0 * split * static_cast<double>(grid.size());
+    if (bytes > kCellAverageBytes) {
+      if (parts > 1) break;
+      char b[200];
+      std::snprintf(b, sizeof b, "they would take about %.1f GiB (the cap is %.0f)",
+                    bytes / (1 << 30), kCellAverageBytes / (1 << 30));
+      return refuse(b);
+    }
+    parts_used = parts;
+    aopt.root_parts = parts;
+    aopt.max_points = static_cast<std::size_t>(pass) * (full ? kCellWorkFull : kCellWorkFast);
+    const auto t0 = MethodClock::now();
+    if (!s.quiet)
+      std::printf(
+          "cell averages (%s): %zu dual cells in %d part(s) per axis, at least %.0f "
+          "points\n",
+          want == "auto" ? "the nodes under-resolve the density" : "values=cells", grid.size(),
+          parts, pass);
+    TraceFailure<N> failure;
+    ca = cell_averages<M>(grid, times, par, opt, aopt, scale, r.solution, failure);
+    secs += seconds_since(t0);
+    if (!failure.ok()) {
+      r.solve_s += secs;
+      r.failure = "(cell averages) " + describe<M>(failure);
+      return;
+    }
+    if (r.budget.mass.size() != K) break;
+    agrees = true;
+    for (std::size_t k = 0; k < K; ++k) {
+      gap[k] = std::fabs(ca.mass[k] - r.budget.mass[k]);
+      agrees = agrees && gap[k] <= 2.0 * (ca.l1_error[k] + r.budget.mass_error[k]);
+    }
+    if (agrees) break;
+  }
+  r.solve_s += secs;
+  for (std::size_t k = 0; k < K; ++k) ca.l1_error[k] = std::max(ca.l1_error[k], gap[k]);
+  if (observable_count<M>() > 0) {
+    r.sampled_observables = cell_observables<M>(grid, ca, par);
+    r.observable_errors = ObservableErrorKind::cells;
+  }
+  std::vector<double> rel(K, 0.0);
+  for (std::size_t k = 0; k < K; ++k) {
+    const double m = r.budget.mass.empty() ? sums[k] : r.budget.mass[k];
+    rel[k] = m > 0.0 ? ca.l1_error[k] / m : ca.l1_error[k];
+  }
+  const Block own = r.solution.owned;
+  const bool distributed = r.solution.distributed;
+  r.solution.u = std::move(ca.averages.u);
+  r.solution.distributed = false;
+  if (distributed) r.solution.keep_only(own);
+  r.cell_averages = true;
+  j = {{"kind", "cells"},
+       {"setting", want},
+       {"reason", why},
+       {"rel_tol", aopt.rel_tol},
+       {"points", ca.points},
+       {"cells", ca.cells},
+       {"parts", parts_used},
+       {"converged", ca.converged},
+       {"error", rel},
+       {"error_note",
+        "per frame, the estimated L1 error of the cell averages (the sum over the dual cells of "
+        "|C|·|average − exact average|) over the mass in the box"},
+       {"seconds", secs}};
+  if (!ca.converged) {
+    char b[400];
+    std::snprintf(b, sizeof b,
+                  "the cell averages reached their point cap (%zu points) before their tolerance "
+                  "%.1e: their estimated relative L1 error is up to %.2g (summary.json "
+                  "values.error)%s",
+                  ca.points, aopt.rel_tol, *std::max_element(rel.begin(), rel.end()),
+                  full ? "" : "; --set budget=full refines them further");
+    r.warnings.push_back(b);
+  }
+  if (!agrees) {
+    const auto k = static_cast<std::size_t>(std::max_element(gap.begin(), gap.end()) - gap.begin());
+    char b[400];
+    std::snprintf(b, sizeof b,
+                  "the cell averages miss mass that the budget measures: at t = %g they hold "
+                  "%.6g against %.6g +/- %.2g; their error estimate (summary.json values.error) "
+                  "includes the gap",
+                  times[k], ca.mass[k], r.budget.mass[k], r.budget.mass_error[k]);
+    r.warnings.push_back(b);
+  }
+}
+
 }  // namespace detail
 
 /// The characteristics method and its adaptive mass budget (`dt` unused).
@@ -336,6 +487,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   const double budget_tol = s.settings.real<"budget_tol">();
   if (budget_kind == "off") {
     r.summary[summary_key::budget] = {{"kind", "off"}};
+    detail::cell_average_stage<M>(grid, times, par, opt, s, r);
     return r;
   }
   // The mass budget integrates u(t) adaptively (characteristics at the cubature nodes): a
@@ -406,6 +558,7 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
                                     {"outflow_error", mb.outflow_error},
                                     {"reset_outflow", mb.reset_outflow},
                                     {"seconds", r.budget_s}};
+  detail::cell_average_stage<M>(grid, times, par, opt, s, r);
   return r;
 }
 

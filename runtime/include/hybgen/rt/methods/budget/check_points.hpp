@@ -31,6 +31,9 @@ struct CheckPoints {
   std::vector<std::array<double, D>> x;  ///< Coordinates.
   std::vector<double> v;                 ///< Values, K per point.
   std::array<double, D> spacing{};       ///< Their lattice's spacing per axis.
+  /// Optional: the cubature's root box each point lies in (a hint: AdaptiveCubature tries
+  /// it first), one per point of x, or empty.
+  std::vector<std::size_t> root;
 };
 
 /// The grid's nodes in the box [lo, hi], every s-th per axis (node indices divisible by s)
@@ -113,11 +116,13 @@ void keep_samples(CheckPoints<state_dim_v<M>>& checks, std::vector<double> v, st
     for (std::size_t k = 0; k < K; ++k) finite = finite && std::isfinite(v[j * K + k]);
     if (!finite || on_support_boundary<M>(checks.x[j], checks.spacing, par)) continue;
     checks.x[kept] = checks.x[j];
+    if (!checks.root.empty()) checks.root[kept] = checks.root[j];
     std::copy_n(v.begin() + static_cast<std::ptrdiff_t>(j * K), K,
                 v.begin() + static_cast<std::ptrdiff_t>(kept * K));
     ++kept;
   }
   checks.x.resize(kept);
+  if (!checks.root.empty()) checks.root.resize(kept);
   v.resize(kept * K);
   checks.v = std::move(v);
 }

@@ -56,7 +56,13 @@
 ///    (outside the support) freeze at once. Cells narrower than 2⁻⁴⁰ of the box are frozen
 ///    too (an unresolvable singularity keeps its honest share of E_k).
 ///  * Memory: 8·5K bytes per live leaf (K slots), at most max_points/q^D leaves, plus one
-///    batch of ≤ 2²¹ (point, time, mode) values.
+///    batch of ≤ 2²¹ (point, time, mode) values (the initial cells are traced in batches of
+///    that size too).
+///  * Per-root integrals (`per_root`): the integral and the error model above are also kept
+///    for every root box on its own (8·5K bytes per root), and the stop test holds the sum
+///    over the roots of their estimated errors, Σ_r E_{r,k} ≤ rel_tol·scale_k: the L1 error
+///    of the roots' integrals, not the error of their sum. The cell averages of
+///    characteristics (budget/cell_averages.hpp) take every dual cell of the grid as a root.
 
 #include <algorithm>
 #include <array>
@@ -79,6 +85,9 @@ struct AdaptiveOptions {
   double rel_tol = 1e-4;            ///< Target: estimated error ≤ rel_tol·max(mass0, mass_k).
   std::size_t max_points = 400000;  ///< Cap on traced points per integral (volume; faces).
   int order = 4;                    ///< Gauss–Legendre nodes per axis in a cell (≥ 1).
+  /// Initial cells per axis of each root box (fewer where they and their halves would take
+  /// more than a quarter of max_points; ≥ 1).
+  int root_parts = 4;
 };
 
 /// What an adaptive cubature did (shared by `AdaptiveMass` and `AdaptiveOutflow`).
@@ -149,9 +158,12 @@ class AdaptiveCubature {
   /// `targeted` (0: all K): only the slots k < targeted steer the refinement (split axes,
   /// indicators) and the stop test; the others are integrated on the same cells, passively
   /// (the faces' unresolved time-integral errors, budget/faces.hpp).
+  /// `per_root`: keep each root's integral and error too, and stop on their L1 sum (file
+  /// comment).
   AdaptiveCubature(std::vector<Box> roots, std::size_t K, std::size_t values_per_point,
                    const AdaptiveOptions& aopt, double scale, Values& values,
-                   const CheckPoints<D>* checks = nullptr, std::size_t targeted = 0)
+                   const CheckPoints<D>* checks = nullptr, std::size_t targeted = 0,
+                   bool per_root = false)
       : rule_(aopt.order),
         roots_(std::move(roots)),
         K_(K),
@@ -159,8 +171,12 @@ class AdaptiveCubature {
         aopt_(aopt),
         scale_(scale),
         values_(values),
-        checks_(checks != nullptr && !checks->x.empty() ? checks : nullptr) {
+        checks_(checks != nullptr && !checks->x.empty() ? checks : nullptr),
+        per_root_(per_root) {
     for (std::size_t i = 0; i < roots_.size(); ++i) roots_[i].tag = i;
+    if (per_root_)
+      for (std::vector<double>* v : {&rtotal_, &rD1_, &rD2_, &rO2_, &rA1_})
+        v->assign(roots_.size() * K_, 0.0);
     stride_ = 5 * K_;
     total_.assign(K_, 0.0);
     D1_.assign(K_, 0.0);
@@ -183,16 +199,17 @@ class AdaptiveCubature {
   /// Run to the target or to the point budget; false if a characteristic failed.
   bool run() {
     const std::size_t Q = rule_.Q;
-    // Initial cells: each root box cut into n_r parts per axis (4; fewer if the initial
-    // cells and their halves would take more than a quarter of the budget).
-    std::size_t n_r = 4, n_init = 0;
+    // Initial cells: each root box cut into n_r parts per axis (root_parts; fewer if the
+    // initial cells and their halves would take more than a quarter of the budget).
+    std::size_t n_r = static_cast<std::size_t>(std::max(aopt_.root_parts, 1)), n_init = 0;
     for (;; --n_r) {
       std::size_t per_root = 1;
       for (std::size_t a = 0; a < D; ++a) per_root *= n_r;
       n_init = per_root * roots_.size();
       if (n_r == 1 || 3 * n_init * Q <= aopt_.max_points / 4) break;
     }
-    batch_.clear();
+    std::vector<Box> init;
+    init.reserve(n_init);
     for (const Box& root : roots_) {
       std::size_t per_root = 1;
       for (std::size_t a = 0; a < D; ++a) per_root *= n_r;
@@ -206,17 +223,27 @@ class AdaptiveCubature {
           if (i > 0) c.lo[a] = root.lo[a] + w * static_cast<double>(i) / nr;
           if (i + 1 < n_r) c.hi[a] = root.lo[a] + w * static_cast<double>(i + 1) / nr;
         }
-        batch_.push_back(c);
+        init.push_back(c);
       }
     }
-    assign_checks();
-    if (!eval()) return false;
+    // Traced in batches of a split's size (the same sums, in the same order, as one batch).
+    const std::size_t chunk = 2 * batch_cap_;
+    std::vector<bool> assigned(checks_ != nullptr ? checks_->x.size() : 0, false);
     std::fill(d_.begin(), d_.end(), 0.0);
     std::fill(o_.begin(), o_.end(), 0.0);
-    for (std::size_t c = 0; c < batch_.size(); ++c) {
-      analyse(c, an_[0]);
-      for (std::size_t k = 0; k < K_; ++k) total_[k] += an_[0].I[k];
-      if constexpr (D > 0) store(c, an_[0], true);
+    for (std::size_t first = 0; first < init.size(); first += chunk) {
+      const std::size_t last = std::min(first + chunk, init.size());
+      batch_.assign(init.begin() + static_cast<std::ptrdiff_t>(first),
+                    init.begin() + static_cast<std::ptrdiff_t>(last));
+      assign_checks(n_r == 1 ? first : kNoHint, assigned);
+      if (!eval()) return false;
+      for (std::size_t c = 0; c < batch_.size(); ++c) {
+        analyse(c, an_[0]);
+        for (std::size_t k = 0; k < K_; ++k) total_[k] += an_[0].I[k];
+        if (per_root_)
+          for (std::size_t k = 0; k < K_; ++k) rtotal_[batch_[c].tag * K_ + k] += an_[0].I[k];
+        if constexpr (D > 0) store(c, an_[0], true);
+      }
     }
     if constexpr (D == 0) {
       converged_ = true;  // points: the "integral" is exact
@@ -285,6 +312,22 @@ class AdaptiveCubature {
   }
   /// Integral of slot k.
   double integral(std::size_t k) const { return total_[k]; }
+  /// Integral of slot k over root r alone (`per_root`).
+  double root_integral(std::size_t r, std::size_t k) const { return rtotal_[r * K_ + k]; }
+  /// Estimated |error| of root_integral(r, k) (`per_root`): |Σ d| + 2·sqrt(Σ d² + Σ o²) over
+  /// the root's leaves, and once a capped run is over at least Σ |c| of its leaves.
+  double root_error(std::size_t r, std::size_t k) const {
+    const std::size_t i = r * K_ + k;
+    const double e =
+        std::fabs(rD1_[i]) + 2.0 * std::sqrt(std::max(rD2_[i], 0.0) + std::max(rO2_[i], 0.0));
+    return done_ && capped_ ? std::max(e, rA1_[i]) : e;
+  }
+  /// Σ_r root_error(r, k): the estimated L1 error of the roots' integrals (`per_root`).
+  double l1_error(std::size_t k) const {
+    double s = 0.0;
+    for (std::size_t r = 0; r < roots_.size(); ++r) s += root_error(r, k);
+    return s;
+  }
   /// Points traced.
   std::size_t points() const { return points_; }
   /// Leaves (live and frozen).
@@ -307,12 +350,13 @@ class AdaptiveCubature {
     std::size_t ax = 0;
   };
 
-  /// max_k E_k / (rel_tol·scale_k) (∞ if a target is 0 and E_k is not).
+  /// max_k E_k / (rel_tol·scale_k) (∞ if a target is 0 and E_k is not); E_k is the L1 sum
+  /// over the roots with `per_root`.
   double worst_excess() const {
     double w = 0.0;
     for (std::size_t k = 0; k < KT_; ++k) {
       const double s = scale_ > 0.0 ? scale_ : std::max(std::fabs(total_[0]), std::fabs(total_[k]));
-      const double target = aopt_.rel_tol * s, e = error(k);
+      const double target = aopt_.rel_tol * s, e = per_root_ ? l1_error(k) : error(k);
       if (e > target)
         w = std::max(w, target > 0.0 ? e / target : std::numeric_limits<double>::infinity());
     }
@@ -346,16 +390,31 @@ class AdaptiveCubature {
     return true;
   }
 
-  /// The check points of the initial batch_: each to the first cell that contains it.
-  void assign_checks() {
+  /// The check points of a batch_ of initial cells: each not yet `assigned` to the first cell
+  /// that contains it. With uncut roots (`first`: the batch's first root), a point's
+  /// `CheckPoints::root` hint is tried first, so that a grid's dual cells as roots do not
+  /// cost a scan of every root per point.
+  void assign_checks(std::size_t first, std::vector<bool>& assigned) {
     batch_own_.assign(batch_.size(), {});
     if (checks_ == nullptr) return;
-    for (std::size_t j = 0; j < checks_->x.size(); ++j)
+    const bool hinted = first != kNoHint && checks_->root.size() == checks_->x.size();
+    for (std::size_t j = 0; j < checks_->x.size(); ++j) {
+      if (assigned[j]) continue;
+      if (hinted) {
+        const std::size_t r = checks_->root[j];
+        if (r >= first && r - first < batch_.size() && contains(batch_[r - first], checks_->x[j])) {
+          batch_own_[r - first].push_back(static_cast<std::uint32_t>(j));
+          assigned[j] = true;
+        }
+        continue;
+      }
       for (std::size_t c = 0; c < batch_.size(); ++c)
         if (contains(batch_[c], checks_->x[j])) {
           batch_own_[c].push_back(static_cast<std::uint32_t>(j));
+          assigned[j] = true;
           break;
         }
+    }
   }
 
   /// C[k] of cell c of the last batch (see the class comment).
@@ -524,6 +583,14 @@ class AdaptiveCubature {
         O2_[k] -= po[k] * po[k];
         A1_[k] -= std::fabs(pc[k]);
       }
+      const std::size_t root = batch_[2 * b].tag;  // slot s may be reused below
+      if (per_root_)
+        for (std::size_t k = 0, i = root * K; k < K; ++k, ++i) {
+          rD1_[i] -= pd[k];
+          rD2_[i] -= pd[k] * pd[k];
+          rO2_[i] -= po[k] * po[k];
+          rA1_[i] -= std::fabs(pc[k]);
+        }
       // ρ = (measured error along the split axis) / (its null-rule indicator), ≤ 1.
       double dsum = 0.0;
       for (std::size_t h = 0; h < 2; ++h) {
@@ -552,6 +619,14 @@ class AdaptiveCubature {
           D2_[k] += d_[k] * d_[k];
           A1_[k] += std::fabs(an.C[k]);
           O2_[k] += o_[k] * o_[k];
+          if (per_root_) {
+            const std::size_t i = root * K + k;
+            rtotal_[i] += dk;
+            rD1_[i] += d_[k];
+            rD2_[i] += d_[k] * d_[k];
+            rA1_[i] += std::fabs(an.C[k]);
+            rO2_[i] += o_[k] * o_[k];
+          }
         }
         store(2 * b + h, an, false);
       }
@@ -563,6 +638,7 @@ class AdaptiveCubature {
   static constexpr double kMinWidth = 0x1p-40;           // relative width below which cells freeze
   static constexpr double kMisfitOverDiscrepancy = 4.0;  // c stands for d beyond this ratio
   static constexpr std::size_t kBatchValues = std::size_t{1} << 21;  // values per batch
+  static constexpr std::size_t kNoHint = ~std::size_t{0};            // assign_checks: roots are cut
 
   CubatureRule<D> rule_;
   std::vector<Box> roots_;
@@ -572,6 +648,7 @@ class AdaptiveCubature {
   double scale_;
   Values& values_;
   const CheckPoints<D>* checks_;
+  bool per_root_ = false;
   std::size_t stride_ = 0, batch_cap_ = 1;
   // Live leaves: cell, split axis, T of the split axis; data_ per leaf: the halves'
   // predictions (2K), d (K), o (K), c (K). Freed slots are reused.
@@ -584,7 +661,9 @@ class AdaptiveCubature {
   // Running sums over all leaves, frozen ones included.
   std::vector<double> total_, D1_, D2_, O2_, A1_;
   std::vector<double> half_;  // total_ when half of the points were spent (empty before)
-  double live_ = 0.0;         // Σ of the indicators in the heap
+  // per_root_: the running sums of each root r at [r·K + k].
+  std::vector<double> rtotal_, rD1_, rD2_, rO2_, rA1_;
+  double live_ = 0.0;  // Σ of the indicators in the heap
   double freeze_tol_ = 0.0;
   std::size_t frozen_ = 0, points_ = 0;
   int iterations_ = 0;

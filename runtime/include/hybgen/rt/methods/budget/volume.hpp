@@ -32,16 +32,18 @@ struct AdaptiveMass : CubatureStats {
 
 namespace detail {
 
-/// Volume integrand: Σ_modes u(t_k) at the points, for the time slots `slots`.
+/// Volume integrand: Σ_modes u(t_k) at the points, for the time slots `slots`, or each mode's
+/// u on its own (`per_mode`: the cell averages, budget/cell_averages.hpp).
 template <HybridModel M>
 struct VolumeValues {
   static constexpr std::size_t N = state_dim_v<M>;  ///< State dimension.
-  std::span<const double> slots;                    ///< Times (slots[0] = 0).
+  std::span<const double> slots;                    ///< Times (slots[0] = 0 for the budget).
   const double* par = nullptr;                      ///< Parameters.
   const CharacteristicsOptions* opt = nullptr;      ///< Characteristics options.
   TraceFailure<N> failure{};                        ///< First failure.
+  bool per_mode = false;                            ///< See the struct comment.
 
-  /// U[i·K + k] = Σ_m u(slots[k], m, pts[i]).
+  /// U[i·K + k] = Σ_m u(slots[k], m, pts[i]); per_mode: U[(i·K + k)·n_mode + m] = u(…).
   bool operator()(std::span<const Cell<N>>, std::span<const std::array<double, N>> pts, std::size_t,
                   std::vector<double>& U) {
     const Solution<N> sol = evaluate<M>(pts, slots, par, *opt);
@@ -49,10 +51,15 @@ struct VolumeValues {
       failure = sol.failure;
       return false;
     }
-    const std::size_t K = slots.size();
+    const std::size_t K = slots.size(), Mn = sol.n_mode;
     for (std::size_t k = 0; k < K; ++k)
-      for (std::size_t m = 0; m < sol.n_mode; ++m)
-        for (std::size_t i = 0; i < pts.size(); ++i) U[i * K + k] += sol.at(k, m, i);
+      for (std::size_t m = 0; m < Mn; ++m)
+        for (std::size_t i = 0; i < pts.size(); ++i) {
+          if (per_mode)
+            U[(i * K + k) * Mn + m] = sol.at(k, m, i);
+          else
+            U[i * K + k] += sol.at(k, m, i);
+        }
     return true;
   }
 };
