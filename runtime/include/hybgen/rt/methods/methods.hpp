@@ -285,6 +285,21 @@ inline void add_spectrum_json(nlohmann::json& j, std::span<const std::complex<do
   j["leaks"] = e.leaks ? nlohmann::json(*e.leaks) : nlohmann::json();
 }
 
+/// A density's largest value over its largest value on a coarser grid (NaN if that is not
+/// positive): ≈ 1 for a bounded density, ≈ 2^c for a measure concentrated on a set of
+/// codimension c that the grid resolves to its spacing (a cycle in the plane: 2).
+inline double max_growth(std::span<const double> fine, std::span<const double> coarse) {
+  if (fine.empty() || coarse.empty()) return std::numeric_limits<double>::quiet_NaN();
+  const double a = *std::max_element(fine.begin(), fine.end());
+  const double b = *std::max_element(coarse.begin(), coarse.end());
+  return b > 0.0 ? a / b : std::numeric_limits<double>::quiet_NaN();
+}
+
+/// The growth of the maximum, at each of two halvings, beyond which an invariant density is
+/// taken for a measure concentrated below the grid's spacing: √2, a peak growing at least
+/// like h^(−1/2) (the width of a cycle smeared by a first-order scheme's diffusion).
+inline constexpr double kConcentratedGrowth = 1.4142;
+
 /// The density's error members of the invariant block (two_grid.hpp; null: no estimate).
 inline void add_density_error_json(nlohmann::json& j, double error,
                                    const std::vector<double>& mode_errors, double observed_order,
@@ -974,6 +989,25 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
         "the spectral gap is within its estimated error of 0: no decay is claimed "
         "(the scheme's numerical diffusion moves a cycle's eigenvalues inside the "
         "unit circle)");
+  // A measure concentrated below the grid's spacing (an attracting cycle): the maximum grows
+  // as the grid is refined, and the values are cell masses that converge as a measure only.
+  const double g1 = detail::max_growth(inv.density, c.density);
+  const double g2 = detail::max_growth(c.density, q.density);
+  const bool concentrated = g1 >= detail::kConcentratedGrowth && g2 >= detail::kConcentratedGrowth;
+  if (concentrated) {
+    char b[700];
+    std::snprintf(b, sizeof b,
+                  "the invariant density's maximum grows %.2fx from the halved grid to this one "
+                  "(%.2fx from the quartered to the halved): the invariant measure is "
+                  "concentrated below the grid's spacing (an attracting cycle carries a measure "
+                  "on a curve), and the values are the dual cells' masses over their volumes. "
+                  "They converge as a measure (cell masses, the means of observables: observe "
+                  "NAME = f, with their errors), not pointwise or in L1, so the density's L1 "
+                  "error estimate does not apply",
+                  g1, g2);
+    notes.push_back(b);
+    r.warnings.push_back(b);
+  }
   std::vector<int> coarse_nodes;
   for (const GridAxis& a : half.axes) coarse_nodes.push_back(a.n);
   nlohmann::json j = detail::operator_summary(o, op);
@@ -981,6 +1015,8 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   detail::add_spectrum_json(j, inv.eigenvalues, spec);
   detail::add_density_error_json(j, error, mode_errors, observed, reliable, coarse_nodes);
   j["order"] = kOrder;
+  j["max_growth"] = {detail::number_or_null(g2), detail::number_or_null(g1)};
+  j["concentrated"] = concentrated;
   j["error_seconds"] = error_s;
   j["min_value"] = inv.min_value;
   j["residual"] = inv.residual;
