@@ -394,9 +394,8 @@ nlohmann::json observables_summary(const RunPlan<state_dim_v<M>>& p,
       break;
     case ObservableErrorKind::cells:
       how =
-          "the observable's oscillation over each dual cell times the cell's mass, plus the "
-          "cell masses' estimated L1 error times the observable's spread (the values are cell "
-          "averages)";
+          "the adaptive cubature's estimates of the integrals of f u and of u over the box, on the "
+          "cells of the cell averages (budget/cell_averages.hpp)";
       break;
     case ObservableErrorKind::none:
       how = "none";

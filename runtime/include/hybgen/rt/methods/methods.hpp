@@ -121,7 +121,7 @@ struct MethodResult {
   /// How the observables' errors are estimated (observables.hpp), and from what: the same
   /// answer on the halved and quartered grids (`coarse`) of a scheme of order `order`, or
   /// the samples' own expectations (`sampled_observables`, particles; or, computed by the
-  /// method too, the cell averages' bound: budget/cell_averages.hpp, cell_observables).
+  /// method too, the cell averages' cubature of f u: budget/cell_averages.hpp).
   ObservableErrorKind observable_errors = ObservableErrorKind::none;
   std::vector<CoarseAnswer<N>> coarse;                ///< See observable_errors.
   int order = 1;                                      ///< See observable_errors.
@@ -422,7 +422,7 @@ void cell_average_stage(const TensorGrid<state_dim_v<M>>& grid, std::span<const 
   r.solve_s += secs;
   for (std::size_t k = 0; k < K; ++k) ca.l1_error[k] = std::max(ca.l1_error[k], gap[k]);
   if (observable_count<M>() > 0) {
-    r.sampled_observables = cell_observables<M>(grid, ca, par);
+    r.sampled_observables = std::move(ca.observables);
     r.observable_errors = ObservableErrorKind::cells;
   }
   std::vector<double> rel(K, 0.0);

@@ -70,7 +70,7 @@ enum class ObservableErrorKind {
   quadrature,  ///< Exact node values: the trapezoid rule's error (characteristics).
   coarse,      ///< A scheme of order `order` with coarse answers (transfer, invariant).
   samples,     ///< Sample means with their standard errors (particles).
-  cells,       ///< Cell averages with their oscillation bound (budget/cell_averages.hpp).
+  cells,       ///< The cell averages' cubature of f u (budget/cell_averages.hpp).
   none,        ///< No estimate.
 };
 

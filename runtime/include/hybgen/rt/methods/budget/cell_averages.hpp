@@ -34,6 +34,10 @@
 /// many per cell) finds it: methods.hpp's `cell_average_stage` then starts again with each
 /// dual cell cut into 2, then 4 parts per axis, and an estimate never below the gap.
 ///
+/// Observables: the cubature integrates Σ_m f_o·u over the cells too, on the cells the masses
+/// chose (passive slots), so E[f] = ∫ Σ_m f u / mass comes with the cubature's estimates of
+/// both integrals: error = (err_F + |E|·err_M)/M.
+///
 /// Cost: 3·3^N·p^N traced points per node at least (order-3 Gauss rule on p^N parts of each
 /// dual cell, each split once), each a backward characteristic for every output time at once;
 /// then refinement up to the cap. Memory: 8·5·K·n_mode bytes per node for the roots' sums, as
@@ -67,6 +71,8 @@ struct CellAverages : CubatureStats {
   /// Per output time: the estimated L1 error Σ_m Σ_i |C_i|·|ū − exact| (mass units).
   std::vector<double> l1_error;
   std::vector<double> mass;  ///< Per output time: Σ_m Σ_i |C_i|·ū, the mass they hold.
+  /// M's observables' means over the box per output time (the file comment), with errors.
+  std::vector<ObservableSeries> observables;
 };
 
 namespace detail {
@@ -134,9 +140,13 @@ CellAverages<state_dim_v<M>> cell_averages(const TensorGrid<state_dim_v<M>>& gri
   std::vector<detail::Cell<N>> roots(grid.size());
   for (std::size_t i = 0; i < roots.size(); ++i) roots[i] = detail::dual_cell(grid, i);
   const detail::CheckPoints<N> checks = detail::cell_checks<M>(grid, nodes, par, opt.backend);
+  // The masses per (time, mode) steer the cubature; each observable's Σ_m f u per time is
+  // integrated on the same cells, passively.
+  const auto n_obs = static_cast<std::size_t>(observable_count<M>());
+  const std::size_t slots = K * (Mn + n_obs);
   detail::VolumeValues<M> values{times, par, &opt, {}, true};
-  detail::AdaptiveCubature<N, detail::VolumeValues<M>> cub(std::move(roots), K * Mn, K * Mn, aopt,
-                                                           scale, values, &checks, 0, true);
+  detail::AdaptiveCubature<N, detail::VolumeValues<M>> cub(std::move(roots), slots, slots, aopt,
+                                                           scale, values, &checks, K * Mn, true);
   const bool ok = cub.run();
   if (!ok) failure = values.failure;
   CellAverages<N> res;
@@ -156,67 +166,25 @@ CellAverages<state_dim_v<M>> cell_averages(const TensorGrid<state_dim_v<M>>& gri
         res.l1_error[k] += cub.root_error(i, k * Mn + m);
       }
   }
-  return res;
-}
-
-/// The expectations of M's observables under cell averages `ca` on `grid` (the file comment):
-///   E[f] = Σ_i m_i f(y_i) / Σ_i m_i,   m_i = |C_i|·ū_i  (per mode, summed),
-/// the dual cells' masses put at their nodes. Where in C_i the mass sits is not known, so
-/// f(y_i) stands for f's mean under u over C_i to within f's oscillation there, taken as
-/// osc_i = ½ Σ_a |f(y_i + ĥ_a⁺ e_a) − f(y_i − ĥ_a⁻ e_a)| (the cell's faces along a; exact for
-/// f linear on C_i); the masses' own error (`ca.l1_error`) moves E by at most
-/// l1·max_i |f_i − E| / mass. The error is their sum:
-///   error = (Σ_i m_i·osc_i + l1·max_i |f_i − E|) / Σ_i m_i,
-/// a bound for f linear on each cell where the masses are right, and first order in the
-/// spacing: wide where u is smooth (its mean over a cell is near its centre), tight where the
-/// mass concentrates in a cell's corner.
-template <HybridModel M>
-std::vector<ObservableSeries> cell_observables(const TensorGrid<state_dim_v<M>>& grid,
-                                               const CellAverages<state_dim_v<M>>& ca,
-                                               const double* par) {
-  constexpr std::size_t N = state_dim_v<M>;
-  const int n_obs = observable_count<M>();
-  const Solution<N>& s = ca.averages;
-  std::vector<ObservableSeries> out(static_cast<std::size_t>(n_obs));
-  for (int o = 0; o < n_obs; ++o) out[static_cast<std::size_t>(o)].name = observable_name<M>(o);
+  // E[f] = F/M with F = ∫ Σ_m f u and M the mass, each the sum over the roots; their errors
+  // are the cubature's estimates of those sums.
   const double nan = std::numeric_limits<double>::quiet_NaN();
-  for (std::size_t k = 0; k < s.n_time; ++k) {
-    std::vector<double> num(out.size(), 0.0), osc(out.size(), 0.0), fmin(out.size(), HUGE_VAL),
-        fmax(out.size(), -HUGE_VAL);
-    double mass = 0.0;
-    for (std::size_t i = 0; i < s.n_point; ++i) {
-      const detail::Cell<N> cell = detail::dual_cell(grid, i);
-      const std::array<double, N> y = grid.node(i);
-      for (std::size_t m = 0; m < s.n_mode; ++m) {
-        const double mi = cell.volume() * s.at(k, m, i);
-        if (mi == 0.0) continue;
-        mass += mi;
-        for (std::size_t o = 0; o < out.size(); ++o) {
-          const int io = static_cast<int>(o), im = static_cast<int>(m);
-          const double f = observable_value<M>(io, im, y.data(), par);
-          double w = 0.0;
-          for (std::size_t a = 0; a < N; ++a) {
-            std::array<double, N> lo = y, hi = y;
-            lo[a] = cell.lo[a], hi[a] = cell.hi[a];
-            w += std::fabs(observable_value<M>(io, im, hi.data(), par) -
-                           observable_value<M>(io, im, lo.data(), par));
-          }
-          num[o] += mi * f;
-          osc[o] += mi * 0.5 * w;
-          fmin[o] = std::min(fmin[o], f);
-          fmax[o] = std::max(fmax[o], f);
-        }
-      }
+  for (std::size_t o = 0; o < n_obs; ++o) {
+    ObservableSeries series;
+    series.name = observable_name<M>(static_cast<int>(o));
+    for (std::size_t k = 0; k < K; ++k) {
+      double mass = 0.0, mass_error = 0.0;
+      for (std::size_t m = 0; m < Mn; ++m)
+        mass += cub.integral(k * Mn + m), mass_error += cub.error(k * Mn + m);
+      const std::size_t slot = K * Mn + k * n_obs + o;
+      const double e = mass > 0.0 ? cub.integral(slot) / mass : nan;
+      series.values.push_back(e);
+      series.errors.push_back(mass > 0.0 ? (cub.error(slot) + std::fabs(e) * mass_error) / mass
+                                         : nan);
     }
-    for (std::size_t o = 0; o < out.size(); ++o) {
-      const double e = mass > 0.0 ? num[o] / mass : nan;
-      const double spread =
-          mass > 0.0 ? std::max(std::fabs(fmax[o] - e), std::fabs(e - fmin[o])) : 0.0;
-      out[o].values.push_back(e);
-      out[o].errors.push_back(mass > 0.0 ? (osc[o] + ca.l1_error[k] * spread) / mass : nan);
-    }
+    res.observables.push_back(std::move(series));
   }
-  return out;
+  return res;
 }
 
 }  // namespace hybgen::rt

@@ -33,7 +33,8 @@ struct AdaptiveMass : CubatureStats {
 namespace detail {
 
 /// Volume integrand: Σ_modes u(t_k) at the points, for the time slots `slots`, or each mode's
-/// u on its own (`per_mode`: the cell averages, budget/cell_averages.hpp).
+/// u on its own and then each observable's Σ_m f_o u (`per_mode`: the cell averages,
+/// budget/cell_averages.hpp).
 template <HybridModel M>
 struct VolumeValues {
   static constexpr std::size_t N = state_dim_v<M>;  ///< State dimension.
@@ -43,7 +44,9 @@ struct VolumeValues {
   TraceFailure<N> failure{};                        ///< First failure.
   bool per_mode = false;                            ///< See the struct comment.
 
-  /// U[i·K + k] = Σ_m u(slots[k], m, pts[i]); per_mode: U[(i·K + k)·n_mode + m] = u(…).
+  /// U[i·K + k] = Σ_m u(slots[k], m, pts[i]); per_mode, with S = K·(n_mode + n_obs) values
+  /// per point: U[i·S + k·n_mode + m] = u(slots[k], m, pts[i]) and
+  /// U[i·S + K·n_mode + k·n_obs + o] = Σ_m f_o(m, pts[i])·u(slots[k], m, pts[i]).
   bool operator()(std::span<const Cell<N>>, std::span<const std::array<double, N>> pts, std::size_t,
                   std::vector<double>& U) {
     const Solution<N> sol = evaluate<M>(pts, slots, par, *opt);
@@ -52,14 +55,23 @@ struct VolumeValues {
       return false;
     }
     const std::size_t K = slots.size(), Mn = sol.n_mode;
-    for (std::size_t k = 0; k < K; ++k)
-      for (std::size_t m = 0; m < Mn; ++m)
-        for (std::size_t i = 0; i < pts.size(); ++i) {
+    const std::size_t n_obs = per_mode ? static_cast<std::size_t>(observable_count<M>()) : 0;
+    const std::size_t S = K * (Mn + n_obs);
+    for (std::size_t i = 0; i < pts.size(); ++i)
+      for (std::size_t m = 0; m < Mn; ++m) {
+        for (std::size_t k = 0; k < K; ++k) {
           if (per_mode)
-            U[(i * K + k) * Mn + m] = sol.at(k, m, i);
+            U[i * S + k * Mn + m] = sol.at(k, m, i);
           else
             U[i * K + k] += sol.at(k, m, i);
         }
+        for (std::size_t o = 0; o < n_obs; ++o) {
+          const double f =
+              observable_value<M>(static_cast<int>(o), static_cast<int>(m), pts[i].data(), par);
+          for (std::size_t k = 0; k < K; ++k)
+            U[i * S + K * Mn + k * n_obs + o] += f * sol.at(k, m, i);
+        }
+      }
     return true;
   }
 };
