@@ -170,6 +170,17 @@ img { max-width: 100%; } .muted { color: #666; }
       << (has(files, "animation.gif") ? ", animated: <a href=\"animation.gif\">animation.gif</a>"
                                       : "")
       << ".</p>\n";
+  // Cell averages (characteristics, values=cells): what the frames hold, and how well.
+  if (run.cell_averages && run.summary.is_object() && run.summary.contains(summary_key::values)) {
+    const nlohmann::json& v = run.summary[summary_key::values];
+    double worst = 0.0;
+    for (const auto& e : v.value("error", nlohmann::json::array()))
+      if (e.is_number()) worst = std::max(worst, e.get<double>());
+    h << "<p>The frames are <b>cell averages</b>: each value is the exact density's mean over "
+         "its node's dual cell, by adaptive cubature (estimated L1 error at most "
+      << number(worst) << " of the mass), because " << html(v.value("reason", std::string()))
+      << ".</p>\n";
+  }
 
   // The mass budget.
   const MassBudget& b = run.budget;

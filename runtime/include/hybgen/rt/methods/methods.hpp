@@ -346,7 +346,7 @@ void cell_average_stage(const TensorGrid<state_dim_v<M>>& grid, std::span<const 
   nlohmann::json& j = r.summary[summary_key::values];
   j = {{"kind", "nodes"}, {"setting", want}};
   if (want == "nodes") return;
-  std::string why = "values=cells";
+  std::string why = "values=cells asks for them";
   std::vector<double> sums(K, 0.0);
   for (std::size_t k = 0; k < K; ++k)
     sums[k] = observable_sums<M>(grid, r.solution, k, 1, par, backend).back();
@@ -355,7 +355,8 @@ void cell_average_stage(const TensorGrid<state_dim_v<M>>& grid, std::span<const 
     if (k == K) return;
     char b[200];
     std::snprintf(b, sizeof b,
-                  "values=auto: at t = %g the nodes' trapezoid sum is %.4g but the mass is %.4g",
+                  "the nodes under-resolve the density (values=auto): at t = %g their trapezoid "
+                  "sum is %.4g but the mass is %.4g",
                   times[k], sums[k], r.budget.mass[k]);
     why = b;
   }
