@@ -92,9 +92,10 @@ Cell<N> dual_cell(const TensorGrid<N>& grid, std::size_t flat) {
   return c;
 }
 
-/// The check points of the cell averages: every node with the run's values u(t_k, m) at slot
-/// k·n_mode + m (summed over the ranks of a distributed solution), each hinted to its own dual
-/// cell.
+/// The check points of the cell averages: every node with the run's values in the cubature's
+/// slots (VolumeValues with per_mode, budget/volume.hpp): u(t_k, m) at k·n_mode + m, then each
+/// observable's Σ_m f_o(m, y)·u(t_k, m) at K·n_mode + k·n_obs + o (summed over the ranks of a
+/// distributed solution), each hinted to its own dual cell.
 template <HybridModel M>
 CheckPoints<state_dim_v<M>> cell_checks(const TensorGrid<state_dim_v<M>>& grid,
                                         const Solution<state_dim_v<M>>& nodes, const double* par,
@@ -105,16 +106,27 @@ CheckPoints<state_dim_v<M>> cell_checks(const TensorGrid<state_dim_v<M>>& grid,
   for (std::size_t a = 0; a < N; ++a) lo[a] = grid.axes[a].min, hi[a] = grid.axes[a].max;
   const std::vector<std::size_t> flat = check_lattice(grid, grid.size(), lo, hi, checks);
   const std::size_t K = nodes.n_time, Mn = nodes.n_mode, P = nodes.n_point;
-  std::vector<double> v(flat.size() * K * Mn, 0.0);
+  const auto n_obs = static_cast<std::size_t>(observable_count<M>());
+  const std::size_t S = K * (Mn + n_obs);  // values per point
+  std::vector<double> v(flat.size() * S, 0.0);
   const Block own = nodes.distributed ? nodes.owned : Block{0, Mn * P};
   for (std::size_t j = 0; j < flat.size(); ++j)
-    for (std::size_t k = 0; k < K; ++k)
-      for (std::size_t m = 0; m < Mn; ++m)
-        if (const std::size_t pair = m * P + flat[j]; pair >= own.begin && pair < own.end)
-          v[(j * K + k) * Mn + m] = nodes.at(k, m, flat[j]);
+    for (std::size_t m = 0; m < Mn; ++m)
+      if (const std::size_t pair = m * P + flat[j]; pair >= own.begin && pair < own.end)
+        for (std::size_t k = 0; k < K; ++k) v[j * S + k * Mn + m] = nodes.at(k, m, flat[j]);
+  // Each (mode, node) pair on one rank: the sum over the ranks is exact, and every rank then
+  // has every u and forms the observables' sums over the modes in the same order.
   if (nodes.distributed && backend != nullptr) backend->sum_disjoint(std::span<double>(v));
+  for (std::size_t j = 0; j < flat.size() && n_obs > 0; ++j)
+    for (std::size_t m = 0; m < Mn; ++m)
+      for (std::size_t o = 0; o < n_obs; ++o) {
+        const double f =
+            observable_value<M>(static_cast<int>(o), static_cast<int>(m), checks.x[j].data(), par);
+        for (std::size_t k = 0; k < K; ++k)
+          v[j * S + K * Mn + k * n_obs + o] += f * v[j * S + k * Mn + m];
+      }
   checks.root = flat;
-  keep_samples<M>(checks, std::move(v), K * Mn, par);
+  keep_samples<M>(checks, std::move(v), S, par);
   return checks;
 }
 

@@ -72,6 +72,8 @@
 #include <limits>
 #include <queue>
 #include <span>
+#include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -174,6 +176,13 @@ class AdaptiveCubature {
         checks_(checks != nullptr && !checks->x.empty() ? checks : nullptr),
         per_root_(per_root) {
     for (std::size_t i = 0; i < roots_.size(); ++i) roots_[i].tag = i;
+    // The misfit reads K values per check point (CheckPoints::v): a mismatch would read past
+    // them (the cell averages' observables' slots once did; ASan found it).
+    if (checks_ != nullptr && checks_->v.size() != checks_->x.size() * K_)
+      throw std::logic_error("AdaptiveCubature: the check points carry " +
+                             std::to_string(checks_->v.size()) + " values for " +
+                             std::to_string(checks_->x.size()) + " points, not " +
+                             std::to_string(K_) + " each");
     if (per_root_)
       for (std::vector<double>* v : {&rtotal_, &rD1_, &rD2_, &rO2_, &rA1_})
         v->assign(roots_.size() * K_, 0.0);
