@@ -385,8 +385,10 @@ void cell_average_stage(const TensorGrid<state_dim_v<M>>& grid, std::span<const 
     const double split = std::pow(static_cast<double>(parts), static_cast<double>(N));
     const double pass = 3.0 * std::pow(kCellAverageOrder, static_cast<double>(N)) * split *
                         static_cast<double>(grid.size());  // the rule's nodes, split once
-    const double bytes =
-        8.0 * 5.0 * static_cast<double>(K * Mn) * 3.0 * split * static_cast<double>(grid.size());
+    // 5 sums per slot (masses and observables), for each root and about twice as many leaves.
+    const auto slots =
+        static_cast<double>(K * (Mn + static_cast<std::size_t>(observable_count<M>())));
+    const double bytes = 8.0 * 5.0 * slots * 3.0 * split * static_cast<double>(grid.size());
     if (bytes > kCellAverageBytes) {
       if (parts > 1) break;
       char b[200];
