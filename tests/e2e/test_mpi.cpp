@@ -215,11 +215,11 @@ TEST_P(MpiAgreement, CharacteristicsAreTheSameBitsAndTheBudgetAgrees) {
     // The observable's mean: the same bits under cell averages (every rank integrates the
     // whole); from node values a sum over the ranks' parts, so rounding.
     for (const char* key : {"values", "errors"}) {
-      const auto a = ref.summary.at("observables").at("first").at(key).get<std::vector<double>>();
-      const auto b = r.summary.at("observables").at("first").at(key).get<std::vector<double>>();
-      ASSERT_EQ(a.size(), b.size()) << c.name;
-      for (std::size_t k = 0; k < a.size(); ++k)
-        EXPECT_NEAR(a[k], b[k], 1e-12 * (1.0 + std::fabs(a[k])))
+      const auto x = ref.summary.at("observables").at("first").at(key).get<std::vector<double>>();
+      const auto y = r.summary.at("observables").at("first").at(key).get<std::vector<double>>();
+      ASSERT_EQ(x.size(), y.size()) << c.name;
+      for (std::size_t k = 0; k < x.size(); ++k)
+        EXPECT_NEAR(x[k], y[k], 1e-12 * (1.0 + std::fabs(x[k])))
             << c.name << " " << key << " " << k;
     }
   }
