@@ -78,4 +78,16 @@ inline nlohmann::json read_json_file(const std::filesystem::path& p) {
   return nlohmann::json::parse(hybgen::gen::read_file(p.string()));
 }
 
+/// `hybgen run 'MODEL' --quiet --out 'DIR' SETS` into a fresh `dir`, with the cache `cache`:
+/// its summary.json, or null when the run failed (a test failure with hybgen's output).
+inline nlohmann::json run_summary(const std::string& model, const std::filesystem::path& dir,
+                                  const std::string& sets, const std::filesystem::path& cache) {
+  std::filesystem::remove_all(dir);
+  const ShellResult res =
+      run_hybgen("run '" + model + "' --quiet --out '" + dir.string() + "' " + sets, cache);
+  EXPECT_EQ(res.code, 0) << res.out;
+  if (res.code != 0) return nullptr;
+  return read_json_file(dir / "summary.json");
+}
+
 }  // namespace hybgen::testing

@@ -45,7 +45,6 @@
 namespace {
 
 namespace fs = std::filesystem;
-using hybgen::testing::run_hybgen;
 using nlohmann::json;
 
 const fs::path kWork = hybgen::testing::e2e_dir("validation_cell_averages");
@@ -57,14 +56,8 @@ constexpr double kPi = 3.14159265358979323846;
 /// `hybgen run MODEL --quiet EXTRA` with .npy frames into its own directory: summary.json
 /// (null when the run failed; the output is in the test's message).
 json run(const std::string& model, const std::string& tag, const std::string& extra) {
-  const fs::path dir = kWork / tag;
-  fs::remove_all(dir);
-  const auto res = run_hybgen("run '" + kModels + model + ".model' --quiet --out '" + dir.string() +
-                                  "' --set outputs=npy " + extra,
-                              kCache);
-  EXPECT_EQ(res.code, 0) << res.out;
-  if (res.code != 0) return nullptr;
-  return hybgen::testing::read_json_file(dir / "summary.json");
+  return hybgen::testing::run_summary(kModels + model + ".model", kWork / tag,
+                                      "--set outputs=npy " + extra, kCache);
 }
 
 /// Φ, the standard normal distribution function.

@@ -46,7 +46,6 @@
 namespace {
 
 namespace fs = std::filesystem;
-using hybgen::testing::run_hybgen;
 using nlohmann::json;
 
 const fs::path kWork = hybgen::testing::e2e_dir("validation_observables");
@@ -56,14 +55,8 @@ const std::string kModels = std::string(HYBGEN_SOURCE_DIR) + "/tests/validation/
 /// `hybgen run MODEL --quiet EXTRA` into its own directory: summary.json (null when the run
 /// failed; the output is in the test's message).
 json run(const std::string& model, const std::string& tag, const std::string& extra) {
-  const fs::path dir = kWork / tag;
-  fs::remove_all(dir);
-  const auto res = run_hybgen("run '" + kModels + model + "' --quiet --out '" + dir.string() +
-                                  "' --set outputs=netcdf " + extra,
-                              kCache);
-  EXPECT_EQ(res.code, 0) << res.out;
-  if (res.code != 0) return nullptr;
-  return hybgen::testing::read_json_file(dir / "summary.json");
+  return hybgen::testing::run_summary(kModels + model, kWork / tag, "--set outputs=netcdf " + extra,
+                                      kCache);
 }
 
 /// The observables every run of the thermostat adds (the heating fraction is a mode piece).

@@ -370,10 +370,10 @@ void cell_average_stage(const TensorGrid<state_dim_v<M>>& grid, std::span<const 
   AdaptiveOptions aopt;
   aopt.rel_tol = full ? s.settings.real<"budget_tol">()
                       : std::max(s.settings.real<"budget_tol">(), kFastBudgetTol);
-  double scale = 0.0;
-  for (const double m : r.budget.mass) scale = std::max(scale, m);
-  for (const double m : sums) scale = r.budget.mass.empty() ? std::max(scale, m) : scale;
-  scale = std::max(scale, r.budget.mass0);
+  // The mass per frame: the budget's, or without a budget the nodes' trapezoid sums.
+  const std::vector<double>& mass = r.budget.mass.size() == K ? r.budget.mass : sums;
+  double scale = r.budget.mass0;
+  for (const double m : mass) scale = std::max(scale, m);
   // Each dual cell in 1, then 2, then 4 parts per axis, until the cells' masses agree with the
   // budget's (budget/cell_averages.hpp: what the first pass can miss).
   CellAverages<N> ca;
@@ -429,10 +429,8 @@ void cell_average_stage(const TensorGrid<state_dim_v<M>>& grid, std::span<const 
     r.observable_errors = ObservableErrorKind::cells;
   }
   std::vector<double> rel(K, 0.0);
-  for (std::size_t k = 0; k < K; ++k) {
-    const double m = r.budget.mass.empty() ? sums[k] : r.budget.mass[k];
-    rel[k] = m > 0.0 ? ca.l1_error[k] / m : ca.l1_error[k];
-  }
+  for (std::size_t k = 0; k < K; ++k)
+    rel[k] = mass[k] > 0.0 ? ca.l1_error[k] / mass[k] : ca.l1_error[k];
   const Block own = r.solution.owned;
   const bool distributed = r.solution.distributed;
   r.solution.u = std::move(ca.averages.u);
