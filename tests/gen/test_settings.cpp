@@ -226,6 +226,25 @@ TEST(Settings, SchemeFvIsForTransferAndInvariant) {
   }
 }
 
+// fv_order=4 gives a cycle growing modes (|λ| = 1 + 1.7e-7 on quadratic_cycle.model at 401
+// nodes): refused before anything runs (setting_rules.hpp, fv_order_rule); 1–3 and 5 pass.
+TEST(Settings, FvOrderFourIsRefused) {
+  for (const int order : {1, 2, 3, 4, 5}) {
+    rt::Settings s;
+    rt::SettingValue v;
+    v.number = order;
+    v.has_number = true;
+    s.assign("fv_order", v);
+    std::string why;
+    for (const rt::SettingConflict& c : rt::setting_conflicts(s, rt::RunFacts{}))
+      if (c.setting == "fv_order") why = c.message;
+    EXPECT_EQ(why.empty(), order != 4) << order << ": " << why;
+    if (order == 4) {
+      EXPECT_NE(why.find("fv_order=5"), std::string::npos) << why;
+    }
+  }
+}
+
 TEST(Settings, DocsPageIsTheTable) {
   const std::string page = read_file(std::string(HYBGEN_SOURCE_DIR) + "/docs/settings.md");
   EXPECT_NE(page.find(rt::settings_markdown()), std::string::npos)

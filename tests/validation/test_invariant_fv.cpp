@@ -127,7 +127,7 @@ TEST(InvariantFv, ThermostatPerModeWithinTheTarget) {
   ASSERT_EQ(r.code, 0) << r.out;
   const json& inv = r.summary["invariant"];
   EXPECT_EQ(inv["scheme"], "fv");
-  EXPECT_EQ(inv["order"], 3);
+  EXPECT_EQ(inv["order"], 5);
   EXPECT_EQ(inv["coarse_grid"], json::array({141}));
   const std::vector<double> e = thermostat_errors(r, 281);
   std::printf("thermostat 281 nodes: heat %.3e, cool %.3e, |lambda1| - 1 = %.1e, %.2f s\n", e[0],

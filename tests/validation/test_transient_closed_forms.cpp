@@ -464,8 +464,9 @@ Transient ball(const std::string& name, int n, double inner) {
 /// Per output time, the true error (max over modes; nodes on a jump left out: the generator
 /// gives them the mean of their one-sided values) of `c` by `method=transfer, scheme=fv` (and
 /// its `sets`), after checking that each of the run's transfer.errors covers its error within
-/// ten times (0 at t = 0) and the budget closes to rounding. The summary into *summary.
-std::vector<double> covered_errors(const Transient& c, nlohmann::json* summary = nullptr) {
+/// `wide` times (0 at t = 0) and the budget closes to rounding. The summary into *summary.
+std::vector<double> covered_errors(const Transient& c, nlohmann::json* summary = nullptr,
+                                   double wide = 10.0) {
   nlohmann::json s;
   const std::vector<double> e = frame_errors(c, &s, "transfer", true);
   if (summary) *summary = s;
@@ -490,7 +491,7 @@ std::vector<double> covered_errors(const Transient& c, nlohmann::json* summary =
       continue;
     }
     EXPECT_GE(estimate, truth[k]) << c.name << " t = " << t;
-    EXPECT_LE(estimate, 10.0 * truth[k]) << c.name << " t = " << t;
+    EXPECT_LE(estimate, wide * truth[k]) << c.name << " t = " << t;
   }
   return truth;
 }
@@ -505,13 +506,14 @@ TEST(TransientClosedForms, TheTimeSteppedGeneratorOnCyclesWallsAndSwitches) {
     Transient c;
     double fv;  // the last frame's relative L1 error, at most
   };
-  // Measured, fv against hat: wrap 7.9e-6 / 1.5e-4, log 1.0e-5 / 5.0e-4, three modes 2.1e-6 /
-  // 1.2e-3, qif 6.1e-5 / 3.4e-3 (1-D: third order, jumps exact); the oscillator (a rotation,
-  // 41 × 81) 6.3e-2 / 7.9e-2 and the helix (25 × 25 × 21) 0.13 / 0.14, where an Eulerian
-  // scheme smears a rotation on coarse grids as much as the sampled one does. Estimates 2.5–7×.
-  for (const Bound& b :
-       {Bound{wrap_circle(), 1.6e-5}, Bound{log_circle(), 2e-5}, Bound{three_mode_cycle(), 4.2e-6},
-        Bound{oscillator_wall(), 0.13}, Bound{helix_switch(), 0.27}, Bound{qif_neuron(), 1.2e-4}}) {
+  // Measured (fv_order 5, the default), fv against hat: wrap 3.0e-7 / 1.5e-4, log 1.3e-7 /
+  // 5.0e-4, three modes 3.1e-8 / 1.2e-3, qif 8.2e-8 / 3.4e-3 (1-D, jumps exact); the
+  // oscillator (a rotation, 41 × 81) 1.6e-2 / 7.9e-2 and the helix (25 × 25 × 21) 5.4e-2 /
+  // 0.14, both a C¹ bump on a coarse grid. Estimates 2.5–6.7×. With fv_order=3: 7.9e-6,
+  // 1.0e-5, 2.1e-6, 6.1e-5, 6.3e-2 and 0.13.
+  for (const Bound& b : {Bound{wrap_circle(), 6e-7}, Bound{log_circle(), 3e-7},
+                         Bound{three_mode_cycle(), 6.3e-8}, Bound{oscillator_wall(), 3.2e-2},
+                         Bound{helix_switch(), 0.11}, Bound{qif_neuron(), 1.7e-7}}) {
     Transient fv = b.c, hat = b.c;
     fv.sets += " --set scheme=fv";
     fv.name += "_fv";
@@ -530,10 +532,14 @@ TEST(TransientClosedForms, TheTimeSteppedGeneratorOnCyclesWallsAndSwitches) {
 
 TEST(TransientClosedForms, TheTimeSteppedGeneratorOnTheBallConvergesAtSecondOrderOrBetter) {
   // The elastic ball on the annulus 0.6 ≤ E ≤ 1.8 (ball_annulus.model), t = 0 … 10 every 0.5,
-  // on 129² and 257²: the observed order against the closed form, every estimate covering
-  // its error within ten times. Measured (2026-11-29): 1.13e-2 → 1.67e-3 at t = 2 (order
-  // 2.8), 1.11e-1 → 1.91e-2 at t = 10 (2.5); the hat scheme 2.5e-2 at 257², t = 10.
-  const std::vector<double> coarse = covered_errors(ball("ball_annulus", 129, 0.6));
+  // on 129² and 257² (fv_order 5, the default): the observed order against the closed form,
+  // every estimate covering its error. Measured (2026-11-29): 1.13e-3 → 1.57e-4 at t = 2
+  // (order 2.85), 1.02e-2 → 1.91e-3 at t = 10 (2.4: by then the orbits' shear has wound the
+  // density into stripes a few cells wide, which any grid scheme damps); the third-order
+  // reconstruction 1.9e-2 and the hat scheme 2.5e-2 at 257², t = 10. At 129² after t = 8 the
+  // estimate is up to 12.2× the error: its coarse grid (65²) does not resolve the stripes, and
+  // the difference from it alone is 11.5× the 129² error; 15× is allowed there.
+  const std::vector<double> coarse = covered_errors(ball("ball_annulus", 129, 0.6), nullptr, 15.0);
   const std::vector<double> fine = covered_errors(ball("ball_annulus", 257, 0.6));
   ASSERT_EQ(coarse.size(), 21u);
   ASSERT_EQ(fine.size(), 21u);
@@ -542,7 +548,7 @@ TEST(TransientClosedForms, TheTimeSteppedGeneratorOnTheBallConvergesAtSecondOrde
     std::printf("ball_annulus t = %.1f: %.3e -> %.3e, order %.2f\n", t, coarse[k], fine[k], order);
     EXPECT_GE(order, 2.0) << "t = " << t;
   }
-  EXPECT_LE(fine[20], 2.5e-2);
+  EXPECT_LE(fine[20], 4e-3);  // the aim at 257², t = 10, is 1e-2 (docs/methods.md, "transfer")
 }
 
 TEST(TransientClosedForms, TheTimeSteppedGeneratorSaysHowFarOffItIsNearTheBallsOrigin) {

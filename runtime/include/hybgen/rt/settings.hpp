@@ -67,7 +67,7 @@ inline constexpr const char* kWithdrawnCell =
     "'cell' (Ulam) was withdrawn: it put each of a cell's K samples on one node, so every "
     "share was a multiple of 1/K and the error did not fall with the grid (13-15 % on the "
     "sawtooth's invariant density at 101 to 1601 nodes); use 'hat' (the default: forward "
-    "samples deposited on hat functions) or 'fv' (the finite-volume generator, order 3)";
+    "samples deposited on hat functions) or 'fv' (the finite-volume generator, order 5)";
 
 /// The settings table.
 inline constexpr std::array kSettings = {
@@ -98,11 +98,11 @@ inline constexpr std::array kSettings = {
                 "transfer invariant escape",
                 "auto (fv for method=invariant where it applies, else hat), hat (forward "
                 "samples on hat functions), or fv (a cut-cell finite-volume "
-                "generator, order 3; guards that are coordinate planes; one process): its null "
+                "generator, order 5; guards that are coordinate planes; one process): its null "
                 "vector for invariant, stepped in time for transfer"},
-    SettingSpec{"fv_order", SettingType::integer, 3, "", 1, 3, false, "", "transfer invariant",
-                "scheme=fv: order of the upwind reconstruction (3; 1 and 2 for tests of the "
-                "order)"},
+    SettingSpec{"fv_order", SettingType::integer, 5, "", 1, 5, false, "", "transfer invariant",
+                "scheme=fv: order of the upwind reconstruction (5, the default, or 3; 1 and 2 for "
+                "tests of the order; 4 is refused)"},
     SettingSpec{"samples", SettingType::integer, 0, "", 0, 64, false, "",
                 "transfer invariant escape",
                 "sample points per axis and cell (0: 4 up to 2-D, 3 in 3-D, 2 above)"},

@@ -359,10 +359,10 @@ inline FvAxis make_fv_axis(const GridAxis& a, std::vector<double> cuts, double s
 
 /// Weights w with Σ_j w_j·avg_j(q) = q(x) for every polynomial q of degree < cells.size(),
 /// avg_j the average over cell j of `ax`: the reconstruction at x from cell averages (a
-/// p × p moment system in the variable (ξ − x)/max width; p ≤ 3 here).
+/// p × p moment system in the variable (ξ − x)/max width; p ≤ 5 here).
 inline std::vector<double> fv_recon_weights(const FvAxis& ax, const std::vector<int>& cells,
                                             double x) {
-  constexpr std::size_t kMax = 3;
+  constexpr std::size_t kMax = 5;
   const std::size_t p = std::min(cells.size(), kMax);
   double s = 0.0;
   for (std::size_t j = 0; j < p; ++j) s = std::max(s, ax.width(cells[j]));

@@ -13,7 +13,8 @@
 /// Spectrum. The eigenvalues μ of L = diag(1/vol)·B nearest a real shift s = −kFvShift·rate
 /// (Spectra's GenEigsRealShiftSolver over a SparseLU of L − sI; a real shift on the real
 /// matrix: no complex arithmetic; a complex shift would need a complex copy of L), sorted by
-/// decreasing Re μ; reported as the transfer operator's λ = exp(μh), h the setting `step`
+/// decreasing Re μ, except that μ = 0 of a closed system goes first when the ones before it
+/// tie with it (kFvTie); reported as the transfer operator's λ = exp(μh), h the setting `step`
 /// (else dt), so |λ₁| = e^{Re μ₁ h} = 1 to rounding for a closed system.
 ///
 /// Errors. The grid's nodes are solved again on the grid of (n+1)/2 nodes per axis (every
@@ -21,9 +22,11 @@
 /// D = max over modes of Σ w|u_n − u_(n+1)/2| / Σ w|u_n| over the coarse nodes (trapezoid
 /// weights w; nodes on a cut of the mode excluded: two-valued). For order p the fine error is
 /// ≈ D/(2^p − 1), so D itself covers it with a margin of ≈ 7 for p = 3 and ≈ 3 for p = 2
-/// (measured 6.8–7.2 for p = 3 in tests/validation/test_invariant_fv.cpp); for p = 1 the margin is
-/// ≈ 1 and `error_factor` doubles it. `error` = factor·D; each eigenvalue's `error` is
-/// factor·|λ(n) − λ((n+1)/2)| for the coarse eigenvalue nearest it; the gap's, the decay
+/// (measured 6.8–7.2 for p = 3 in tests/validation/test_invariant_fv.cpp); for p = 5
+/// `error_factor` is 1/4, keeping the margin near 8; for p = 1 the margin is ≈ 1 and
+/// `error_factor` doubles it. `error` = factor·D; each eigenvalue's `error` is
+/// factor·|λ(n) − λ((n+1)/2)| for the coarse eigenvalue nearest it, plus kFvRoundingUlps
+/// units of rounding; the gap's, the decay
 /// rate's and the leak rate's likewise, and a gap within its error of 0 claims no decay
 /// (two_grid.hpp: the cycles' eigenvalues lie on the unit circle up to the scheme's damping,
 /// which falls like n^{−p}). The observed order log2(D((n+3)/4 → (n+1)/2) / D) says whether
@@ -63,6 +66,11 @@ inline constexpr double kFvShift = 1e-2;
 /// A density below −this × its maximum is oscillating, not rounding (scheme=auto's test,
 /// methods.hpp `solve_by_invariant_fv`).
 inline constexpr double kFvNegativeTolerance = 1e-6;
+/// Rates within this × the model's rate of each other are a tie (rounding and the scheme's
+/// damping of a cycle, not a decay): the leak test and λ₁'s choice.
+inline constexpr double kFvTie = 1e-8;
+/// The eigenvalues' error floor in units of rounding: λ = exp(μh) from a shift-invert solve.
+inline constexpr double kFvRoundingUlps = 16.0;
 /// Fewest nodes per axis of a grid the error estimate solves on.
 inline constexpr int kFvMinNodes = 5;
 
@@ -84,7 +92,7 @@ struct FvGridSolution {
 
 /// Options of `fv_invariant`.
 struct FvOptions {
-  int order = 3;       ///< Reconstruction order p.
+  int order = 5;       ///< Reconstruction order p.
   int n_eigen = 6;     ///< Eigenvalues reported.
   double step = 1.0;   ///< h of λ = e^{μh}.
   double tol = 1e-10;  ///< Spectra's tolerance.
@@ -170,9 +178,25 @@ FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const doubl
             return std::fabs(x.imag()) < std::fabs(y.imag());
           return x.imag() > y.imag();
         });
+        // λ₁ is the invariant density's. At order 5 a cycle's eigenvalues lie on the unit
+        // circle to ~1e-10 either side (Re μ of either sign), and the sort by Re μ alone may
+        // put one of them before μ = 0: the real eigenvalue nearest 0 goes first when every
+        // one before it is within kFvTie·rate of its real part (a tie, not a growing mode).
+        const double tie = kFvTie * s.rate;
+        auto first = order.end();
+        for (auto it = order.begin(); it != order.end(); ++it) {
+          const std::complex<double> m = ev[*it];
+          if (std::fabs(m.imag()) <= tie && std::fabs(m.real()) <= tie &&
+              (first == order.end() || std::abs(m) < std::abs(ev[*first])))
+            first = it;
+        }
+        if (first != order.end() && std::all_of(order.begin(), first, [&](Eigen::Index k) {
+              return ev[k].real() <= ev[*first].real() + tie;
+            }))
+          std::rotate(order.begin(), first, first + 1);
         for (const Eigen::Index k : order) s.mu.push_back(ev[k]);
         // Mass leaves the box: the density is μ₁'s eigenvector (real: rotate its phase).
-        s.leaks = s.sigma > 1e-8 * s.rate && s.mu.front().real() < -1e-8 * s.rate;
+        s.leaks = s.sigma > tie && s.mu.front().real() < -tie;
         if (s.leaks) {
           const Eigen::MatrixXcd V = eigs.eigenvectors();
           const Eigen::Index k = order.front();
@@ -237,6 +261,8 @@ FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const dou
   r.seconds_fine = std::chrono::duration<double>(Clock::now() - t0).count();
   if (!r.fine.failure.empty()) return r;
   const double h = o.step, factor = error_factor(o.order);
+  // λ = exp(μh) is known to a few units of rounding: the eigenvalues' error floor.
+  const double floor = kFvRoundingUlps * std::numeric_limits<double>::epsilon();
   const std::size_t ne =
       std::min<std::size_t>(static_cast<std::size_t>(o.n_eigen), r.fine.mu.size());
   for (std::size_t k = 0; k < ne; ++k) r.lambda.push_back(std::exp(r.fine.mu[k] * h));
@@ -269,7 +295,7 @@ FvInvariantResult fv_invariant(const TensorGrid<state_dim_v<M>>& grid, const dou
   for (double& e : r.mode_errors) e *= factor;
   std::vector<std::complex<double>> coarse_lambda;
   for (const std::complex<double> m : c.mu) coarse_lambda.push_back(std::exp(m * h));
-  r.spectrum = spectrum_errors(r.lambda, coarse_lambda, h, factor);
+  r.spectrum = spectrum_errors(r.lambda, coarse_lambda, h, factor, floor);
   if (r.spectrum.decays == false)
     r.notes.push_back(
         "the spectral gap is within its estimated error of 0: no decay is claimed (the "

@@ -57,10 +57,13 @@ TensorGrid<N> halved_grid(const TensorGrid<N>& grid) {
 }
 
 /// The factor on the two-resolution difference D that makes it cover the error of a scheme
-/// of order p: D ≈ (2^p − 1)·E covers E with the margin 2^p − 1 for p ≥ 2 (3 at p = 2, 7 at
-/// p = 3); at p = 1 the margin is 1, and the factor 2 makes it 2 (and covers p ≥ 0.58).
+/// of order p: D ≈ (2^p − 1)·E covers E with the margin 2^p − 1 for p = 2 and 3 (3 and 7);
+/// above, the factor 8/2^p keeps the margin near 8 (31 at p = 5 would make the estimate too
+/// wide to tell a user anything) and still covers a true order down to 2.3 (where data that
+/// is only C², a jump or a wall's third-order stencil limit a fifth-order scheme); at p = 1
+/// the margin is 1, and the factor 2 makes it 2 (and covers p ≥ 0.58).
 constexpr double error_factor(int p) {
-  return p <= 1 ? 2.0 : 1.0;
+  return p <= 1 ? 2.0 : p <= 3 ? 1.0 : 8.0 / static_cast<double>(1 << p);
 }
 
 /// Whether |p_obs − p| ≤ max(0.5, p/3): an observed order near the scheme's (file comment).
