@@ -245,6 +245,23 @@ TEST(Settings, FvOrderFourIsRefused) {
   }
 }
 
+// A tolerance double precision cannot meet used to run and fail at the first step ("ODE step
+// size underflow", exit 3); it is refused before anything runs, naming the range.
+TEST(Settings, TolBelowDoublePrecisionIsRefused) {
+  for (const std::string v : {"1e-300", "1e-15"}) {
+    Model m = model();
+    try {
+      apply_overrides(m, {"tol=" + v});
+      ADD_FAILURE() << "tol=" << v << " accepted";
+    } catch (const UsageError& e) {
+      EXPECT_NE(std::string(e.what()).find("1e-14"), std::string::npos) << e.what();
+    }
+  }
+  Model m = model();
+  apply_overrides(m, {"tol=1e-14"});
+  EXPECT_EQ(m.sim.settings.real<"tol">(), 1e-14);
+}
+
 TEST(Settings, DocsPageIsTheTable) {
   const std::string page = read_file(std::string(HYBGEN_SOURCE_DIR) + "/docs/settings.md");
   EXPECT_NE(page.find(rt::settings_markdown()), std::string::npos)

@@ -76,8 +76,9 @@ inline constexpr std::array kSettings = {
                 "output interval (default: t_end/10)"},
     SettingSpec{"method", SettingType::word, 0.0, method_spec(Method::characteristics).name, 0, 0,
                 false, kMethodWords, "all", "the solver"},
-    SettingSpec{"tol", SettingType::real, 1e-10, "", 0.0, 0.1, true, "", "all",
-                "relative tolerance of the ODE integrator (absolute: tol/100)"},
+    SettingSpec{"tol", SettingType::real, 1e-10, "", 1e-14, 0.1, false, "", "all",
+                "relative tolerance of the ODE integrator (absolute: tol/100; below 1e-14 "
+                "double precision cannot meet it)"},
     SettingSpec{"max_events", SettingType::integer, 100000, "", 1, 1e9, false, "", "all",
                 "cap on resets per characteristic or trajectory (a Zeno cap)"},
     SettingSpec{"budget", SettingType::word, 0.0, "fast", 0, 0, false, "full|fast|off",

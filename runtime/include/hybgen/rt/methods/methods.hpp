@@ -728,9 +728,9 @@ MethodResult<state_dim_v<M>> solve_by_transfer_fv(const TensorGrid<state_dim_v<M
     char b[300];
     std::snprintf(b, sizeof b,
                   "scheme=fv undershoots: the smallest density is %.3g against a largest of %.3g "
-                  "(the unlimited third-order reconstruction near a steep front); refine the "
+                  "(the unlimited order-%d reconstruction near a steep front); refine the "
                   "grid, or --set fv_order=1 for a positive, first-order march",
-                  run.min_value, top);
+                  run.min_value, top, fo.order);
     r.warnings.push_back(b);
   }
   detail::add_transfer_errors(t, r, grid, times, fo.order, s,
@@ -929,9 +929,8 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   MethodResult<N> r;
   if (!fallback.empty())
     r.warnings.push_back(
-        "scheme=auto used hat, first order, not the finite-volume generator "
-        "(order 3): " +
-        fallback);
+        "scheme=auto used hat, first order, not the finite-volume generator (order " +
+        std::to_string(s.settings.integer<"fv_order">()) + "): " + fallback);
   const TransferOptions o = detail::transfer_options(s, dt);
   const auto t0 = detail::MethodClock::now();
   const TransferOperator<N> op = detail::assemble<M>(grid, par, o, s.quiet);
