@@ -163,7 +163,8 @@ std::size_t warning_count(const nlohmann::json& s) {
 
 /// Read the summary.json of point `p`, which its runner wrote into `dir` and ended with exit 0;
 /// a summary that cannot be read makes the point a failure (exit 70, said on stderr). Returns
-/// what its "ok" should not hide: a budget that does not close, or how many warnings its
+/// what its "ok" should not hide: a budget that does not close or stopped short of its
+/// tolerance, or how many warnings its
 /// runner gave (on stderr marked with the point's name, several points running at once).
 std::string finish_point(Point& p, const std::filesystem::path& dir) {
   try {
@@ -175,6 +176,9 @@ std::string finish_point(Point& p, const std::filesystem::path& dir) {
   }
   if (p.summary.contains("budget") && p.summary["budget"].value("closes", true) == false)
     return ", but its mass budget does not close (the warning above; column budget_closes)";
+  if (p.summary.contains("budget") && p.summary["budget"].value("converged", true) == false)
+    return ", but its mass budget stopped short of its tolerance (its errors say how far it "
+           "got; column budget_converged)";
   if (const std::size_t warnings = warning_count(p.summary); warnings > 0)
     return ", with " + std::to_string(warnings) + " warning" + (warnings > 1 ? "s" : "") +
            " (above, marked [" + p.label + "]; column warnings)";
@@ -261,6 +265,10 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
     put_last(row, "unaccounted", b, "defect");
     put_last(row, "unaccounted_error", b, "defect_error");
     if (b.contains("closes") && b["closes"].is_boolean()) row["budget_closes"] = b["closes"];
+    // false: a cubature stopped at its point cap (budget=fast in 4-D and above, typically),
+    // and the error columns are as wide as that left them.
+    if (b.contains("converged") && b["converged"].is_boolean())
+      row["budget_converged"] = b["converged"];
   }
   if (s.contains(k::transfer)) put_number(row, "unaccounted", s[k::transfer], "budget_defect");
   if (s.contains(k::invariant)) {

@@ -84,7 +84,8 @@ TEST(Sweep, RowTakesTheFinalTimeAndTheMethodsFields) {
     "mass": [3.0, 2.5, 2.0], "outflow": [0, 0.4, 0.9], "atom": [0, 0.1, 0.1],
     "atom_error": [0, 0.01, 0.02],
     "budget": {"mass_error": [0.1, 0.2, 0.3], "outflow_error": [0, 0, 0.05],
-               "defect": [0, 0, 0.0], "defect_error": [0, 0, 0.4], "closes": false},
+               "defect": [0, 0, 0.0], "defect_error": [0, 0, 0.4], "closes": false,
+               "converged": false},
     "seconds": {"derive": 0.5, "build": 1.5, "solve": 2.5}})");
   const auto r = sweep_row(chars);
   EXPECT_EQ(r["method"], "characteristics");
@@ -98,6 +99,7 @@ TEST(Sweep, RowTakesTheFinalTimeAndTheMethodsFields) {
   EXPECT_EQ(r["mass_error"], 0.3);
   EXPECT_EQ(r["unaccounted_error"], 0.4);
   EXPECT_EQ(r["budget_closes"], false);
+  EXPECT_EQ(r["budget_converged"], false);
   EXPECT_EQ(r["seconds_build"], 1.5);
   EXPECT_FALSE(r.contains("spectral_gap"));
 

@@ -558,21 +558,17 @@ TEST(AdaptiveBudget, ZeroDensityIsNotRefined) {
   EXPECT_EQ(am.points, 3u * 16u * 16u);  // 16 initial cells of 4 × 4 nodes, 32 halves
 }
 
-TEST(AdaptiveBudget, RunnerConfigurationSpeed) {
+TEST(AdaptiveBudget, RunnerConfigurationAtomWithinItsEstimate) {
   // The runner's set-up (models/bouncing_ball.model): 75×75 box, t = 0, 0.2, …, 10 (51
   // times), here with e = 0.8; rel_tol 3e-4 (suggested for the runner) and the default 1e-4.
-  // Time is printed (best of 3), not asserted: the machine may be shared.
+  // The time is printed, not asserted (the budget's cost is benchmarked by
+  // bench/budget_cost.sh).
   const auto times = output_times(51, 0.2);
   for (const double tol : {3e-4, 1e-4}) {
     rt::AdaptiveOptions ao;
     ao.rel_tol = tol;
-    double best = 1e30;
-    BallRun r;
-    for (int rep = 0; rep < 3; ++rep) {
-      r = ball_budget(0.8, times, ao);
-      ASSERT_TRUE(r.res.ok());
-      best = std::min(best, r.seconds);
-    }
+    const BallRun r = ball_budget(0.8, times, ao);
+    ASSERT_TRUE(r.res.ok());
     double worst = 0.0, est = 0.0;
     for (std::size_t k = 0; k < times.size(); ++k) {
       worst = std::max(worst, std::fabs(r.res.budget.atom[k] - zeno_mass(times[k], 0.8)));
@@ -580,10 +576,10 @@ TEST(AdaptiveBudget, RunnerConfigurationSpeed) {
     }
     const double m0 = r.res.budget.mass0;
     std::printf(
-        "[ timing ] 75x75 ball e=0.8, 51 times to 10, rel_tol %.0e, %d threads: budget best of 3 "
-        "%.3f s (%zu + %zu points); worst |atom − Z| %.2e mass0, estimate %.2e mass0\n",
-        tol, omp_get_max_threads(), best, r.info.volume.points, r.info.surface.points, worst / m0,
-        est / m0);
+        "[ timing ] 75x75 ball e=0.8, 51 times to 10, rel_tol %.0e, %d threads: budget %.3f s "
+        "(%zu + %zu points); worst |atom − Z| %.2e mass0, estimate %.2e mass0\n",
+        tol, omp_get_max_threads(), r.seconds, r.info.volume.points, r.info.surface.points,
+        worst / m0, est / m0);
     EXPECT_LE(worst, 1e-3 * m0);
     EXPECT_LE(worst, est);
   }

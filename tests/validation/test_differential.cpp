@@ -17,8 +17,9 @@
 // One line per model (seed, states, modes, guards, reset families, nodes compared and left
 // out, resets the tracer crossed, the largest difference), one line per disagreement, and
 // the last line `N models, K disagreements`. HYBGEN_DIFFERENTIAL_METHOD=transfer runs the
-// models by method=transfer instead, against the tracer with u0 restricted to the box (as the
-// forward methods start), and holds transfer's error estimate (summary.json
+// models by method=transfer instead, against the tracer's means over the nodes' dual cells
+// with u0 restricted to the box (as the forward methods start), and holds transfer's error
+// estimate (summary.json
 // transfer.errors: per output time, the relative L1 error, max over modes) to the true one,
 // each mode's measured against at least 1e-3 of the whole density's L1 norm: a disagreement
 // is an estimate marked reliable that does not cover it (not part of CI: docs/hardening.md).
@@ -100,10 +101,9 @@ std::string first_error_line(const std::string& text) {
 /// Z times the normal density N(c, 1/(2k)), Z = Π √(π/k_i), so the mass in the box at t is
 /// Z·P(φ_t(x0) in the box) over x0 ~ N(c, 1/(2k)) in the support (the initial mode by the
 /// `where` split), with standard deviation Z·√(p(1 − p)/n). hybgen's `initial_mass` and
-/// `mass` must lie within 5 of those plus 3 of its own mass errors, or hybgen must have said
-/// that its budget does not close at that time (|defect| > 2·defect_error: a warning, so the
-/// answer is not silent; counted and shown apart). Returns the disagreements and appends a
-/// summary to `line`.
+/// `mass` must lie within 5 of those plus 3 of its own mass errors, also where hybgen's budget
+/// does not close (its bars are then widened by the defect: methods.hpp,
+/// solve_by_characteristics). Returns the disagreements and appends a summary to `line`.
 int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const nlohmann::json& s,
                std::string& line) {
   const auto& m = r.model;
@@ -135,7 +135,7 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
       inside[k] += in ? 1 : 0;
     }
   }
-  int bad = 0, warned = 0;
+  int bad = 0, widened = 0;
   double worst = 0;  // the largest |difference| / bound
   for (std::size_t k = 0; k < frames; ++k) {
     const double p = static_cast<double>(inside[k]) / samples;
@@ -144,15 +144,8 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
     const double herr = s["budget"]["mass_error"][k].get<double>();
     const double bound = 5 * sd + 3 * herr + 1e-12;
     worst = std::max(worst, std::fabs(h - mc) / bound);
-    const double defect = s["budget"]["defect"][k].get<double>();
-    const double defect_error = s["budget"]["defect_error"][k].get<double>();
-    if (!(std::fabs(h - mc) <= bound) && std::fabs(defect) > 2 * defect_error) {
-      ++warned;
-      std::printf(
-          "\n  (warned: the mass in the box at t = %g is %.6g +/- %.2g by hybgen's budget, "
-          "%.6g +/- %.2g by Monte Carlo, and hybgen said its budget does not close)",
-          s["times"][k].get<double>(), h, herr, mc, sd);
-    } else if (!(std::fabs(h - mc) <= bound)) {
+    widened += s["budget"]["widened_by"][k].get<double>() > 0 ? 1 : 0;
+    if (!(std::fabs(h - mc) <= bound)) {
       ++bad;
       std::printf(
           "\n  disagreement: the mass in the box at t = %g is %.6g +/- %.2g by hybgen's "
@@ -160,10 +153,9 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
           s["times"][k].get<double>(), h, herr, mc, sd);
     }
   }
-  if (warned > 0 && bad == 0) std::printf("\n  ");
   char b[160];
   std::snprintf(b, sizeof b, ", masses within %.2f of their bound%s", worst,
-                warned > 0 ? " (beyond it where hybgen warned)" : "");
+                widened > 0 ? " (bars widened where the budget did not close)" : "");
   line += b;
   return bad;
 }
@@ -185,6 +177,49 @@ std::vector<double> node_point(const RandomRunModel& r, std::size_t node) {
   for (std::size_t a = 0; a < idx.size(); ++a)
     x[a] = hybgen::testing::grid_node(r.model.lo[a], r.model.hi[a], r.grid[a], idx[a]);
   return x;
+}
+
+/// The tracer's mean of mode `mode`'s density over the dual cell of `node` (the box around it
+/// reaching halfway to its neighbours, clipped to the box) at time t: the midpoint rule on
+/// s^N points, s = 4 up to 2-D, 2 in 3-D, 1 (the node) above. transfer's node values carry
+/// the mass of their cells (docs/methods.md, "transfer"), and where a reset compresses mass
+/// into a strip narrower than the spacing (random model 16: restitution 0.4, a strip 0.03
+/// wide on a spacing of 0.125) the node values of the exact density say nothing of it: they
+/// are 0 beside a mode that holds 8 % of the mass. Points the tracer cannot decide are left
+/// out of the mean; `flags.unsure` when all are.
+double dual_cell_average(const RandomRunModel& r, const IndependentTracer& tracer, int mode,
+                         std::size_t node, double t, TraceFlags& flags) {
+  const std::size_t n = r.model.states.size();
+  const int s = n <= 2 ? 4 : n == 3 ? 2 : 1;
+  if (s == 1) return tracer.density(mode, node_point(r, node), t, flags);
+  const std::vector<int> idx = node_indices(r, node);
+  std::vector<double> lo(n), hi(n);
+  for (std::size_t a = 0; a < n; ++a) {
+    const double h = (r.model.hi[a] - r.model.lo[a]) / (r.grid[a] - 1);
+    const double x = hybgen::testing::grid_node(r.model.lo[a], r.model.hi[a], r.grid[a], idx[a]);
+    lo[a] = std::max(r.model.lo[a], x - h / 2), hi[a] = std::min(r.model.hi[a], x + h / 2);
+  }
+  std::size_t points = 1;
+  for (std::size_t a = 0; a < n; ++a) points *= static_cast<std::size_t>(s);
+  double sum = 0;
+  long sure = 0;
+  for (std::size_t j = 0; j < points; ++j) {
+    std::vector<double> x(n);
+    std::size_t rem = j;
+    for (std::size_t a = 0; a < n; ++a, rem /= static_cast<std::size_t>(s))
+      x[a] = lo[a] +
+             (static_cast<double>(rem % static_cast<std::size_t>(s)) + 0.5) / s * (hi[a] - lo[a]);
+    TraceFlags f;
+    const double v = tracer.density(mode, x, t, f);
+    flags.resets += f.resets;
+    if (f.unsure) {
+      if (flags.why.empty()) flags.why = f.why;
+      continue;
+    }
+    sum += v, ++sure;
+  }
+  flags.unsure = sure == 0;
+  return sure > 0 ? sum / static_cast<double>(sure) : 0.0;
 }
 
 /// Run model `seed` through hybgen by `method` and compare every decidable node with the
@@ -264,7 +299,8 @@ Outcome check_model(std::uint64_t seed, const std::string& method) {
       double scale = 0;
       for (std::size_t node = 0; node < total; ++node) {
         TraceFlags f;
-        ur[node] = tracer.density(static_cast<int>(mode), node_point(r, node), t, f);
+        ur[node] = transfer ? dual_cell_average(r, tracer, static_cast<int>(mode), node, t, f)
+                            : tracer.density(static_cast<int>(mode), node_point(r, node), t, f);
         resets += f.resets;
         skip[node] = f.unsure ? 1 : 0;
         if (f.unsure) ++why[f.why];
