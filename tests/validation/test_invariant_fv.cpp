@@ -221,7 +221,7 @@ TEST(InvariantFv, OrderOfConvergenceIsThreeAndOrderOneIsOne) {
 
 TEST(InvariantFv, CurvedGuardIsRefusedNamingTheGuard) {
   const FvRun r = run(kModels + "radial_fv.model", "radial", "");
-  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_EQ(r.code, hybgen::rt::exit_status(hybgen::rt::ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("guard 'rim'"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("scheme=hat"), std::string::npos) << r.out;
 }
@@ -231,7 +231,7 @@ TEST(InvariantFv, CurvedGuardIsRefusedNamingTheGuard) {
 // says so before anything runs, with both ways out.
 TEST(InvariantFv, EscapeWithTheGeneratorIsRefused) {
   const FvRun r = run(kModels + "thermostat_fv.model", "escape", "", "escape");
-  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_EQ(r.code, hybgen::rt::exit_status(hybgen::rt::ExitCode::UsageError)) << r.out;
   EXPECT_NE(r.out.find("scheme=fv"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("method=invariant or transfer"), std::string::npos) << r.out;
   const FvRun t = run(kModels + "thermostat_fv.model", "transfer", "", "transfer");
