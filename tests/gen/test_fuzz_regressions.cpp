@@ -16,7 +16,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <filesystem>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -29,6 +32,7 @@
 #include "hybgen/gen/fs.hpp"
 #include "hybgen/gen/parse.hpp"
 #include "hybgen/gen/reduce.hpp"
+#include "hybgen/rt/settings.hpp"
 
 namespace hybgen::gen {
 namespace {
@@ -84,6 +88,54 @@ TEST(FuzzRegressions, OverrideFindingsEndCleanly) {
     EXPECT_EQ(outcome([&] { wrong = fuzz::run_overrides(text); }), "") << f;
     EXPECT_EQ(wrong, "") << f;
   }
+}
+
+// Every number of the settings table (runtime/include/hybgen/rt/settings.hpp) at the edges of
+// its range, as `--set KEY=VALUE` on the fuzzer's model: the smallest and the largest value
+// it admits must be taken or refused with a usage error (never an internal error, nor a state
+// the runner cannot use: fuzz/overrides_pipeline.hpp's invariant), and the values just
+// outside must be refused. The fuzzer draws such values by chance; this walks all of them.
+TEST(FuzzPipeline, EverySettingAtTheEdgesOfItsRangeEndsCleanly) {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  int checked = 0;
+  for (const rt::SettingSpec& spec : rt::kSettings) {
+    const bool integer = spec.type == rt::SettingType::integer;
+    if (!integer && spec.type != rt::SettingType::real) continue;
+    const double lo_in = !spec.lo_open ? spec.lo
+                         : integer     ? spec.lo + 1
+                                       : std::nextafter(spec.lo, kInf);
+    const double below = spec.lo_open ? spec.lo
+                         : integer    ? spec.lo - 1
+                                      : std::nextafter(spec.lo, -kInf);
+    // (hi + 1 is hi itself at 2^53, the seed's largest: the next double then.)
+    const double above =
+        integer && spec.hi + 1 > spec.hi ? spec.hi + 1 : std::nextafter(spec.hi, kInf);
+    const struct {
+      double value;
+      bool inside;
+    } cases[] = {{lo_in, true}, {spec.hi, true}, {below, false}, {above, false}};
+    for (const auto& c : cases) {
+      char text[128];
+      std::snprintf(text, sizeof text, "%s=%.17g", std::string(spec.name).c_str(), c.value);
+      std::string wrong;
+      bool refused = false;
+      const std::string what = outcome([&] {
+        try {
+          wrong = fuzz::run_overrides(text);
+        } catch (const UsageError&) {
+          refused = true;
+          throw;
+        }
+      });
+      EXPECT_EQ(what, "") << text;
+      EXPECT_EQ(wrong, "") << text;
+      if (!c.inside) {
+        EXPECT_TRUE(refused) << text << ": a value outside the range was taken";
+      }
+      ++checked;
+    }
+  }
+  EXPECT_GE(checked, 4 * 15);  // the table's numbers, not an empty loop
 }
 
 // fuzz/regressions/frontend/leak-ginac-pole-in-evaluator.model, minimised:
