@@ -109,5 +109,26 @@ TEST(Progress, LongRunsPrintDecilesFromManyThreads) {
   EXPECT_NE(out.find("1.0 s elapsed"), std::string::npos) << out;
 }
 
+// A run of 10¹⁰ units at 10⁵ a second (the particle method's 1e10 on a 1-D model): the
+// first line comes after the first second, at 0.0 %, with the time left in hours, and then
+// one a minute although no tenth is reached (not a terminal), and times over two minutes in
+// minutes. Before, the clock was looked
+// at every 1/512 of the work, first after 20 minutes here.
+TEST(Progress, AVeryLongRunSaysSoAtOnceAndEveryMinute) {
+  fake_ms = 0;
+  const std::string out = capture_stderr([] {
+    Progress p("particles", 10'000'000'000ULL, false, &fake_now);
+    for (int i = 1; i <= 13000; ++i) {  // 10 ms of fake time per 1000 units: 130 s
+      fake_ms = 10L * i;
+      p.advance(1000);
+    }
+  });
+  // At 1 s, 61 s and 121 s, and the last line when it ends (at 130 s).
+  EXPECT_EQ(count(out, "\n"), 4u) << out;
+  EXPECT_NE(out.find("  0.0%  1.0 s elapsed, about 27.8 h left"), std::string::npos) << out;
+  EXPECT_NE(out.find("61.0 s elapsed, about 27.8 h left"), std::string::npos) << out;
+  EXPECT_NE(out.find("2 min elapsed, about 27.7 h left"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace hybgen::rt
