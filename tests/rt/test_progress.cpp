@@ -130,5 +130,22 @@ TEST(Progress, AVeryLongRunSaysSoAtOnceAndEveryMinute) {
   EXPECT_NE(out.find("2 min elapsed, about 27.7 h left"), std::string::npos) << out;
 }
 
+// restart(): a stage before the work (the particles' drawing pass) is not counted in the
+// work's elapsed time or its rate.
+TEST(Progress, RestartCountsFromThen) {
+  fake_ms = 0;
+  const std::string out = capture_stderr([] {
+    Progress p("pushing", 100, false, &fake_now);
+    fake_ms = 30000;  // 30 s of another stage
+    p.restart();
+    for (int i = 1; i <= 100; ++i) {
+      fake_ms = 30000 + 20L * i;  // 2 s for the 100 units
+      p.advance();
+    }
+  });
+  EXPECT_NE(out.find("100.0%  2.0 s elapsed"), std::string::npos) << out;
+  EXPECT_EQ(out.find("32.0 s"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace hybgen::rt

@@ -51,6 +51,10 @@ class Progress {
     draw(done, false);
   }
 
+  /// Count the time from now (before any unit is done: a stage that precedes the work, such
+  /// as the particles' drawing pass, is not part of its rate).
+  void restart() { start_ = now_(); }
+
   /// Draw the final state (if anything was drawn) and end the line; idempotent.
   void finish() {
     if (quiet_ || finished_.exchange(true)) return;

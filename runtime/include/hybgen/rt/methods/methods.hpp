@@ -1170,7 +1170,9 @@ MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>
   const auto t0 = detail::MethodClock::now();
   // Each rank advances its own block: rank 0's bar counts its own share.
   const Backend& backend = s.backend ? *s.backend : serial_backend();
-  Progress progress("particles", particle_block(po.particles, backend).size(), s.quiet);
+  const std::size_t mine = particle_block(po.particles, backend).size();
+  Progress drawing("particles: drawing", mine, s.quiet), progress("particles", mine, s.quiet);
+  po.draw_progress = &drawing;
   po.progress = &progress;
   ParticleRun<N> run = solve_particles<M>(grid, times, par, po);
   progress.finish();

@@ -111,6 +111,9 @@ struct ParticleOptions {
   /// stay below this; above it one shared array with atomic adds.
   std::size_t private_deposit_bytes = std::size_t{256} << 20;
   Progress* progress = nullptr;  ///< Advanced once per particle pushed when set.
+  /// Advanced once per particle drawn in the first pass (the weights' largest, for the fixed
+  /// point), when set: at 10¹⁰ particles that pass alone takes minutes.
+  Progress* draw_progress = nullptr;
   /// The ranks sharing the particles (null: this process alone); the result is on rank 0.
   const Backend* backend = nullptr;
   /// Keep the 2-D marginals of every pair of axes and the moments instead of the density on
@@ -591,11 +594,14 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   long long traced = 0;
 #pragma omp parallel for reduction(max : wmax) reduction(+ : traced) schedule(static)
   for (long long i = first; i < last; ++i) {
+    if (opt.draw_progress) opt.draw_progress->advance();
     const double w = std::fabs(sampler.draw(static_cast<std::size_t>(i)).weight);
     if (!std::isfinite(w)) continue;
     wmax = std::max(wmax, w);
     if (w > 0.0) ++traced;
   }
+  if (opt.draw_progress) opt.draw_progress->finish();
+  if (opt.progress) opt.progress->restart();  // its times from here: the pushes alone
   wmax = backend.max(wmax);
   run.traced = static_cast<std::size_t>(backend.sum(std::int64_t{traced}));
   const double nd = static_cast<double>(std::max<long long>(n, 1));
