@@ -47,10 +47,11 @@ t0=$SECONDS
 # sanitized on the 1-D and 3-D models of TheTimeSteppedGeneratorOnCyclesWallsAndSwitches and in
 # tests/rt/test_generator.cpp. Nor is the observables' ball, four 129² runs of the methods
 # whose observables run sanitized on the thermostat in tests/validation/test_observables.cpp.
-# Nor the crossing switch of test_crossing_shear.cpp, one more sanitized runner for paths that
-# the transient closed forms' runs and the differential models take sanitized.)
+# Nor the crossing switch of test_crossing_shear.cpp and the Heisenberg walls of
+# test_heisenberg_walls.cpp, one more sanitized runner each for paths that the transient closed
+# forms' runs, the differential models and LieCli.RunHeisenbergOnATinyGrid take sanitized.)
 HYBGEN_RANDOM_MODELS=20 HYBGEN_DIFFERENTIAL_MODELS=2 ctest --preset asan --output-on-failure -LE e2e \
-  -E '_NOT_BUILT$|TheTimeSteppedGeneratorOnTheBall|TheTimeSteppedGeneratorSaysHowFarOff|TheElasticBallKeepsItsMeanEnergy|CrossingShear'
+  -E '_NOT_BUILT$|TheTimeSteppedGeneratorOnTheBall|TheTimeSteppedGeneratorSaysHowFarOff|TheElasticBallKeepsItsMeanEnergy|CrossingShear|HeisenbergWalls'
 ctest --preset asan --output-on-failure --no-tests=error -L e2e -R \
   "^(Cli\.RunEveryShippedModelOnASmallGrid|Cli\.BouncingBallPaperConfigurationMatchesClosedForm|NothingLost\.OutputsOfARunKilledMidSwapAreRestored|NumericalFailure\.NonFiniteFlowAndDivergence|LieCli\.RunHeisenbergOnATinyGrid)$"
 echo "ci-hardening: sanitized tests in $((SECONDS - t0)) s" >&2
