@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "hybgen/rt/io/npy.hpp"
+#include "support/cycle_closed_forms.hpp"
 #include "support/e2e.hpp"
 
 namespace {
@@ -63,7 +64,7 @@ double exact(int m, double x, double y, double t) {
 }
 
 double node(int i) {
-  return kLo + (kHi - kLo) * i / (kNodes - 1);
+  return hybgen::testing::grid_node(kLo, kHi, kNodes, i);
 }
 
 /// Frame k of mode `name` of a run in `dir` (81 × 81, x the slow axis).
@@ -71,12 +72,6 @@ std::vector<double> frame(const fs::path& dir, std::size_t k, const char* name) 
   char file[40];
   std::snprintf(file, sizeof file, "u_%04zu_%s.npy", k, name);
   return hybgen::rt::read_npy((dir / file).string()).data;
-}
-
-/// Trapezoid weight of node i (one axis).
-double weight(int i) {
-  const double h = (kHi - kLo) / (kNodes - 1);
-  return i == 0 || i == kNodes - 1 ? h / 2 : h;
 }
 
 /// Whether node column i of mode m is on a jump of the exact density at time t: the guard
@@ -104,7 +99,8 @@ std::vector<double> relative_l1(const fs::path& dir, std::size_t k, double t, Re
     for (int i = 0; i < kNodes; ++i) {
       if (on_jump(m, i, t)) continue;
       for (int j = 0; j < kNodes; ++j) {
-        const double r = ref(m, i, j), wt = weight(i) * weight(j);
+        const double r = ref(m, i, j), wt = hybgen::testing::trapezoid_weight(kNodes, i) *
+                                            hybgen::testing::trapezoid_weight(kNodes, j);
         num += wt * std::fabs(u[static_cast<std::size_t>(i * kNodes + j)] - r);
         den += wt * std::fabs(r);
       }

@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "hybgen/rt/io/npy.hpp"
+#include "support/cycle_closed_forms.hpp"
 #include "support/e2e.hpp"
 
 namespace {
@@ -125,7 +126,7 @@ TEST(HeisenbergWalls, CharacteristicsAreTheBracketsBackwardTraceAtEveryNode) {
         const int n = kNodes[a];
         const auto j = static_cast<int>(rem % static_cast<std::size_t>(n));
         rem /= static_cast<std::size_t>(n);
-        s[a] = kLo[a] + (kHi[a] - kLo[a]) * j / (n - 1);
+        s[a] = hybgen::testing::grid_node(kLo[a], kHi[a], n, j);
         if (a == 3 && (j == 0 || j == n - 1)) on_wall = true;
       }
       double ur = 0;
