@@ -4,16 +4,19 @@
 
 #include "hybgen/gen/render.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <optional>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "expr_printer.hpp"
 #include "hybgen/gen/derive.hpp"
 #include "hybgen/gen/emit.hpp"
+#include "hybgen/gen/latex_lines.hpp"
 #include "hybgen/gen/tex.hpp"
 #include "hybgen/rt/method_table.hpp"
 
@@ -120,6 +123,56 @@ std::string minus_level(const ex& c, const std::function<std::string(const ex&)>
   return " - " + print(c);
 }
 
+/// The width of a display line, in ems of the 11-point document of derive_latex_document
+/// (US letter less 2 cm margins: 500 pt, 45 em), less a margin for latex_width's estimate.
+constexpr double kLineEms = 41.0;
+/// A row's label (`mode heat:`) goes on a line of its own above its equations when a
+/// right-hand side does not fit beside it and the label leaves less than this for them.
+constexpr double kMinRhsEms = 22.0;
+/// A state tuple wider than this is written as the point x in the PDE's display.
+constexpr double kLongTupleEms = 10.0;
+
+/// An `aligned` display of rows `lhs &= rhs` after `label` (may be empty), each rhs broken
+/// into lines that fit beside the label and the widest lhs (latex_lines.hpp).
+void aligned_display(std::ostream& os, const std::string& label,
+                     const std::vector<std::pair<std::string, std::string>>& rows) {
+  double lhs = 0.0, widest = 0.0;
+  for (const auto& [l, r] : rows) {
+    lhs = std::max(lhs, latex_width(l));
+    widest = std::max(widest, latex_width(r));
+  }
+  double rhs = kLineEms - lhs - latex_width("=");
+  os << "\\[\n";
+  if (!label.empty()) {
+    const double beside = rhs - latex_width(label);
+    os << "  " << label << "\n";
+    if (widest > beside && beside < kMinRhsEms)
+      os << "\\]\n\\[\n";  // the label alone, its rows in a display of their own
+    else
+      rhs = beside;
+  }
+  os << "  \\begin{aligned}\n";
+  for (std::size_t k = 0; k < rows.size(); ++k)
+    os << "    " << rows[k].first << " &= " << latex_aligned_rhs(rows[k].second, rhs)
+       << (k + 1 < rows.size() ? ", \\\\\n" : "\n");
+  os << "  \\end{aligned}\n\\]\n";
+}
+
+/// A case of the `cases` display: `expr` broken into lines of `width` ems, stacked in an
+/// `aligned` block when it takes more than one (centred on its condition: KaTeX, which
+/// renders the report, takes no `[t]`).
+std::string case_latex(const std::string& expr, double width) {
+  const std::vector<std::string> lines = latex_lines(expr, width);
+  if (lines.size() == 1) return expr;
+  std::string out = "\\begin{aligned}\n    &" + lines.front();
+  for (std::size_t k = 1; k < lines.size(); ++k) {
+    const bool op =
+        !lines[k].empty() && (lines[k][0] == '+' || lines[k][0] == '-' || lines[k][0] == '=');
+    out += " \\\\\n    &\\quad " + std::string(op ? "{}" : "") + lines[k];
+  }
+  return out + "\n  \\end{aligned}";
+}
+
 /// The reduction objects of a Lie-group model in text (derive --format text).
 void reduction_text(std::ostream& os, const Model& m, ExprPrinter& pr) {
   const Reduction& r = *m.reduction;
@@ -176,32 +229,34 @@ void reduction_text(std::ostream& os, const Model& m, ExprPrinter& pr) {
      << ", transversal: " << (r.transversal ? "yes" : "no") << "\n";
 }
 
-/// The reduction objects in LaTeX (derive --format latex and report.md).
+/// The reduction objects in LaTeX (derive --format latex and report.md), one row each.
 void reduction_latex(std::ostream& os, const Model& m, ExprPrinter& pr) {
   const Reduction& r = *m.reduction;
   const unsigned n = r.algebra_dim;
   const std::string q = m.tex.at(r.q);
   os << "% Lie-group reduction (Impact Lie--Poisson Reduction theorem), group " << r.group << "\n";
-  os << "\\[\n  h(\\zeta) = " << pr.latex(r.hamiltonian)
-     << ", \\qquad \\zeta^\\sharp = \\frac{\\partial h}{\\partial\\zeta} = "
-     << tuple_latex(pr, r.dh) << "\n\\]\n";
-  os << "\\[\n  \\mathrm{ad}^*_{\\partial h/\\partial\\zeta} = \\begin{pmatrix}\n";
+  const std::string ad = "\\mathrm{ad}^*_{\\partial h/\\partial\\zeta}";
+  std::string matrix = "\\begin{pmatrix}\n";
   for (unsigned i = 0; i < n; ++i) {
-    os << "    ";
-    for (unsigned j = 0; j < n; ++j) os << (j ? " & " : "") << pr.latex(r.coadjoint(i, j));
-    os << (i + 1 < n ? " \\\\\n" : "\n");
+    matrix += "      ";
+    for (unsigned j = 0; j < n; ++j) matrix += (j ? " & " : "") + pr.latex(r.coadjoint(i, j));
+    matrix += i + 1 < n ? " \\\\\n" : "\n";
   }
-  os << "  \\end{pmatrix}, \\qquad \\dot\\zeta = "
-        "\\mathrm{ad}^*_{\\partial h/\\partial\\zeta}\\,\\zeta, \\qquad "
-     << tex_dot(q) << " = " << pr.latex(r.q_dot) << "\n\\]\n";
-  os << "\\[\n  " << q << " = " << pr.latex(r.phi)
-     << minus_level(
-            r.level, [&](const ex& e) { return pr.latex(e); }, "\\left(", "\\right)")
-     << ", \\qquad \\mathfrak k = \\ker d\\phi_e,\\ d\\phi_e = " << tuple_latex(pr, r.dphi_e);
+  matrix += "    \\end{pmatrix}";
+  std::vector<std::pair<std::string, std::string>> rows = {
+      {"h(\\zeta)", pr.latex(r.hamiltonian)},
+      {"\\zeta^\\sharp = \\frac{\\partial h}{\\partial\\zeta}", tuple_latex(pr, r.dh)},
+      {ad, matrix},
+      {"\\dot\\zeta", ad + "\\,\\zeta"},
+      {tex_dot(q), pr.latex(r.q_dot)},
+      {q, pr.latex(r.phi) +
+              minus_level(
+                  r.level, [&](const ex& e) { return pr.latex(e); }, "\\left(", "\\right)")},
+      {"d\\phi_e", tuple_latex(pr, r.dphi_e) + ", \\qquad \\mathfrak k = \\ker d\\phi_e"}};
   for (std::size_t k = 0; k < r.momentum_jumps.size() && k < m.guards.size(); ++k)
-    os << ", \\qquad \\Delta\\zeta_{" << tex_label(m.guards[k].name)
-       << "} = " << tuple_latex(pr, r.momentum_jumps[k]);
-  os << "\n\\]\n";
+    rows.emplace_back("\\Delta\\zeta_{" + tex_label(m.guards[k].name) + "}",
+                      tuple_latex(pr, r.momentum_jumps[k]));
+  aligned_display(os, "", rows);
 }
 
 /// The `reduction` block of derive --format json (docs/design.md).
@@ -365,31 +420,45 @@ std::string derive_latex(const HybridSystem& sys) {
   if (m.reduction) reduction_latex(os, m, pr);
   // Each mode's field, one line per state (its own derivative), and its divergence.
   for (const auto& md : sys.modes) {
-    os << "\\[\n  \\text{mode } " << tex_label(md.name) << ":\\qquad\n  \\begin{aligned}\n";
+    std::vector<std::pair<std::string, std::string>> rows;
     for (std::size_t i = 0; i < m.state.size(); ++i)
-      os << "    " << tex_dot(m.tex.at(m.state[i])) << " &= " << pr.latex(md.flow[i]) << ", \\\\\n";
-    os << "    \\operatorname{div}_\\mu X &= " << pr.latex(md.divergence)
-       << "\n  \\end{aligned}\n\\]\n";
+      rows.emplace_back(tex_dot(m.tex.at(m.state[i])), pr.latex(md.flow[i]));
+    rows.emplace_back("\\operatorname{div}_\\mu X", pr.latex(md.divergence));
+    aligned_display(os, "\\text{mode } " + tex_label(md.name) + ":\\qquad", rows);
   }
   // Each guard: its surface, its reset (and inverse) and the hybrid Jacobian.
   for (const auto& g : sys.guards) {
-    os << "\\[\n  \\text{guard } " << tex_label(g.name) << "\\ ("
-       << tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) << " \\to "
-       << tex_label(sys.modes[static_cast<std::size_t>(g.to)].name)
-       << "):\\qquad\n  \\begin{aligned}\n    \\mathcal S_{" << tex_label(g.name) << "} &= \\{"
-       << pr.latex(g.surface) << " = 0\\}, \\\\\n    \\Delta" << tuple_latex(pr, m.state_symbols)
-       << " &= " << tuple_latex(pr, g.reset) << ", \\\\\n";
+    std::vector<std::pair<std::string, std::string>> rows;
+    rows.emplace_back("\\mathcal S_{" + tex_label(g.name) + "}",
+                      "\\{" + pr.latex(g.surface) + " = 0\\}");
+    rows.emplace_back("\\Delta" + tuple_latex(pr, m.state_symbols), tuple_latex(pr, g.reset));
     if (g.has_inverse)
-      os << "    \\Delta^{-1}" << tuple_latex(pr, m.state_symbols)
-         << " &= " << tuple_latex(pr, g.reset_inverse) << ", \\\\\n";
-    os << "    \\mathcal J^X_\\mu(\\Delta) &= " << pr.latex(g.hybrid_jacobian_on_surface)
-       << "\n  \\end{aligned}\n\\]\n";
+      rows.emplace_back("\\Delta^{-1}" + tuple_latex(pr, m.state_symbols),
+                        tuple_latex(pr, g.reset_inverse));
+    rows.emplace_back("\\mathcal J^X_\\mu(\\Delta)", pr.latex(g.hybrid_jacobian_on_surface));
+    aligned_display(os,
+                    "\\text{guard } " + tex_label(g.name) + "\\ (" +
+                        tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) + " \\to " +
+                        tex_label(sys.modes[static_cast<std::size_t>(g.to)].name) + "):\\qquad",
+                    rows);
   }
+  // The PDE per mode and the jump per guard, each beside where it holds: the left column
+  // gets the line less the widest condition, the brace and the columns' \quad. A long state
+  // is written x (bold: no state's name), defined below the display.
+  const std::string args = state_args_latex(m);
+  const bool bold = latex_width(args) > kLongTupleEms;
+  const std::string point = bold ? "\\mathbf{x}" : "(" + args.substr(2) + ")";
+  const std::string at = bold ? ", \\mathbf{x}" : args;
+  double condition = latex_width(point + " \\notin \\Delta(\\mathcal S);");
+  for (const auto& g : sys.guards)
+    condition = std::max(
+        condition, latex_width(point + " \\in \\Delta(\\mathcal S_{" + tex_label(g.name) + "});"));
+  const double column = kLineEms - condition - 2.5;
   os << "\\[\n\\begin{cases}\n";
   for (const auto& md : sys.modes) {
     std::string u = multi ? "u_{" + tex_label(md.name) + "}" : "u";
-    os << "  " << pde_latex(sys, pr, md, u) << ", & (" << state_args_latex(m).substr(2)
-       << ") \\notin \\Delta(\\mathcal S); \\\\[1ex]\n";
+    os << "  " << case_latex(pde_latex(sys, pr, md, u), column) << ", & " << point
+       << " \\notin \\Delta(\\mathcal S); \\\\[1ex]\n";
   }
   for (std::size_t k = 0; k < sys.guards.size(); ++k) {
     const auto& g = sys.guards[k];
@@ -397,24 +466,29 @@ std::string derive_latex(const HybridSystem& sys) {
         multi ? "u_{" + tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) + "}" : "u";
     std::string ut =
         multi ? "u_{" + tex_label(sys.modes[static_cast<std::size_t>(g.to)].name) + "}" : "u";
-    std::string args = state_args_latex(m);
-    os << "  " << ut << "(t^+" << args << ") = ";
+    // The jump at the pre-image written out; where that does not fit its column, in terms of
+    // Δ⁻¹ and J, both displayed with the guard above.
+    const std::string inner = at.substr(2);
+    const std::string generic = "\\dfrac{" + uf + "(t^-, \\Delta^{-1}(" + inner +
+                                "))}{\\left|\\mathcal J(\\Delta^{-1}(" + inner + "))\\right|}";
+    std::string jump = generic;
     if (g.has_inverse) {
       std::string pre;
       for (const auto& e : g.reset_inverse) pre += ", " + pr.latex(e);
       const ex Jpre = jacobian_at_preimage(sys, g);
       if (GiNaC::is_a<GiNaC::numeric>(Jpre) && GiNaC::abs(GiNaC::ex_to<GiNaC::numeric>(Jpre)) == 1)
-        os << uf << "(t^-" << pre << ")";
+        jump = uf + "(t^-" + pre + ")";
       else
-        os << "\\dfrac{" << uf << "(t^-" << pre << ")}{" << abs_latex(pr, Jpre) << "}";
-    } else {
-      os << "\\dfrac{" << uf << "(t^-, \\Delta^{-1}(" << args.substr(2)
-         << "))}{\\left|\\mathcal J(\\Delta^{-1}(" << args.substr(2) << "))\\right|}";
+        jump = "\\dfrac{" + uf + "(t^-" + pre + ")}{" + abs_latex(pr, Jpre) + "}";
+      if (latex_width(ut + "(t^+" + at + ") = " + jump) > column) jump = generic;
     }
-    os << ", & (" << args.substr(2) << ") \\in \\Delta(\\mathcal S_{" << tex_label(g.name) << "})"
+    os << "  " << case_latex(ut + "(t^+" + at + ") = " + jump, column) << ", & " << point
+       << " \\in \\Delta(\\mathcal S_{" << tex_label(g.name) << "})"
        << (k + 1 < sys.guards.size() ? ";\\\\[1ex]" : ".") << "\n";
   }
   os << "\\end{cases}\n\\]\n";
+  if (bold)
+    os << "\\[\n  \\text{where } \\mathbf{x} = \\left(" << args.substr(2) << "\\right).\n\\]\n";
   return os.str();
 }
 

@@ -164,19 +164,4 @@ TEST(Gl3, FullDensitiesOfTenDimensionsAreRefusedWithTheWayOut) {
   EXPECT_FALSE(fs::exists(dir));
 }
 
-#ifdef HYBGEN_WITH_MPI
-TEST(Gl3, TwoRanksDepositTheSameMarginalBits) {
-  (void)run_gl3("omp_small", "--set particles=20000 --set outputs=netcdf");
-  (void)run_gl3("mpi_small", "--set particles=20000 --set outputs=netcdf --ranks 2");
-  const fs::path a = e2e_dir("gl3") / "omp_small" / "run.nc";
-  const fs::path b = e2e_dir("gl3") / "mpi_small" / "run.nc";
-  for (const char* v : {"marginal_zeta1_zeta5", "marginal_zeta9_q", "marginal_zeta2_zeta7", "mean",
-                        "covariance", "mass", "outflow"}) {
-    const std::vector<double> x = nc_values(a, v), y = nc_values(b, v);
-    ASSERT_FALSE(x.empty()) << v;
-    EXPECT_EQ(x, y) << v;
-  }
-}
-#endif
-
 }  // namespace

@@ -336,6 +336,27 @@ TEST(Mpi, TwoRanksDrawThePicturesOfTheOneProcessRun) {
   }
 }
 
+TEST(Mpi, TwoRanksDepositTheSameMarginalBits) {
+  // density=marginals (the particles keep the marginal of every pair of axes and the moments,
+  // not the grid: how models/gl3.model's ten dimensions run) on the 5-D GL2 system: each of
+  // the ten pairs' marginals, the mean and the covariance are the one-process bits on two ranks.
+  const std::string sets =
+      "--set method=particles --set density=marginals --set particles=20000 --set t_end=0.5 "
+      "--set dt=0.25 --set grid=7x7x7x7x7";
+  const RunDir ref = run_model("models/gl2.model", sets, "gl2_marginals_omp", 0, "netcdf");
+  const RunDir two = run_model("models/gl2.model", sets, "gl2_marginals_2", 2, "netcdf");
+  EXPECT_EQ(compare_run_nc(ref.dir / "run.nc", two.dir / "run.nc"), "ok\n");
+  EXPECT_EQ(ref.summary.at("mass"), two.summary.at("mass"));
+  EXPECT_EQ(two.summary.at("ranks").get<int>(), 2);
+  // What was compared: a marginal per pair of the five axes.
+  const std::string python = hybgen::testing::python_with("netCDF4");
+  ASSERT_FALSE(python.empty()) << "no python3 with netCDF4 (scripts/setup.sh --tests)";
+  const auto pairs = hybgen::testing::run_shell(
+      python + " -c \"import netCDF4; d = netCDF4.Dataset('" + (two.dir / "run.nc").string() +
+      "'); print(sum(v.startswith('marginal_') for v in d.variables))\"");
+  EXPECT_EQ(pairs.out, "10\n");
+}
+
 TEST(Mpi, AFrameLargerThanAChunkIsWrittenInSlabsByEveryRank) {
   // 129³ nodes = 2 146 689 > 2²¹: the density is stored in chunks of 126 slices of the first
   // axis (hyperslab.hpp, c_order_chunk), and each rank's block ends inside a chunk, so both

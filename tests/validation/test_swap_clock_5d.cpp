@@ -220,8 +220,8 @@ struct Moments {
 Moments exact_moments(double t) {
   const auto [mg, s2] = bump_moments();
   const double f = t - std::floor(t);
-  std::vector<double> bp{0.0, 1.0};
-  if (f > 0.0) bp.insert(bp.begin() + 1, 1.0 - f);
+  const std::vector<double> bp =
+      f > 0.0 ? std::vector<double>{0.0, 1.0 - f, 1.0} : std::vector<double>{0.0, 1.0};
   std::vector<double> fine{0.0};
   for (std::size_t j = 0; j + 1 < bp.size(); ++j)
     for (int p = 1; p <= 50; ++p) fine.push_back(bp[j] + (bp[j + 1] - bp[j]) * p / 50.0);
