@@ -30,8 +30,8 @@ namespace fs = std::filesystem;
 using GiNaC::ex;
 
 const std::vector<std::string> kModels = {
-    "bouncing_ball",     "sir", "sir_3d", "filippov", "chaplygin_energy", "sawtooth",
-    "integrate_and_fire"};
+    "bouncing_ball",      "sir",        "sir_3d",      "filippov", "chaplygin_energy", "sawtooth",
+    "integrate_and_fire", "thermostat", "tilted_floor"};
 
 /// A shipped model through the front end, named by its path relative to the source tree
 /// (paths in provenance must not depend on where the tree is).

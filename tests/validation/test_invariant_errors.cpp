@@ -153,13 +153,13 @@ TEST(InvariantSchemeAuto, TakesTheGeneratorWhereTheGuardsAreCoordinatePlanes) {
 }
 
 TEST(InvariantSchemeAuto, TheNewcomersThermostatWithoutWhereIsExactToItsEstimate) {
-  // thermostat_newcomer.model: the thermostat a new user writes (no `where` lines, a box
+  // models/thermostat.model: the thermostat a new user writes (no `where` lines, a box
   // [0.5, 2.5] wider than the cycle [1, 2]), which the hat scheme got 5-28 % wrong, by the
   // default scheme: u_heat = 1/(2 ln 2 (3 − T)), u_cool = 1/(2 ln 2 T) on [1, 2], 0 outside.
   // Measured (2026-11-28): 1.0e-7, estimated 7.0e-7, λ₁ = 1 to 2e-15.
   Case c;
   c.name = "newcomer";
-  c.model = "tests/validation/models/thermostat_newcomer.model";
+  c.model = "models/thermostat.model";
   c.axes = {{0.5, 2.5, 201}};
   c.modes = {"heat", "cool"};
   c.exact = [](int mode, const hybgen::testing::Point& x) {

@@ -44,15 +44,15 @@ namespace fs = std::filesystem;
 const fs::path kWork = hybgen::testing::e2e_dir("validation_reset_outflow");
 const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
 
-/// `hybgen run MODEL --set method=METHOD SETS` into its own directory; its summary.json (null
+/// `hybgen run MODEL.model --set method=METHOD SETS` (MODEL: its path in the source tree without
+/// the extension) into its own directory; its summary.json (null
 /// if the run failed, with the failure reported). The run's output into *out.
 nlohmann::json run(const std::string& model, const std::string& name, const std::string& method,
                    const std::string& sets = "", std::string* out = nullptr) {
   const fs::path dir = kWork / name;
   fs::remove_all(dir);
-  const auto r =
-      hybgen_cli("run tests/validation/models/" + model + ".model --quiet --out '" + dir.string() +
-                 "' --set method=" + method + " --set outputs=netcdf " + sets);
+  const auto r = hybgen_cli("run " + model + ".model --quiet --out '" + dir.string() +
+                            "' --set method=" + method + " --set outputs=netcdf " + sets);
   if (out != nullptr) *out = r.out;
   EXPECT_EQ(r.code, 0) << r.out;
   if (r.code != 0) return nullptr;
@@ -82,8 +82,8 @@ double leap_outflow(double t) {
 
 TEST(ResetOutflow, ALeapOutOfTheBoxIsOutflowByEveryMethod) {
   std::string out;
-  const nlohmann::json c = run("leap_out", "leap_characteristics", "characteristics",
-                               "--set budget=full --set budget_tol=1e-8", &out);
+  const nlohmann::json c = run("tests/validation/models/leap_out", "leap_characteristics",
+                               "characteristics", "--set budget=full --set budget_tol=1e-8", &out);
   ASSERT_FALSE(c.is_null());
   // The pre-flight scan names the first point reset out of the box, as a warning.
   EXPECT_NE(out.find("the reset carries mass out of the domain (the grid box) at the point (x = "
@@ -119,7 +119,7 @@ TEST(ResetOutflow, ALeapOutOfTheBoxIsOutflowByEveryMethod) {
 
   // The forward methods count the same mass as outflow.
   for (const std::string method : {"transfer", "particles"}) {
-    const nlohmann::json f = run("leap_out", "leap_" + method, method);
+    const nlohmann::json f = run("tests/validation/models/leap_out", "leap_" + method, method);
     ASSERT_FALSE(f.is_null()) << method;
     const std::vector<double> fo = numbers(f["outflow"]);
     ASSERT_EQ(fo.size(), times.size());
@@ -172,8 +172,8 @@ TEST(ResetOutflow, ImagesOnAFaceAndAtomsOutsideTheBoxAreCountedOnce) {
       {"ball_zeno_below", {}, 0.02 * std::numbers::pi},
   };
   for (const Case& c : cases) {
-    const nlohmann::json s =
-        run(c.model, c.model, "characteristics", "--set budget=full --set budget_tol=1e-8");
+    const nlohmann::json s = run(std::string("tests/validation/models/") + c.model, c.model,
+                                 "characteristics", "--set budget=full --set budget_tol=1e-8");
     ASSERT_FALSE(s.is_null()) << c.model;
     EXPECT_TRUE(s["budget"]["closes"].get<bool>()) << c.model << ": " << s["budget"].dump();
     const std::vector<double> times = numbers(s["times"]), outflow = numbers(s["outflow"]),
@@ -196,7 +196,7 @@ TEST(ResetOutflow, TheTiltedFloorRunsWithEveryMethodAndItsBudgetsAgree) {
     // budget=full: budget=fast's point cap leaves its mass 5 % off in 4-D (within its wide
     // estimate); to 1e-3 it takes about 2 s.
     const nlohmann::json c =
-        run("tilted_floor", "tilted_characteristics_" + tag, "characteristics",
+        run("models/tilted_floor", "tilted_characteristics_" + tag, "characteristics",
             std::string("--set e=") + e + " --set budget=full --set budget_tol=1e-3", &out);
     ASSERT_FALSE(c.is_null()) << e;
     EXPECT_NE(out.find("the reset carries mass out of the domain"), std::string::npos) << out;
@@ -209,8 +209,8 @@ TEST(ResetOutflow, TheTiltedFloorRunsWithEveryMethodAndItsBudgetsAgree) {
     EXPECT_GT(reset.back(), 0.02 * mass0) << e;
 
     // Particles (forward Monte Carlo, independent of the backward characteristics).
-    const nlohmann::json p =
-        run("tilted_floor", "tilted_particles_" + tag, "particles", std::string("--set e=") + e);
+    const nlohmann::json p = run("models/tilted_floor", "tilted_particles_" + tag, "particles",
+                                 std::string("--set e=") + e);
     ASSERT_FALSE(p.is_null()) << e;
     const std::vector<double> po = numbers(p["outflow"]);
     ASSERT_EQ(po.size(), times.size());
@@ -231,7 +231,7 @@ TEST(ResetOutflow, TheTiltedFloorRunsWithEveryMethodAndItsBudgetsAgree) {
     }
     // The grid methods run on the same model; none is refused.
     for (const std::string method : {"transfer", "invariant", "escape"}) {
-      const nlohmann::json r = run("tilted_floor", "tilted_" + method + "_" + tag, method,
+      const nlohmann::json r = run("models/tilted_floor", "tilted_" + method + "_" + tag, method,
                                    std::string("--set e=") + e + " --set grid=9x9x9x9");
       EXPECT_FALSE(r.is_null()) << method << " e = " << e;
     }
@@ -244,8 +244,8 @@ TEST(ResetOutflow, AResetOnTheSupportsEdgeIsInsideItUpToRounding) {
   // -1.9200000000000004, just outside. The scan now takes an image within 1e-9 of the
   // box's size of the support (on the way to its crossing point) as inside it; an image
   // clearly outside still fails (tests/e2e/test_failures.cpp, ResetOutsideTheSupport).
-  const std::string text = hybgen::gen::read_file(std::string(HYBGEN_SOURCE_DIR) +
-                                                  "/tests/validation/models/tilted_floor.model");
+  const std::string text =
+      hybgen::gen::read_file(std::string(HYBGEN_SOURCE_DIR) + "/models/tilted_floor.model");
   const std::string with_disc = text.substr(0, text.find("  support y >= k*x")) +
                                 "  support y >= k*x\n  support px^2 + py^2 <= 4\n" +
                                 text.substr(text.find("  grid "));
