@@ -419,6 +419,11 @@ class IndependentTracer {
     // `initial` without a mode is the first mode's, or split by the modes' `where` regions
     // (docs/model-language.md).
     bool holds = m == 0;
+    // A history that ends on the support's edge within rounding (random model 2522: x0' = 0.2
+    // from −1.05 for 0.75 ends at −1.2, where 0.2·x0 + 0.24 is −4.4e-17 in one order and 0 in
+    // another): hybgen and the tracer may put it on either side.
+    if (r_.support && std::fabs(evaluate(r_.support, s.z, p_)) <= 1e-12)
+      flags.doubt("a history that ends on the support's edge");
     if (r_.where) {
       const double w = evaluate(r_.where, s.z, p_);
       if (std::fabs(w) < 1e-7) flags.doubt("a history that ends on a `where` boundary");
