@@ -499,14 +499,14 @@ std::vector<std::string> latex_lines(std::string_view s, double width) {
   return lines;
 }
 
-std::string latex_aligned_rhs(std::string_view s, double width) {
+std::string latex_aligned_rhs(std::string_view s, double width, std::string_view indent) {
   const std::vector<std::string> lines = latex_lines(s, width);
   std::string out = lines.front();
   for (std::size_t k = 1; k < lines.size(); ++k) {
     // "{}" before a leading + or − keeps it binary (its spacing) on the new row.
     const bool op =
         !lines[k].empty() && (lines[k][0] == '+' || lines[k][0] == '-' || lines[k][0] == '=');
-    out += " \\\\\n      &\\quad " + std::string(op ? "{}" : "") + lines[k];
+    out += " \\\\\n" + std::string(indent) + "&\\quad " + std::string(op ? "{}" : "") + lines[k];
   }
   return out;
 }

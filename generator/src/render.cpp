@@ -162,15 +162,9 @@ void aligned_display(std::ostream& os, const std::string& label,
 /// `aligned` block when it takes more than one (centred on its condition: KaTeX, which
 /// renders the report, takes no `[t]`).
 std::string case_latex(const std::string& expr, double width) {
-  const std::vector<std::string> lines = latex_lines(expr, width);
-  if (lines.size() == 1) return expr;
-  std::string out = "\\begin{aligned}\n    &" + lines.front();
-  for (std::size_t k = 1; k < lines.size(); ++k) {
-    const bool op =
-        !lines[k].empty() && (lines[k][0] == '+' || lines[k][0] == '-' || lines[k][0] == '=');
-    out += " \\\\\n    &\\quad " + std::string(op ? "{}" : "") + lines[k];
-  }
-  return out + "\n  \\end{aligned}";
+  const std::string rows = latex_aligned_rhs(expr, width, "    ");
+  if (rows.find(" \\\\\n") == std::string::npos) return expr;
+  return "\\begin{aligned}\n    &" + rows + "\n  \\end{aligned}";
 }
 
 /// The reduction objects of a Lie-group model in text (derive --format text).

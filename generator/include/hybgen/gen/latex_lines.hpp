@@ -27,7 +27,7 @@ double latex_width(std::string_view s);
 std::vector<std::string> latex_lines(std::string_view s, double width);
 
 /// latex_lines of `s` as the right-hand side of a row of an `aligned` environment: the lines
-/// after the first on rows of their own, `\\ &\quad {} + …`, indented under the first.
-std::string latex_aligned_rhs(std::string_view s, double width);
+/// after the first on rows of their own, `\\ &\quad {} + …`, each after `indent` in the source.
+std::string latex_aligned_rhs(std::string_view s, double width, std::string_view indent = "      ");
 
 }  // namespace hybgen::gen
