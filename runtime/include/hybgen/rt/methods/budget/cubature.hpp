@@ -44,12 +44,20 @@
 ///    E_k ≤ rel_tol·scale_k for every slot, or when `max_points` would be exceeded
 ///    (`converged` = false; E_k is still the estimate).
 ///  * Bounded work: at most `max_points` integrand points in all, whatever the integrand —
-///    the initial cells take at most a quarter of them (fewer per root if needed), and no
-///    batch is traced that would exceed the cap. A point's cost is its integrand's: one
-///    backward characteristic (volume; bounded by the ODE's step limit and `max_events`),
-///    one with a time integral under its own work cap (faces: Tracer::accumulate in
-///    characteristics.hpp), or one forward flow (atom; `max_events`). A cubature stopped by
-///    the cap says so (`converged` = false) and widens its estimate (`error`).
+///    the initial cells with their halves take at most a quarter of them (fewer cells per
+///    root if needed), and no batch is traced that would exceed the cap. But where a quarter
+///    would leave one cell per root and two per axis fit in three quarters, two: the
+///    discrepancies are only as good as the first level of nodes, and in 4-D a cap of 20000
+///    (budget=fast) left ONE cell of 4⁴ nodes over the box, from which a plain Gaussian (the
+///    differential campaign's model 2531) was refined on the wrong axes and declared
+///    converged at 0.3005 for 0.3357 with an estimate of 4.3e-3; from 2⁴ cells it is
+///    0.33579 ± 1.5e-2 (tests/rt/test_cubature.cpp). (Three quarters always, 4³ cells in
+///    3-D, left too little for the refinement of a contracting density:
+///    tests/validation/test_cell_averages.cpp's 3-D clock lost 7 % of its mass at t = 4.) A point's
+///    cost is its integrand's: one backward characteristic (volume; bounded by the ODE's step limit
+///    and `max_events`), one with a time integral under its own work cap (faces: Tracer::accumulate
+///    in characteristics.hpp), or one forward flow (atom; `max_events`). A cubature stopped by the
+///    cap says so (`converged` = false) and widens its estimate (`error`).
 ///  * Frozen leaves: leaves with e ≤ rel_tol·scale/(max cells) can never be marked before the
 ///    stop test holds (all of them together are below the target), so they are frozen:
 ///    their values stay in the sums, their storage is freed. Cells where the integrand is 0
@@ -88,7 +96,7 @@ struct AdaptiveOptions {
   std::size_t max_points = 400000;  ///< Cap on traced points per integral (volume; faces).
   int order = 4;                    ///< Gauss–Legendre nodes per axis in a cell (≥ 1).
   /// Initial cells per axis of each root box (fewer where they and their halves would take
-  /// more than a quarter of max_points; ≥ 1).
+  /// more than a quarter of max_points, but 2 rather than 1 within three quarters; ≥ 1).
   int root_parts = 4;
 };
 
@@ -209,13 +217,23 @@ class AdaptiveCubature {
   bool run() {
     const std::size_t Q = rule_.Q;
     // Initial cells: each root box cut into n_r parts per axis (root_parts; fewer if the
-    // initial cells and their halves would take more than a quarter of the budget).
-    std::size_t n_r = static_cast<std::size_t>(std::max(aopt_.root_parts, 1)), n_init = 0;
-    for (;; --n_r) {
+    // initial cells and their halves would take more than a quarter of the budget, the rest
+    // being the refinement's; but 2 where 1 would be the answer and 2 fit in three quarters:
+    // the file comment).
+    const std::size_t want = static_cast<std::size_t>(std::max(aopt_.root_parts, 1));
+    const auto initial_cells = [&](std::size_t parts) {
       std::size_t per_root = 1;
-      for (std::size_t a = 0; a < D; ++a) per_root *= n_r;
-      n_init = per_root * roots_.size();
+      for (std::size_t a = 0; a < D; ++a) per_root *= parts;
+      return per_root * roots_.size();
+    };
+    std::size_t n_r = want, n_init = 0;
+    for (;; --n_r) {
+      n_init = initial_cells(n_r);
       if (n_r == 1 || 3 * n_init * Q <= aopt_.max_points / 4) break;
+    }
+    if (n_r == 1 && want >= 2 && 4 * initial_cells(2) * Q <= aopt_.max_points) {
+      n_r = 2;
+      n_init = initial_cells(2);
     }
     std::vector<Box> init;
     init.reserve(n_init);
