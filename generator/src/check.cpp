@@ -517,7 +517,14 @@ struct Checker {
         throw src.error(g.name.loc, where + " needs 'from MODE' (the model has " +
                                         std::to_string(m.modes.size()) + " modes)");
       }
-      spec.to = g.to ? find_mode(*g.to) : spec.from;
+      const bool absorb = g.has_reset && g.reset.kind == ResetDecl::Kind::Absorb;
+      if (absorb && g.to)
+        throw src.error(g.to->loc, where +
+                                       " absorbs the mass that reaches it ('reset absorb'): it "
+                                       "has no target mode; omit 'to " +
+                                       g.to->name + "'");
+      // An absorbing guard's mass leaves the system: no target mode (GuardSpec::to = −1).
+      spec.to = absorb ? -1 : g.to ? find_mode(*g.to) : spec.from;
       if (!g.has_when)
         throw src.error(g.name.loc, where + " has no surface (write 'when s = 0 decreasing')");
       Converter conv(src, full_scope, "the surface of " + where);
@@ -530,11 +537,13 @@ struct Checker {
       if (!g.has_reset)
         throw src.error(g.name.loc, where +
                                         " has no reset (write 'reset identity', 'reset "
-                                        "elastic', 'reset restitution e' or 'reset (...)')");
+                                        "elastic', 'reset restitution e', 'reset absorb' or "
+                                        "'reset (...)')");
       spec.reset_kind = g.reset.kind;
       spec.reset_loc = g.reset.loc;
       switch (g.reset.kind) {
         case ResetDecl::Kind::Identity:
+        case ResetDecl::Kind::Absorb:
           break;
         case ResetDecl::Kind::Elastic:
           spec.restitution = 1;

@@ -244,6 +244,10 @@ Model check_general_part(const ModelAst& ast, const LieDecl& lie, const SourceTe
   for (auto& g : general.guards) {
     if (g.from) throw src.error(g.from->loc, "a Lie-group model has one mode: omit 'from'");
     if (g.to) throw src.error(g.to->loc, "a Lie-group model has one mode: omit 'to'");
+    if (g.has_reset && g.reset.kind == ResetDecl::Kind::Absorb)
+      throw src.error(g.reset.loc,
+                      "'reset absorb' is for general hybrid models; an impact of a Lie-group "
+                      "model resets the momentum (elastic, restitution e or explicit)");
     LieImpact imp;
     imp.kind = g.reset.kind;
     if (g.has_reset && (g.reset.kind == ResetDecl::Kind::Elastic ||

@@ -471,8 +471,21 @@ struct Deriver {
     for (const auto& xi : X)
       g.gradient.push_back(simplify(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(xi))));
     const IrMode& before = sys.modes[static_cast<std::size_t>(gs.from)];
-    const IrMode& after = sys.modes[static_cast<std::size_t>(gs.to)];
     const std::string where = "guard '" + gs.name + "'";
+    if (gs.reset_kind == ResetDecl::Kind::Absorb) {
+      // The mass that reaches S leaves the system: S and its direction are all there is (no
+      // reset, inverse or J: IrGuard::absorbing). The flow must still cross S somewhere.
+      g.absorbing = true;
+      g.has_inverse = true;  // nothing to invert (rt::GuardInfo: the runtime needs no Newton)
+      ex den = 0;
+      for (std::size_t i = 0; i < n; ++i) den += g.gradient[i] * before.flow[i];
+      if (is_identically_zero(simplify(den), all_symbols))
+        throw src.error(gs.surface_loc, "the flow of mode '" + before.name +
+                                            "' is tangent to the surface of " + where +
+                                            " everywhere (∇s·X ≡ 0): it never crosses it");
+      return g;
+    }
+    const IrMode& after = sys.modes[static_cast<std::size_t>(gs.to)];
 
     // The reset map Δ.
     scope.object("the reset of guard '" + gs.name + "'", gs.reset_loc);
@@ -487,6 +500,8 @@ struct Deriver {
       case ResetDecl::Kind::Restitution:
         g.reset = mechanical_reset(gs, g.surface, where);
         break;
+      case ResetDecl::Kind::Absorb:  // returned above: nothing is reset
+        throw InternalError("derive_guard: an absorbing guard reached the reset of " + where);
     }
     g.reset_jacobian = jacobian(g.reset, X);
 
@@ -691,7 +706,8 @@ struct Deriver {
     const GuardSpec& gs = m.guards[gi];
     const std::string where = "guard '" + g.name + "'";
     const IrMode& before = sys.modes[static_cast<std::size_t>(g.from)];
-    const IrMode& after = sys.modes[static_cast<std::size_t>(g.to)];
+    // An absorbing guard has no target (its reset checks are skipped below).
+    const IrMode& after = sys.modes[static_cast<std::size_t>(g.absorbing ? g.from : g.to)];
     ex lie = 0;
     for (std::size_t i = 0; i < n; ++i) lie += g.gradient[i] * before.flow[i];
     int on_surface = 0, crossing = 0, retrigger = 0, jzero = 0, leaks = 0, wall = 0;
@@ -788,6 +804,7 @@ struct Deriver {
         continue;
       }
       ++crossing;
+      if (g.absorbing) continue;  // nothing is reset: no wall, no J, no re-trigger
       std::vector<double> y(n);
       for (std::size_t i = 0; i < n; ++i) y[i] = eval(g.reset[i], x);
       {

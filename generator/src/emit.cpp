@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -171,15 +172,16 @@ class HeaderBuilder {
   [[nodiscard]] KernelCases guard_cases() const {
     KernelCases cases{"guard", {}};
     for (const auto& g : sys_.guards)
-      cases.labels.push_back("guard " + g.name + ": " +
-                             sys_.modes[static_cast<std::size_t>(g.from)].name + " -> " +
-                             sys_.modes[static_cast<std::size_t>(g.to)].name);
+      cases.labels.push_back(
+          "guard " + g.name + ": " + sys_.modes[static_cast<std::size_t>(g.from)].name + " -> " +
+          (g.absorbing ? "(absorbed)" : sys_.modes[static_cast<std::size_t>(g.to)].name));
     return cases;
   }
 
   /// A kernel `static void NAME(int INDEX, const double* state, const double* parameter,
   /// double* out)` switching on INDEX (`mode` or `guard`); `outputs(k)` gives the expressions
-  /// for case k.
+  /// for case k, or none for a case that has no value (an absorbing guard's reset): it then
+  /// takes the default, NaN.
   void vector_kernel(const std::string& doc, const std::string& name, const KernelCases& cases,
                      std::size_t n_out,
                      const std::function<std::vector<ex>(std::size_t)>& outputs) {
@@ -189,6 +191,7 @@ class HeaderBuilder {
     for (std::size_t c = 0; c < cases.labels.size(); ++c) {
       std::vector<CAssignment> as;
       const auto es = outputs(c);
+      if (es.empty()) continue;
       for (std::size_t i = 0; i < es.size(); ++i)
         as.push_back({"out[" + std::to_string(i) + "]", pr_.node(es[i])});
       begin_case();
@@ -203,14 +206,21 @@ class HeaderBuilder {
                 arguments() + ", double* out) {\n" + body.str();
   }
 
-  /// A kernel `static double NAME(int INDEX, const double* state, const double* parameter)`.
+  /// A kernel `static double NAME(int INDEX, const double* state, const double* parameter)`;
+  /// `value(k)` is case k's expression, or nullopt where it has none (an absorbing guard's
+  /// hybrid Jacobian): NaN there.
   void scalar_kernel(const std::string& doc, const std::string& name, const KernelCases& cases,
-                     const std::function<ex(std::size_t)>& value) {
+                     const std::function<std::optional<ex>(std::size_t)>& value) {
     begin_kernel();
     std::ostringstream body;
     body << "    double result = 0.0;\n    switch (" << cases.index << ") {\n";
     for (std::size_t c = 0; c < cases.labels.size(); ++c) {
-      const ex v = value(c);
+      const std::optional<ex> vc = value(c);
+      if (!vc) {
+        body << case_line(cases, c) << "        return std::nan(\"\");\n      }\n";
+        continue;
+      }
+      const ex v = *vc;
       std::vector<CAssignment> as{{"result", pr_.node(v)}};
       begin_case();
       body << case_line(cases, c) << name_values({v}, "        ")
@@ -347,8 +357,8 @@ class HeaderBuilder {
        << "> mode_names{" << names(mnames) << "};\n";
     os << "  /// Guard names.\n  static constexpr std::array<const char*, " << gnames.size()
        << "> guard_names{" << names(gnames) << "};\n";
-    os << "  /// Guards: source mode, target mode, direction (-1 decreasing, +1 increasing), "
-          "closed-form inverse, axis of a constant reset component (-1: none).\n";
+    os << "  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 "
+          "increasing), closed-form inverse, axis of a constant reset component (-1: none).\n";
     os << "  static constexpr std::array<hybgen::rt::GuardInfo, " << gnames.size() << "> guards{{";
     for (std::size_t g = 0; g < sys_.guards.size(); ++g) {
       const auto& gd = sys_.guards[g];
@@ -485,7 +495,10 @@ GeneratedFiles emit(const HybridSystem& sys) {
   hb.vector_kernel("Jacobian matrix of the reset of guard k, row-major.", "reset_jacobian", guards,
                    n * n, [&](std::size_t k) { return sys.guards[k].reset_jacobian; });
   hb.scalar_kernel("Hybrid Jacobian of guard k at a point of its surface.", "hybrid_jacobian",
-                   guards, [&](std::size_t k) { return sys.guards[k].hybrid_jacobian_on_surface; });
+                   guards, [&](std::size_t k) -> std::optional<ex> {
+                     if (sys.guards[k].absorbing) return std::nullopt;
+                     return sys.guards[k].hybrid_jacobian_on_surface;
+                   });
   hb.density_kernels();
   if (!m.sim.observables.empty()) {
     // One case per observable and mode, at index i·n_mode + k (runtime/include/hybgen/rt/

@@ -537,12 +537,15 @@ class Parser {
     guard.direction_loc = take().loc;
   }
 
-  // reset := 'identity' | 'elastic' | 'restitution' expr
+  // reset := 'identity' | 'elastic' | 'restitution' expr | 'absorb'
   //        | '(' expr { ',' expr } ')'
   void parse_reset(ResetDecl& reset) {
     if (at_word("identity")) {
       take();
       reset.kind = ResetDecl::Kind::Identity;
+    } else if (at_word("absorb")) {
+      take();
+      reset.kind = ResetDecl::Kind::Absorb;
     } else if (at_word("elastic")) {
       take();
       reset.kind = ResetDecl::Kind::Elastic;
@@ -563,7 +566,9 @@ class Parser {
       }
       take();
     } else {
-      unexpected("identity, elastic, restitution COEFFICIENT or (e1, ..., eN) after 'reset'");
+      unexpected(
+          "identity, elastic, restitution COEFFICIENT, absorb or (e1, ..., eN) after "
+          "'reset'");
     }
   }
 

@@ -337,8 +337,13 @@ std::string derive_text(const HybridSystem& sys) {
   }
   for (const auto& g : sys.guards) {
     os << "\nguard " << g.name << ": " << sys.modes[static_cast<std::size_t>(g.from)].name << " -> "
-       << sys.modes[static_cast<std::size_t>(g.to)].name << " when s = " << pr.ginac(g.surface)
-       << " crosses 0, " << direction_word(g.direction) << "\n";
+       << (g.absorbing ? "absorbed" : sys.modes[static_cast<std::size_t>(g.to)].name)
+       << " when s = " << pr.ginac(g.surface) << " crosses 0, " << direction_word(g.direction)
+       << "\n";
+    if (g.absorbing) {
+      os << "  reset            absorb: the mass that reaches the guard leaves the system\n";
+      continue;
+    }
     os << "  reset            Delta" << tuple_text(pr, m.state_symbols) << " = "
        << tuple_text(pr, g.reset) << "\n";
     if (g.has_inverse)
@@ -375,6 +380,11 @@ std::string derive_text(const HybridSystem& sys) {
   for (const auto& g : sys.guards) {
     std::string uf =
         sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.from)].name : "u";
+    if (g.absorbing) {
+      os << "  at " << g.name << ": " << uf
+         << " leaves through S (absorbed; the flux u X.n out of it is counted)\n";
+      continue;
+    }
     std::string ut =
         sys.modes.size() > 1 ? "u_" + sys.modes[static_cast<std::size_t>(g.to)].name : "u";
     os << "  jump at " << g.name << ": " << ut << "(t+, " << args << ") = " << uf << "(t-, Delta^-1"
@@ -425,6 +435,14 @@ std::string derive_latex(const HybridSystem& sys) {
     std::vector<std::pair<std::string, std::string>> rows;
     rows.emplace_back("\\mathcal S_{" + tex_label(g.name) + "}",
                       "\\{" + pr.latex(g.surface) + " = 0\\}");
+    if (g.absorbing) {
+      aligned_display(os,
+                      "\\text{guard } " + tex_label(g.name) + "\\ (" +
+                          tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) +
+                          " \\to \\text{absorbed}):\\qquad",
+                      rows);
+      continue;
+    }
     rows.emplace_back("\\Delta" + tuple_latex(pr, m.state_symbols), tuple_latex(pr, g.reset));
     if (g.has_inverse)
       rows.emplace_back("\\Delta^{-1}" + tuple_latex(pr, m.state_symbols),
@@ -445,8 +463,9 @@ std::string derive_latex(const HybridSystem& sys) {
   const std::string at = bold ? ", \\mathbf{x}" : args;
   double condition = latex_width(point + " \\notin \\Delta(\\mathcal S);");
   for (const auto& g : sys.guards)
-    condition = std::max(
-        condition, latex_width(point + " \\in \\Delta(\\mathcal S_{" + tex_label(g.name) + "});"));
+    if (!g.absorbing)
+      condition = std::max(condition, latex_width(point + " \\in \\Delta(\\mathcal S_{" +
+                                                  tex_label(g.name) + "});"));
   const double column = kLineEms - condition - 2.5;
   os << "\\[\n\\begin{cases}\n";
   for (const auto& md : sys.modes) {
@@ -454,8 +473,12 @@ std::string derive_latex(const HybridSystem& sys) {
     os << "  " << case_latex(pde_latex(sys, pr, md, u), column) << ", & " << point
        << " \\notin \\Delta(\\mathcal S); \\\\[1ex]\n";
   }
+  std::size_t last_jump = 0;  // one past the last guard with a jump
+  for (std::size_t k = 0; k < sys.guards.size(); ++k)
+    if (!sys.guards[k].absorbing) last_jump = k + 1;
   for (std::size_t k = 0; k < sys.guards.size(); ++k) {
     const auto& g = sys.guards[k];
+    if (g.absorbing) continue;  // no jump: the mass leaves (its guard's display says so)
     std::string uf =
         multi ? "u_{" + tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) + "}" : "u";
     std::string ut =
@@ -478,7 +501,7 @@ std::string derive_latex(const HybridSystem& sys) {
     }
     os << "  " << case_latex(ut + "(t^+" + at + ") = " + jump, column) << ", & " << point
        << " \\in \\Delta(\\mathcal S_{" << tex_label(g.name) << "})"
-       << (k + 1 < sys.guards.size() ? ";\\\\[1ex]" : ".") << "\n";
+       << (k + 1 < last_jump ? ";\\\\[1ex]" : ".") << "\n";
   }
   os << "\\end{cases}\n\\]\n";
   if (bold)
@@ -542,9 +565,20 @@ nlohmann::ordered_json derive_json(const HybridSystem& sys) {
     nlohmann::ordered_json gj;
     gj["name"] = g.name;
     gj["from"] = sys.modes[static_cast<std::size_t>(g.from)].name;
-    gj["to"] = sys.modes[static_cast<std::size_t>(g.to)].name;
+    gj["to"] = g.absorbing ? nlohmann::ordered_json(nullptr)
+                           : nlohmann::ordered_json(sys.modes[static_cast<std::size_t>(g.to)].name);
     gj["surface"] = pr.ginac(g.surface);
     gj["direction"] = direction_word(g.direction);
+    gj["absorbing"] = g.absorbing;
+    if (g.absorbing) {
+      // `reset absorb`: no target, reset, inverse or J (docs/design.md, the JSON contract).
+      for (const char* key :
+           {"reset", "reset_inverse", "hybrid_jacobian", "hybrid_jacobian_general"})
+        gj[key] = nullptr;
+      gj["reset_inverse_kind"] = "absorb";
+      guards.push_back(gj);
+      continue;
+    }
     std::vector<std::string> reset, inverse;
     for (const auto& e : g.reset) reset.push_back(pr.ginac(e));
     gj["reset"] = reset;

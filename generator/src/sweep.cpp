@@ -284,6 +284,12 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
     put_number(row, "escape_rate", s[k::escape], "rate");
     put_number(row, "escape_rate_error", s[k::escape], "rate_error");
   }
+  // Each trap's absorbed mass at the final time and its error (absorbed_NAME, …_error).
+  if (s.contains(k::absorbed) && s[k::absorbed].is_object())
+    for (const auto& [name, a] : s[k::absorbed].items()) {
+      put_last(row, "absorbed_" + name, a, "values");
+      put_last(row, "absorbed_" + name + "_error", a, "errors");
+    }
   // Each observable's mean at the final time and its error (E_NAME, E_NAME_error).
   if (s.contains(k::observables) && s[k::observables].is_object())
     for (const auto& [name, o] : s[k::observables].items()) {

@@ -659,8 +659,8 @@ TEST(ParseErrors, Guards) {
   expect_error("guard g { when x == 0 decreasing }", 1, 19, "write '=', not '=='");
   expect_error("guard g { when x decreasing }", 1, 18, "expected '=' in the guard surface");
   expect_error("guard g { reset bounce }", 1, 17,
-               "expected identity, elastic, restitution COEFFICIENT or (e1, ..., eN) after "
-               "'reset', found 'bounce'");
+               "expected identity, elastic, restitution COEFFICIENT, absorb or (e1, ..., eN) "
+               "after 'reset', found 'bounce'");
   expect_error("guard g { reset (x, -p }", 1, 24,
                "expected ',' or ')' in the reset components (opened at 1:17), found '}'");
   expect_error("guard g { when x = 0 decreasing; when x = 1 increasing }", 1, 34,

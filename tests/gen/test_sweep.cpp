@@ -83,6 +83,7 @@ TEST(Sweep, RowTakesTheFinalTimeAndTheMethodsFields) {
     "method": "characteristics", "times": [0, 1, 2], "initial_mass": 3.0,
     "mass": [3.0, 2.5, 2.0], "outflow": [0, 0.4, 0.9], "atom": [0, 0.1, 0.1],
     "atom_error": [0, 0.01, 0.02],
+    "absorbed": {"trap": {"values": [0, 0.25, 0.5], "errors": [0, 0.001, 0.002]}},
     "budget": {"mass_error": [0.1, 0.2, 0.3], "outflow_error": [0, 0, 0.05],
                "defect": [0, 0, 0.0], "defect_error": [0, 0, 0.4], "closes": false,
                "converged": false},
@@ -101,6 +102,8 @@ TEST(Sweep, RowTakesTheFinalTimeAndTheMethodsFields) {
   EXPECT_EQ(r["budget_closes"], false);
   EXPECT_EQ(r["budget_converged"], false);
   EXPECT_EQ(r["seconds_build"], 1.5);
+  EXPECT_EQ(r["absorbed_trap"], 0.5);
+  EXPECT_EQ(r["absorbed_trap_error"], 0.002);
   EXPECT_FALSE(r.contains("spectral_gap"));
 
   const nlohmann::json inv = nlohmann::json::parse(R"({

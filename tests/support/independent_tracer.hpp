@@ -86,11 +86,11 @@ class IndependentTracer {
 
   /// Where the state (mode, x) is after time t FORWARD: the hybrid flow itself (RK4 at 200
   /// steps per unit time; a guard of the current mode crossed its way fires: the state jumps
-  /// to Δ(x*) in the target mode). Returns false if the state leaves the support (its mass
-  /// leaves the state space) or meets more than 1000 resets. For the budget's independent
-  /// check (test_differential.cpp: the mass in the box by Monte Carlo), which needs neither
-  /// Δ⁻¹ nor J.
-  bool push(int& mode, std::vector<double>& x, double t) const {
+  /// to Δ(x*) in the target mode, or ends at a trap). Returns false if the state leaves the
+  /// support (its mass leaves the state space), reaches a trap (then `*trap` = the guard) or
+  /// meets more than 1000 resets. For the budget's independent check (test_differential.cpp:
+  /// the mass in the box and the traps' by Monte Carlo), which needs neither Δ⁻¹ nor J.
+  bool push(int& mode, std::vector<double>& x, double t, int* trap = nullptr) const {
     if (!in_support(x)) return false;
     const int steps = std::max(4, static_cast<int>(std::ceil(t * 200)));
     const double h = t / steps;
@@ -120,6 +120,10 @@ class IndependentTracer {
         x = s1.z;
         tau += hs;
       } else {
+        if (absorbing(which)) {
+          if (trap != nullptr) *trap = static_cast<int>(which);
+          return false;
+        }
         if (++resets > 1000) return false;
         x = reset(which, rk4(mode, State{x, 0.0}, -first).z);
         mode = guard(which).to;
@@ -174,6 +178,8 @@ class IndependentTracer {
     return g;
   }
   const RandomGuard& guard(std::size_t g) const { return r_.model.guards[g]; }
+  /// Whether guard g is a trap (`reset absorb`).
+  bool absorbing(std::size_t g) const { return g < r_.absorbing.size() && r_.absorbing[g] != 0; }
   Vec reset(std::size_t g, const Vec& y) const {
     Vec out(static_cast<std::size_t>(n_));
     for (int i = 0; i < n_; ++i) out[i] = evaluate(guard(g).reset[i], y, p_);
@@ -307,7 +313,7 @@ class IndependentTracer {
   std::vector<Event> events_of(int m) const {
     std::vector<Event> ev;
     for (std::size_t g = 0; g < r_.model.guards.size(); ++g) {
-      if (guard(g).to == m) ev.push_back({g, true});
+      if (guard(g).to == m && !absorbing(g)) ev.push_back({g, true});  // a trap leads nowhere
       if (guard(g).from == m) ev.push_back({g, false});
     }
     if (r_.support) ev.push_back({0, false, true});

@@ -31,7 +31,10 @@
 ///  - one model in four has a `support` line, a half-space c·x ≥ d that cuts a corner off
 ///    the box, so that the state space ends inside the box;
 ///  - one model in three with two modes splits the initial density between them by `where`
-///    lines w(x) > 0 and w(x) < 0 (w affine).
+///    lines w(x) > 0 and w(x) < 0 (w affine);
+///  - one guard in five is a trap instead (`reset absorb`: its mass leaves the system), drawn
+///    from a stream of its own after the rest, so that the other draws, and every model
+///    without a trap, are those of the seed before traps existed.
 /// The simulation block gives the box, a grid of about 600–2400 nodes, t_end and two output
 /// intervals.
 
@@ -51,6 +54,7 @@ enum class RunResetKind {
   Affine,       ///< Δ = A x + b.
   Triangular,   ///< Δ_i = d_i x_i + e_i x_i³ + h_i(earlier states) + b_i.
   Restitution,  ///< `restitution e` of a mechanical model.
+  Absorb,       ///< `reset absorb`: a trap (RandomRunModel::absorbing).
 };
 
 /// A runnable random model: random_model.hpp's representation plus what a run needs.
@@ -65,8 +69,10 @@ struct RandomRunModel {
   bool mechanical = false;          ///< Hamiltonian modes (see the file comment).
   std::vector<Tree> hamiltonians;   ///< Per mode, when mechanical: H as printed.
   std::vector<double> restitution;  ///< Per guard: e of `restitution e`, or −1.
-  std::vector<int> grid;            ///< Nodes per axis.
-  double t_end = 1;                 ///< Final time (frames at 0, t_end/2, t_end).
+  /// Per guard: whether it absorbs (`reset absorb`; its drawn reset and target are unused).
+  std::vector<char> absorbing;
+  std::vector<int> grid;  ///< Nodes per axis.
+  double t_end = 1;       ///< Final time (frames at 0, t_end/2, t_end).
 };
 
 namespace detail {
@@ -125,6 +131,12 @@ class RunModelGenerator : RandomDraws {
               : n_ == 2 ? std::vector<int>{25, 25}
               : n_ == 3 ? std::vector<int>{9, 9, 9}
                         : std::vector<int>{7, 7, 7, 7};
+    // Traps, from their own stream (the file comment).
+    std::mt19937_64 traps(m.seed * 0xD1B54A32D192ED03ULL + 0x7A7);
+    for (std::size_t g = 0; g < m.guards.size(); ++g) {
+      r_.absorbing.push_back(traps() % 5 == 0 ? 1 : 0);
+      if (r_.absorbing.back()) r_.kinds[g] = RunResetKind::Absorb;
+    }
     m.has_simulation = true;
     m.text = print();
     return std::move(r_);
@@ -433,16 +445,20 @@ class RunModelGenerator : RandomDraws {
       s += "}\n";
     }
     for (const auto& g : m.guards) {
+      const auto gi = static_cast<std::size_t>(&g - m.guards.data());
+      const bool trap = gi < r_.absorbing.size() && r_.absorbing[gi];
       s += "guard " + g.name + " {\n";
       if (m.modes.size() > 1) {
         s += "  from " + m.modes[static_cast<std::size_t>(g.from)].name;
-        if (g.to != g.from) s += " to " + m.modes[static_cast<std::size_t>(g.to)].name;
+        if (g.to != g.from && !trap) s += " to " + m.modes[static_cast<std::size_t>(g.to)].name;
         s += "\n";
       }
       s += "  when " + text(g.surface) + " = 0 " + (g.decreasing ? "decreasing" : "increasing") +
            "\n";
-      const double e = r_.restitution[static_cast<std::size_t>(&g - m.guards.data())];
-      if (g.identity_keyword) {
+      const double e = r_.restitution[gi];
+      if (trap) {
+        s += "  reset absorb\n";
+      } else if (g.identity_keyword) {
         s += "  reset identity\n";
       } else if (e >= 0) {
         s += "  reset restitution " + number(e) + "\n";

@@ -73,6 +73,8 @@ const char* kind_name(hybgen::testing::RunResetKind k) {
       return "triangular";
     case hybgen::testing::RunResetKind::Restitution:
       return "restitution";
+    case hybgen::testing::RunResetKind::Absorb:
+      return "absorb";
   }
   return "?";
 }
@@ -103,7 +105,8 @@ std::string first_error_line(const std::string& text) {
 /// `where` split), with standard deviation Z·√(p(1 − p)/n). hybgen's `initial_mass` and
 /// `mass` must lie within 5 of those plus 3 of its own mass errors, also where hybgen's budget
 /// does not close (its bars are then widened by the defect: methods.hpp,
-/// solve_by_characteristics). Returns the disagreements and appends a summary to `line`.
+/// solve_by_characteristics); and each trap's absorbed mass (`reset absorb`) the same way
+/// against the samples it took. Returns the disagreements and appends a summary to `line`.
 int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const nlohmann::json& s,
                std::string& line) {
   const auto& m = r.model;
@@ -115,6 +118,8 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
   auto uniform = [&rng] { return (static_cast<double>(rng() >> 11) + 0.5) * 0x1p-53; };
   const std::size_t frames = s["times"].size();
   std::vector<long> inside(frames, 0);
+  // Per trap (`reset absorb`) and frame, the samples it has taken.
+  std::vector<std::vector<long>> trapped(m.guards.size(), std::vector<long>(frames, 0));
   for (int j = 0; j < samples; ++j) {
     std::vector<double> x(n);
     for (std::size_t i = 0; i < n; ++i) {  // Box–Muller
@@ -128,7 +133,12 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
     double t = 0;
     for (std::size_t k = 0; k < frames; ++k) {
       const double tk = s["times"][k].get<double>();
-      if (tk > t && !tracer.push(mode, x, tk - t)) break;
+      int trap = -1;
+      if (tk > t && !tracer.push(mode, x, tk - t, &trap)) {
+        if (trap >= 0)
+          for (std::size_t q = k; q < frames; ++q) ++trapped[static_cast<std::size_t>(trap)][q];
+        break;
+      }
       t = tk;
       bool in = true;
       for (std::size_t i = 0; i < n; ++i) in = in && x[i] >= m.lo[i] && x[i] <= m.hi[i];
@@ -155,6 +165,32 @@ int check_mass(const RandomRunModel& r, const IndependentTracer& tracer, const n
           "\n  disagreement: the mass in the box at t = %g is %.6g +/- %.2g by hybgen's "
           "budget, %.6g +/- %.2g by Monte Carlo of the forward flow",
           s["times"][k].get<double>(), h, herr, mc, sd);
+    }
+  }
+  // Each trap's absorbed mass (summary.json `absorbed`) against the samples it took.
+  for (std::size_t g = 0; g < m.guards.size(); ++g) {
+    if (!r.absorbing[g]) continue;
+    const std::string& name = m.guards[g].name;
+    if (!s.contains("absorbed") || !s["absorbed"].contains(name)) {
+      ++bad;
+      std::printf("\n  disagreement: summary.json has no absorbed mass of trap '%s'", name.c_str());
+      continue;
+    }
+    const nlohmann::json& a = s["absorbed"][name];
+    for (std::size_t k = 0; k < frames; ++k) {
+      const double p = static_cast<double>(trapped[g][k]) / samples;
+      const double q = std::max(p * (1 - p), 1.0 / samples);
+      const double mc = Z * p, sd = Z * std::sqrt(q / samples);
+      const double h = a["values"][k].get<double>(), herr = a["errors"][k].get<double>();
+      const double bound = 5 * sd + 3 * herr + 1e-12;
+      worst = std::max(worst, std::fabs(h - mc) / bound);
+      if (!(std::fabs(h - mc) <= bound)) {
+        ++bad;
+        std::printf(
+            "\n  disagreement: trap '%s' has absorbed %.6g +/- %.2g by t = %g by hybgen's "
+            "budget, %.6g +/- %.2g by Monte Carlo of the forward flow",
+            name.c_str(), h, herr, s["times"][k].get<double>(), mc, sd);
+      }
     }
   }
   char b[160];

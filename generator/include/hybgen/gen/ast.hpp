@@ -91,6 +91,7 @@ struct ResetDecl {
     Elastic,      ///< `reset elastic`
     Restitution,  ///< `reset restitution EXPR`
     Explicit,     ///< `reset (e1, e2, ..., eN)` — one component per state.
+    Absorb,       ///< `reset absorb`: the mass that reaches the guard leaves the system.
   };
   Kind kind = Kind::Identity;       ///< Form.
   SourceLoc loc;                    ///< Position of the `reset` keyword.

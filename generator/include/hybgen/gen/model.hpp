@@ -52,12 +52,12 @@ struct ModeSpec {
 
 /// A checked guard.
 struct GuardSpec {
-  std::string name;                                        ///< Guard name.
-  SourceLoc loc;                                           ///< Where it was declared.
-  int from = 0;                                            ///< Source mode.
-  int to = 0;                                              ///< Target mode.
-  GiNaC::ex surface;                                       ///< s(x); the guard is s = 0.
-  SourceLoc surface_loc;                                   ///< Where `when` was written.
+  std::string name;       ///< Guard name.
+  SourceLoc loc;          ///< Where it was declared.
+  int from = 0;           ///< Source mode.
+  int to = 0;             ///< Target mode; −1 for an absorbing guard (`reset absorb`).
+  GiNaC::ex surface;      ///< s(x); the guard is s = 0.
+  SourceLoc surface_loc;  ///< Where `when` was written.
   Direction direction = Direction::Decreasing;             ///< Crossing direction.
   SourceLoc direction_loc;                                 ///< Where the direction word is.
   ResetDecl::Kind reset_kind = ResetDecl::Kind::Identity;  ///< Form of the reset.
@@ -148,9 +148,13 @@ struct IrMode {
 
 /// A guard of the IR.
 struct IrGuard {
-  std::string name;                             ///< Guard name.
-  int from = 0;                                 ///< Source mode.
-  int to = 0;                                   ///< Target mode.
+  std::string name;  ///< Guard name.
+  int from = 0;      ///< Source mode.
+  int to = 0;        ///< Target mode; −1 for an absorbing guard (`absorbing`).
+  /// `reset absorb`: the mass that reaches the guard leaves the system. The guard has a
+  /// surface, its gradient and a direction only: no reset, inverse or hybrid Jacobian (their
+  /// kernels' cases give NaN; the runtime never calls them: rt::GuardInfo::to = −1).
+  bool absorbing = false;
   GiNaC::ex surface;                            ///< s(x).
   std::vector<GiNaC::ex> gradient;              ///< ∇s.
   Direction direction = Direction::Decreasing;  ///< Crossing direction.

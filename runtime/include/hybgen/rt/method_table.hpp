@@ -40,7 +40,10 @@ inline constexpr const char* mass_error = "mass_error";      ///< Its error (par
 inline constexpr const char* outflow = "outflow";            ///< Mass out of the box per time.
 inline constexpr const char* atom = "atom";                  ///< Mass at a Zeno point per time.
 inline constexpr const char* atom_error = "atom_error";      ///< Its estimated error.
-inline constexpr const char* warnings = "warnings";          ///< The method's warnings.
+/// Per absorbing guard (`reset absorb`), by its name: the mass it took by each frame
+/// (`values`, part of `outflow`) and its estimated error (`errors`).
+inline constexpr const char* absorbed = "absorbed";
+inline constexpr const char* warnings = "warnings";                ///< The method's warnings.
 inline constexpr const char* output_warnings = "output_warnings";  ///< The outputs' warnings.
 /// Per observable (`observe`): its expectation per frame (`values`) and error (`errors`).
 inline constexpr const char* observables = "observables";

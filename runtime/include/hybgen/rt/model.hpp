@@ -21,7 +21,7 @@ namespace hybgen::rt {
 /// Static description of one guard.
 struct GuardInfo {
   int from;          ///< Source mode index.
-  int to;            ///< Target mode index.
+  int to;            ///< Target mode index; −1: absorbing (`reset absorb`, see below).
   int direction;     ///< -1: s decreases through 0; +1: s increases through 0.
   bool has_inverse;  ///< Whether `reset_inverse` is a closed form (else Newton).
   /// The axis i of a reset with a constant component (Δ_i independent of the state: the
@@ -32,6 +32,14 @@ struct GuardInfo {
   /// newton_reset_solve), which is what the backward characteristics need.
   int image_axis = -1;
 };
+
+/// Whether guard info `gi` absorbs (`reset absorb`): the mass that reaches its surface
+/// leaves the system. Such a guard has no target mode and no reset; its reset kernels' cases
+/// give NaN and are never called. Every method ends a trajectory there and counts its mass
+/// per guard (summary.json `absorbed`), with the outflow of the mass budget.
+constexpr bool absorbs(const GuardInfo& gi) {
+  return gi.to < 0;
+}
 
 /// What the runtime needs of a generated model. All functions are pure; `x`
 /// has `n_state` entries, `par` has `n_param` entries.

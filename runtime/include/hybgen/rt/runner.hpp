@@ -453,6 +453,13 @@ nlohmann::json run_summary(const RunPlan<state_dim_v<M>>& p,
   s[k::outflow] = mb.outflow;
   s[k::atom] = mb.atom;
   s[k::atom_error] = res.atom_error;
+  for (std::size_t g = 0; g < mb.absorbed.size(); ++g) {
+    if (mb.absorbed[g].empty()) continue;
+    const bool has_error = g < mb.absorbed_error.size() && !mb.absorbed_error[g].empty();
+    s[k::absorbed][M::guard_names[g]] = {
+        {"values", mb.absorbed[g]},
+        {"errors", has_error ? nlohmann::json(mb.absorbed_error[g]) : nlohmann::json(nullptr)}};
+  }
   for (const auto& [key, value] : res.summary.items()) s[key] = value;
   if (nlohmann::json obs = observables_summary<M>(p, res); !obs.is_null())
     s[k::observables] = std::move(obs);
@@ -629,6 +636,17 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
                     mb.mass[i], mb.outflow[i], mb.atom[i],
                     i < rec.atom_error.size() ? rec.atom_error[i] : 0.0, defect[i], bar[i]);
   }
+  // What each absorbing guard took by the last frame (summary.json `absorbed` has each frame).
+  if (s.contains(k::absorbed) && !rec.times.empty())
+    for (const auto& [name, a] : s[k::absorbed].items()) {
+      const auto& e = a["errors"];
+      char bar[48] = "";
+      if (e.is_array() && !e.empty() && e.back().is_number())
+        std::snprintf(bar, sizeof bar, " +/- %.1e", e.back().get<double>());
+      std::printf("absorbed by guard '%s' by t = %g: %.8g%s (of the initial mass %.6g)\n",
+                  name.c_str(), rec.times.back(), a["values"].back().get<double>(), bar,
+                  rec.budget.mass0);
+    }
   // The transfer operator's error per output time (methods.hpp, add_transfer_errors).
   if (s.contains(k::transfer) && s[k::transfer].contains("error") &&
       s[k::transfer]["error"].is_number() && !rec.times.empty()) {

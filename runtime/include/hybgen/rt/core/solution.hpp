@@ -181,6 +181,12 @@ struct MassBudget {
   double mass0_error = 0.0;           ///< Estimated |error| of mass0 (adaptive only).
   std::vector<double> outflow_error;  ///< Estimated |error| of outflow[k] (adaptive only).
   std::vector<double> atom_error;     ///< Estimated |error| of atom[k] (adaptive only).
+  /// Per guard g: the mass that g absorbed (`reset absorb`, model.hpp) by each output time —
+  /// part of `outflow`, the mass that left the box — or empty where g does not absorb or the
+  /// method does not count it.
+  std::vector<std::vector<double>> absorbed;
+  /// Estimated |error| of absorbed[g][k] (as `absorbed`; empty without an estimate).
+  std::vector<std::vector<double>> absorbed_error;
 };
 
 /// mass0 − mass[k] − outflow[k] − atom[k]: what no term of the budget accounts for.

@@ -33,6 +33,7 @@
 #include <span>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/core/solution.hpp"
@@ -61,7 +62,8 @@ struct AdaptiveBudgetInfo {
 ///  * outflow: `adaptive_outflow` (backward characteristics on the faces, integrated in time
 ///    along each to rel_tol/10), target rel_tol·max(mass0, max_k mass_k), plus the net mass
 ///    that resets carry out of the box (forward flows from the box, `adaptive_atom`);
-///  * atom: `adaptive_atom` (forward flows from the box to their Zeno points), same target.
+///  * atom: `adaptive_atom` (forward flows from the box to their Zeno points), same target;
+///  * absorbed: the same flows, the mass each absorbing guard took (part of the outflow).
 /// Each has its estimated error (mass_error, outflow_error, atom_error); the DEFECT
 /// mass0 − mass − outflow − atom (`budget_defect`) checks them against each other: it is what
 /// no term accounts for (mass that started outside the box and is reset into it, or an error
@@ -89,7 +91,15 @@ BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M
       adaptive_outflow<M>(grid, times, par, opt, aopt, scale, time_tol, flux_failure);
   if (res.failure.ok()) res.failure = flux_failure;
   AdaptiveOutflow reset;
-  AdaptiveOutflow az = adaptive_atom<M>(grid, times, par, opt, aopt, scale, res.message, &reset);
+  std::vector<AdaptiveOutflow> absorbed;
+  AdaptiveOutflow az =
+      adaptive_atom<M>(grid, times, par, opt, aopt, scale, res.message, &reset, &absorbed);
+  mb.absorbed.assign(absorbed.size(), {});
+  mb.absorbed_error.assign(absorbed.size(), {});
+  for (std::size_t g = 0; g < absorbed.size(); ++g) {
+    mb.absorbed[g] = std::move(absorbed[g].outflow);
+    mb.absorbed_error[g] = std::move(absorbed[g].error);
+  }
   mb.mass0 = am.mass0;
   mb.mass = am.mass;
   mb.mass_error = am.error;

@@ -19,6 +19,8 @@
 ///  * A state at rest: if a reset of g (to = from) maps the state to itself (to rounding) and g
 ///    fires again at once (as at the start of the flow), the flow ends with `zeno` there — the
 ///    ball's Zeno point (0, 0), e.g. when a flow is restarted from a Zeno state.
+///  * An absorbing guard (model.hpp, `absorbs`) ends the flow where it fires: `absorbed`, at
+///    the located (projected) point of its surface, with the guard and the time.
 ///  * `in_support` is checked at step ends (as in the tracer): the first step end outside it
 ///    stops the flow with `left_support` at that time; outputs inside that step are delivered.
 ///  * Grazing: a crossing where the flow is tangent to the guard and the orbit crosses it (the
@@ -84,6 +86,7 @@ enum class ForwardStatus {
   ok,            ///< Reached the final time.
   left_support,  ///< Left `M::in_support` (at a step end, t_stop).
   zeno,          ///< Came to rest at a Zeno accumulation point (x) at time t_stop.
+  absorbed,      ///< Reached an absorbing guard (`guard`) at t_stop, at x (model.hpp, absorbs).
   event_cap,     ///< More than `max_events` guard crossings without the Zeno signature.
   failed,        ///< Numerical failure (non-finite value, ODE step limit/underflow).
 };
@@ -97,6 +100,8 @@ inline const char* forward_status_name(ForwardStatus s) {
       return "left the support";
     case ForwardStatus::zeno:
       return "Zeno accumulation";
+    case ForwardStatus::absorbed:
+      return "absorbed by a guard";
     case ForwardStatus::event_cap:
       return "too many guard crossings without Zeno signature (max_events; chattering?)";
     case ForwardStatus::failed:
@@ -111,8 +116,9 @@ struct ForwardResult {
   ForwardStatus status = ForwardStatus::ok;  ///< How it ended.
   int mode = -1;                             ///< Mode at t_stop.
   /// State at t_stop: the final state (ok), the first state outside the support
-  /// (left_support), the accumulation state (zeno), the event state before the reset that
-  /// exceeded the cap (event_cap), the last good state (failed).
+  /// (left_support), the accumulation state (zeno), the point of the absorbing guard's surface
+  /// (absorbed), the event state before the reset that exceeded the cap (event_cap), the last
+  /// good state (failed).
   std::array<double, N> x{};
   double t_stop = 0.0;                  ///< Final time, or when the flow stopped (t_Z for zeno).
   int events = 0;                       ///< Guard crossings located.
@@ -268,6 +274,13 @@ class ForwardFlow {
         res.x = xe;
         res.t_stop = root.t;
         res.value = ratio;
+        return res;
+      }
+      if (absorbs(gi)) {  // the trajectory ends on the guard's surface; its mass leaves
+        res.status = ForwardStatus::absorbed;
+        res.mode = m;
+        res.x = xe;
+        res.t_stop = root.t;
         return res;
       }
       push_history(root.t, xe);

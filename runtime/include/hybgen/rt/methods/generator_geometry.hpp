@@ -11,7 +11,7 @@
 /// one axis d, the same at every point, and the roots along the lines parallel to d must be
 /// the same planes on every line (s constant in the other coordinates); the images Δ_g of
 /// sampled points of each plane must have exactly one constant coordinate d' (one
-/// hyperplane, not a set of lower dimension). Any other guard is refused
+/// hyperplane, not a set of lower dimension). An absorbing guard, and any other, is refused
 /// (std::invalid_argument, which the run's chain turns into exit 2), naming the guard.
 /// Curved guards (cut cells by quadrature on s_g, local level sets of the images) are not
 /// built yet.
@@ -150,6 +150,10 @@ std::vector<FvGuardPlane> fv_guard_planes(const TensorGrid<state_dim_v<M>>& grid
   std::vector<FvGuardPlane> out;
   for (int g = 0; g < M::n_guard; ++g) {
     const GuardInfo& gi = M::guards[static_cast<std::size_t>(g)];
+    if (absorbs(gi))
+      throw std::invalid_argument(std::string("scheme=fv: guard '") + guard_name<M>(g) +
+                                  "' absorbs: the finite-volume generator does not take "
+                                  "absorbing guards yet; scheme=hat does");
     // Points of the guard: roots of s along lines parallel to every axis.
     std::vector<std::array<double, N>> on;
     std::vector<std::vector<std::vector<double>>> roots_along(N);  // [axis][line] roots

@@ -256,6 +256,7 @@ PreflightFailure<state_dim_v<M>> check_crossing(int g, const std::array<double, 
       return fail(PreflightError::guards_overlap, 0.0);
     }
   }
+  if (absorbs(gi)) return f;  // nothing is reset (model.hpp): no image to check
   std::array<double, N> y{};
   M::reset(g, x.data(), par, y.data());
   f.image = y;

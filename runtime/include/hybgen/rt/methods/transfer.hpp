@@ -188,6 +188,11 @@ struct TransferOperator {
   std::vector<double> weight;   ///< Trapezoid weight (= dual-cell volume) of every index r.
   std::vector<double> outflow;  ///< Fraction of cell r leaving the box or the support.
   std::vector<double> atom;     ///< Fraction of cell r that reaches a Zeno point within h.
+  /// Per guard g, whether it absorbs (model.hpp, `absorbs`); n_guard entries.
+  std::vector<char> absorbing;
+  /// absorbed[r·n_guard + g]: the fraction of cell r that guard g absorbs within h (a part of
+  /// outflow_r); valid where outflow is. Empty without absorbing guards.
+  std::vector<double> absorbed;
   /// max_r |Σ_j P_jr + outflow_r + atom_r − 1| (≤ kColumnTol, or the assembly failed).
   double column_defect = 0.0;
   /// First failure (smallest index r), if any; status.tau is the FORWARD time of the failure.
@@ -493,6 +498,12 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   op.owned = backend.block(op.size());
   op.outflow.assign(static_cast<std::size_t>(R), 0.0);
   op.atom.assign(static_cast<std::size_t>(R), 0.0);
+  const auto G = static_cast<std::size_t>(M::n_guard);
+  op.absorbing.assign(G, 0);
+  for (std::size_t g = 0; g < G; ++g) op.absorbing[g] = absorbs(detail::guard_info<M>(g)) ? 1 : 0;
+  const bool any_absorbing =
+      std::any_of(op.absorbing.begin(), op.absorbing.end(), [](char c) { return c != 0; });
+  if (any_absorbing) op.absorbed.assign(static_cast<std::size_t>(R) * G, 0.0);
   const int Ka = opt.samples_per_axis > 0 ? opt.samples_per_axis : default_samples_per_axis(N);
   op.samples_per_axis = Ka;
   std::size_t K = 1;
@@ -538,6 +549,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
     std::vector<ForwardResult<N>> end(K);  // where each sample's flow ended
     std::vector<char> valid(K);            // … in the support, status ok
     std::vector<char> flowed(K);           // whether the sample was in the support
+    std::vector<std::size_t> n_absorbed(any_absorbing ? G : 0);  // per guard, in one cell
 #pragma omp for schedule(dynamic, 64)
     for (auto r = static_cast<std::int64_t>(op.owned.begin);
          r < static_cast<std::int64_t>(op.owned.end); ++r) {
@@ -554,6 +566,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         delta[a] = (hi[a] - lo[a]) / static_cast<double>(Ka);  // a sample's sub-cell
       }
       dest.clear();
+      std::fill(n_absorbed.begin(), n_absorbed.end(), 0);
       std::size_t n_out = 0, n_atom = 0, n_void = 0;
       bool failed = false;
       auto sample = [&](std::size_t q) {
@@ -623,6 +636,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         }
         if (res.status != ForwardStatus::ok) {
           ++n_out;
+          if (res.status == ForwardStatus::absorbed)
+            ++n_absorbed[static_cast<std::size_t>(res.guard)];
           continue;
         }
         State width = delta;
@@ -676,6 +691,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       const double inv = k_in > 0 ? 1.0 / static_cast<double>(k_in) : 0.0;
       op.outflow[static_cast<std::size_t>(r)] = k_in > 0 ? static_cast<double>(n_out) * inv : 1.0;
       op.atom[static_cast<std::size_t>(r)] = static_cast<double>(n_atom) * inv;
+      for (std::size_t g = 0; g < n_absorbed.size(); ++g)
+        op.absorbed[static_cast<std::size_t>(r) * G + g] = static_cast<double>(n_absorbed[g]) * inv;
       std::sort(dest.begin(), dest.end());
       for (std::size_t k = 0; k < dest.size();) {
         double w = 0.0;
@@ -892,6 +909,10 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   MassBudget& mb = run.budget;
   mb.times.assign(times.begin(), times.end());
   mb.mass0 = mass0;
+  // The absorbing guards' shares, Σ_r absorbed_rg x_r per step, cumulated (with the outflow).
+  const std::size_t G = op.absorbed.empty() ? 0 : op.absorbing.size();
+  std::vector<double> absorbed_cum(G, 0.0), absorbed_step(G, 0.0);
+  if (G > 0) mb.absorbed.assign(G, {});
   auto emit = [&](long n) {
     for (; k < times.size() && at[k] == n; ++k) {
       double* dst = sol.u.data() + k * L;
@@ -903,6 +924,8 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
       mb.mass.push_back(run.step_mass.back());
       mb.outflow.push_back(out_cum);
       mb.atom.push_back(atom_cum);
+      for (std::size_t g = 0; g < G; ++g)
+        if (op.absorbing[g]) mb.absorbed[g].push_back(absorbed_cum[g]);
     }
   };
   emit(0);
@@ -947,6 +970,14 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
          << node / op.n_node;
       run.failure = os.str();
       break;
+    }
+    if (G > 0) {
+      std::fill(absorbed_step.begin(), absorbed_step.end(), 0.0);
+      const double* ab = op.absorbed.data() + own.begin * G;
+      for (std::size_t r = 0; r < L; ++r)
+        for (std::size_t g = 0; g < G; ++g) absorbed_step[g] += ab[r * G + g] * x[r];
+      if (op.distributed) b.sum(std::span<double>(absorbed_step));
+      for (std::size_t g = 0; g < G; ++g) absorbed_cum[g] += absorbed_step[g];
     }
     std::swap(x, y);
     out_cum += s.outflow;
