@@ -33,8 +33,7 @@ struct bouncing_ball {
   static constexpr std::array<const char*, 1> mode_names{"flight"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"ground"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
   /// Number of observables (`observe` lines).
   static constexpr int n_observable = 1;
@@ -48,8 +47,8 @@ struct bouncing_ball {
         const double p = state[1];
         const double m = parameter[0];
         const double g = parameter[1];
-        out[0] = p / m;
-        out[1] = -g * m;
+        out[0] = p/m;
+        out[1] = -g*m;
         break;
       }
       default:
@@ -109,7 +108,7 @@ struct bouncing_ball {
         const double p = state[1];
         const double e = parameter[2];
         out[0] = x;
-        out[1] = -e * p;
+        out[1] = -e*p;
         break;
       }
       default:
@@ -126,7 +125,7 @@ struct bouncing_ball {
         const double p = state[1];
         const double e = parameter[2];
         out[0] = x;
-        out[1] = -p / e;
+        out[1] = -p/e;
         break;
       }
       default:
@@ -158,7 +157,7 @@ struct bouncing_ball {
     switch (guard) {
       case 0: {  // guard ground: flight -> flight
         const double e = parameter[2];
-        result = e * e;
+        result = e*e;
         break;
       }
       default:
@@ -184,7 +183,7 @@ struct bouncing_ball {
         const double x = state[0];
         const double p = state[1];
         const double _t0 = x - 1.0;
-        result = std::exp(-p * p - _t0 * _t0);
+        result = std::exp(-p*p - _t0*_t0);
         break;
       }
       default:
@@ -202,7 +201,7 @@ struct bouncing_ball {
         const double p = state[1];
         const double m = parameter[0];
         const double g = parameter[1];
-        result = g * m * x + (1.0 / 2.0) * (p * p) / m;
+        result = g*m*x + (1.0/2.0)*(p*p)/m;
         break;
       }
       default:
@@ -210,6 +209,7 @@ struct bouncing_ball {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<bouncing_ball>);

@@ -33,10 +33,8 @@ struct chaplygin {
   static constexpr std::array<const char*, 1> mode_names{"flow"};
   /// Guard names.
   static constexpr std::array<const char*, 2> guard_names{"turn_right", "turn_left"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
-  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{
-      {{0, 0, 1, true, -1}, {0, 0, -1, true, -1}}};
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 0, 1, true, -1}, {0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
@@ -47,8 +45,8 @@ struct chaplygin {
         const double m = parameter[0];
         const double I = parameter[1];
         const double a = parameter[2];
-        out[0] = a * (omega * omega);
-        out[1] = -a * m * omega * v / (I + a * a * m);
+        out[0] = a*(omega*omega);
+        out[1] = -a*m*omega*v/(I + a*a*m);
         out[2] = omega;
         break;
       }
@@ -67,7 +65,7 @@ struct chaplygin {
         const double m = parameter[0];
         const double I = parameter[1];
         const double a = parameter[2];
-        result = -a * m * v / (I + a * a * m);
+        result = -a*m*v/(I + a*a*m);
         break;
       }
       default:
@@ -244,7 +242,7 @@ struct chaplygin {
         const double v = state[0];
         const double omega = state[1];
         const double theta = state[2];
-        result = std::exp(-omega * omega - theta * theta - v * v);
+        result = std::exp(-omega*omega - theta*theta - v*v);
         break;
       }
       default:
@@ -252,6 +250,7 @@ struct chaplygin {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<chaplygin>);

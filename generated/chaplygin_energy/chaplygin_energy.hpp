@@ -33,10 +33,8 @@ struct chaplygin_energy {
   static constexpr std::array<const char*, 2> mode_names{"plus", "minus"};
   /// Guard names.
   static constexpr std::array<const char*, 2> guard_names{"turn_right", "turn_left"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
-  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{
-      {{0, 1, 1, true, -1}, {1, 0, -1, true, -1}}};
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, 1, true, -1}, {1, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
@@ -47,10 +45,10 @@ struct chaplygin_energy {
         const double I = parameter[1];
         const double a = parameter[2];
         const double E = parameter[3];
-        const double _t0 = 2.0 * E - m * (v * v);
-        const double _t1 = I + a * a * m;
-        out[0] = a * _t0 / _t1;
-        out[1] = std::sqrt(_t0 / _t1);
+        const double _t0 = 2.0*E - m*(v*v);
+        const double _t1 = I + a*a*m;
+        out[0] = a*_t0/_t1;
+        out[1] = std::sqrt(_t0/_t1);
         break;
       }
       case 1: {  // mode minus
@@ -59,10 +57,10 @@ struct chaplygin_energy {
         const double I = parameter[1];
         const double a = parameter[2];
         const double E = parameter[3];
-        const double _t0 = 2.0 * E - m * (v * v);
-        const double _t1 = I + a * a * m;
-        out[0] = a * _t0 / _t1;
-        out[1] = -std::sqrt(_t0 / _t1);
+        const double _t0 = 2.0*E - m*(v*v);
+        const double _t1 = I + a*a*m;
+        out[0] = a*_t0/_t1;
+        out[1] = -std::sqrt(_t0/_t1);
         break;
       }
       default:
@@ -80,7 +78,7 @@ struct chaplygin_energy {
         const double m = parameter[0];
         const double I = parameter[1];
         const double a = parameter[2];
-        result = -2.0 * a * m * v / (I + a * a * m);
+        result = -2.0*a*m*v/(I + a*a*m);
         break;
       }
       case 1: {  // mode minus
@@ -88,7 +86,7 @@ struct chaplygin_energy {
         const double m = parameter[0];
         const double I = parameter[1];
         const double a = parameter[2];
-        result = -2.0 * a * m * v / (I + a * a * m);
+        result = -2.0*a*m*v/(I + a*a*m);
         break;
       }
       default:
@@ -244,13 +242,13 @@ struct chaplygin_energy {
       case 0: {  // mode plus
         const double v = state[0];
         const double theta = state[1];
-        result = (1.0 / 2.0) * std::exp(-theta * theta - v * v);
+        result = (1.0/2.0)*std::exp(-theta*theta - v*v);
         break;
       }
       case 1: {  // mode minus
         const double v = state[0];
         const double theta = state[1];
-        result = (1.0 / 2.0) * std::exp(-theta * theta - v * v);
+        result = (1.0/2.0)*std::exp(-theta*theta - v*v);
         break;
       }
       default:
@@ -258,6 +256,7 @@ struct chaplygin_energy {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<chaplygin_energy>);

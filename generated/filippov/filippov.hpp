@@ -33,10 +33,8 @@ struct filippov {
   static constexpr std::array<const char*, 2> mode_names{"A", "B"};
   /// Guard names.
   static constexpr std::array<const char*, 2> guard_names{"A_to_B", "B_to_A"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
-  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{
-      {{0, 1, -1, true, -1}, {1, 0, 1, true, -1}}};
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, -1, true, -1}, {1, 0, 1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double* parameter, double* out) {
@@ -45,16 +43,16 @@ struct filippov {
         const double x = state[0];
         const double y = state[1];
         const double alpha = parameter[0];
-        out[0] = y / alpha - x;
-        out[1] = -y - alpha * x;
+        out[0] = y/alpha - x;
+        out[1] = -y - alpha*x;
         break;
       }
       case 1: {  // mode B
         const double x = state[0];
         const double y = state[1];
         const double alpha = parameter[0];
-        out[0] = alpha * y - x;
-        out[1] = -y - x / alpha;
+        out[0] = alpha*y - x;
+        out[1] = -y - x/alpha;
         break;
       }
       default:
@@ -88,13 +86,13 @@ struct filippov {
       case 0: {  // guard A_to_B: A -> B
         const double x = state[0];
         const double y = state[1];
-        result = x * y;
+        result = x*y;
         break;
       }
       case 1: {  // guard B_to_A: B -> A
         const double x = state[0];
         const double y = state[1];
-        result = x * y;
+        result = x*y;
         break;
       }
       default:
@@ -203,16 +201,14 @@ struct filippov {
         const double x = state[0];
         const double y = state[1];
         const double alpha = parameter[0];
-        result = (x * (y + x / alpha) + y * (x - alpha * y)) /
-                 (alpha * (x * x) + 2.0 * x * y - y * y / alpha);
+        result = (x*(y + x/alpha) + y*(x - alpha*y))/(alpha*(x*x) + 2.0*x*y - y*y/alpha);
         break;
       }
       case 1: {  // guard B_to_A: B -> A
         const double x = state[0];
         const double y = state[1];
         const double alpha = parameter[0];
-        result = (x * (y + alpha * x) + y * (x - y / alpha)) /
-                 (2.0 * x * y + x * x / alpha - alpha * (y * y));
+        result = (x*(y + alpha*x) + y*(x - y/alpha))/(2.0*x*y + x*x/alpha - alpha*(y*y));
         break;
       }
       default:
@@ -222,7 +218,9 @@ struct filippov {
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double*, const double*) { return true; }
+  static bool in_support(const double*, const double*) {
+    return true;
+  }
 
   /// Whether x lies in the closure of mode k's region (its `where` relations, < read as <=
   /// and > as >=).
@@ -232,14 +230,14 @@ struct filippov {
         const double x = state[0];
         const double y = state[1];
         double _w0 = 0.0;
-        _w0 = x * y;
+        _w0 = x*y;
         return _w0 >= 0.0;
       }
       case 1: {  // mode B
         const double x = state[0];
         const double y = state[1];
         double _w0 = 0.0;
-        _w0 = x * y;
+        _w0 = x*y;
         return _w0 <= 0.0;
       }
       default:
@@ -256,22 +254,22 @@ struct filippov {
         const double x = state[0];
         const double y = state[1];
         double _w0 = 0.0;
-        _w0 = x * y;
+        _w0 = x*y;
         if (!(_w0 > 0.0)) return 0.0;
         const double _t0 = x - 1.0;
         const double _t1 = y - 1.0;
-        result = std::exp(-4.0 * (_t0 * _t0) - 4.0 * (_t1 * _t1));
+        result = std::exp(-4.0*(_t0*_t0) - 4.0*(_t1*_t1));
         break;
       }
       case 1: {  // mode B
         const double x = state[0];
         const double y = state[1];
         double _w0 = 0.0;
-        _w0 = x * y;
+        _w0 = x*y;
         if (!(_w0 < 0.0)) return 0.0;
         const double _t0 = x - 1.0;
         const double _t1 = y - 1.0;
-        result = std::exp(-4.0 * (_t0 * _t0) - 4.0 * (_t1 * _t1));
+        result = std::exp(-4.0*(_t0*_t0) - 4.0*(_t1*_t1));
         break;
       }
       default:
@@ -279,6 +277,7 @@ struct filippov {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<filippov>);

@@ -33,8 +33,7 @@ struct gl2 {
   static constexpr std::array<const char*, 1> mode_names{"flow"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"impact"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
@@ -46,14 +45,14 @@ struct gl2 {
         const double zeta3 = state[2];
         const double zeta4 = state[3];
         const double q = state[4];
-        const double _t0 = zeta3 * zeta3;
-        const double _t1 = zeta2 * zeta2;
-        const double _t2 = zeta1 * zeta2 - zeta1 * zeta3 - zeta2 * zeta4 + zeta3 * zeta4;
+        const double _t0 = zeta3*zeta3;
+        const double _t1 = zeta2*zeta2;
+        const double _t2 = zeta1*zeta2 - zeta1*zeta3 - zeta2*zeta4 + zeta3*zeta4;
         out[0] = _t0 - _t1;
         out[1] = _t2;
         out[2] = _t2;
         out[3] = _t1 - _t0;
-        out[4] = (q + 1.0) * (zeta1 + zeta4);
+        out[4] = (q + 1.0)*(zeta1 + zeta4);
         break;
       }
       default:
@@ -120,10 +119,10 @@ struct gl2 {
         const double zeta4 = state[3];
         const double q = state[4];
         const double e = parameter[0];
-        const double _t0 = (1.0 / 2.0) * zeta1;
-        const double _t1 = (1.0 / 2.0) * zeta4;
-        const double _t2 = (1.0 / 2.0) * e * zeta1;
-        const double _t3 = (1.0 / 2.0) * e * zeta4;
+        const double _t0 = (1.0/2.0)*zeta1;
+        const double _t1 = (1.0/2.0)*zeta4;
+        const double _t2 = (1.0/2.0)*e*zeta1;
+        const double _t3 = (1.0/2.0)*e*zeta4;
         out[0] = _t0 - _t1 - _t2 - _t3;
         out[1] = zeta2;
         out[2] = zeta3;
@@ -147,12 +146,12 @@ struct gl2 {
         const double zeta4 = state[3];
         const double q = state[4];
         const double e = parameter[0];
-        const double _t0 = e * zeta1;
-        const double _t1 = e * zeta4;
-        out[0] = -(1.0 / 2.0) * (zeta1 + zeta4 - _t0 + _t1) / e;
+        const double _t0 = e*zeta1;
+        const double _t1 = e*zeta4;
+        out[0] = -(1.0/2.0)*(zeta1 + zeta4 - _t0 + _t1)/e;
         out[1] = zeta2;
         out[2] = zeta3;
-        out[3] = -(1.0 / 2.0) * (zeta1 + zeta4 + _t0 - _t1) / e;
+        out[3] = -(1.0/2.0)*(zeta1 + zeta4 + _t0 - _t1)/e;
         out[4] = q;
         break;
       }
@@ -167,9 +166,9 @@ struct gl2 {
     switch (guard) {
       case 0: {  // guard impact: flow -> flow
         const double e = parameter[0];
-        const double _t0 = (1.0 / 2.0) * e;
-        const double _t1 = (1.0 / 2.0) - _t0;
-        const double _t2 = -_t0 - (1.0 / 2.0);
+        const double _t0 = (1.0/2.0)*e;
+        const double _t1 = (1.0/2.0) - _t0;
+        const double _t2 = -_t0 - (1.0/2.0);
         out[0] = _t1;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -209,7 +208,7 @@ struct gl2 {
     switch (guard) {
       case 0: {  // guard impact: flow -> flow
         const double e = parameter[0];
-        result = e * e;
+        result = e*e;
         break;
       }
       default:
@@ -237,9 +236,8 @@ struct gl2 {
         const double zeta3 = state[2];
         const double zeta4 = state[3];
         const double q = state[4];
-        const double _t0 = 2.0 * q - 1.0;
-        result = std::exp(-2.0 * (zeta1 * zeta1) - 2.0 * (zeta2 * zeta2) - 2.0 * (zeta3 * zeta3) -
-                          2.0 * (zeta4 * zeta4) - _t0 * _t0);
+        const double _t0 = 2.0*q - 1.0;
+        result = std::exp(-2.0*(zeta1*zeta1) - 2.0*(zeta2*zeta2) - 2.0*(zeta3*zeta3) - 2.0*(zeta4*zeta4) - _t0*_t0);
         break;
       }
       default:
@@ -247,6 +245,7 @@ struct gl2 {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<gl2>);

@@ -24,8 +24,7 @@ struct gl3 {
   /// Number of guards.
   static constexpr int n_guard = 1;
   /// State variable names, in order.
-  static constexpr std::array<const char*, 10> state_names{
-      "zeta1", "zeta2", "zeta3", "zeta4", "zeta5", "zeta6", "zeta7", "zeta8", "zeta9", "q"};
+  static constexpr std::array<const char*, 10> state_names{"zeta1", "zeta2", "zeta3", "zeta4", "zeta5", "zeta6", "zeta7", "zeta8", "zeta9", "q"};
   /// Parameter names.
   static constexpr std::array<const char*, 0> param_names{};
   /// Parameter defaults.
@@ -34,8 +33,7 @@ struct gl3 {
   static constexpr std::array<const char*, 1> mode_names{"flow"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"impact"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
@@ -52,18 +50,15 @@ struct gl3 {
         const double zeta8 = state[7];
         const double zeta9 = state[8];
         const double q = state[9];
-        const double _t0 = zeta4 * zeta4;
-        const double _t1 = zeta7 * zeta7;
-        const double _t2 = zeta2 * zeta2;
-        const double _t3 = zeta3 * zeta3;
-        const double _t4 = zeta1 * zeta2 - zeta1 * zeta4 - zeta2 * zeta5 - zeta3 * zeta6 +
-                           zeta4 * zeta5 + zeta7 * zeta8;
-        const double _t5 = zeta1 * zeta3 - zeta1 * zeta7 - zeta2 * zeta8 - zeta3 * zeta9 +
-                           zeta4 * zeta6 + zeta7 * zeta9;
-        const double _t6 = zeta6 * zeta6;
-        const double _t7 = zeta8 * zeta8;
-        const double _t8 = zeta2 * zeta3 - zeta4 * zeta7 + zeta5 * zeta6 - zeta5 * zeta8 -
-                           zeta6 * zeta9 + zeta8 * zeta9;
+        const double _t0 = zeta4*zeta4;
+        const double _t1 = zeta7*zeta7;
+        const double _t2 = zeta2*zeta2;
+        const double _t3 = zeta3*zeta3;
+        const double _t4 = zeta1*zeta2 - zeta1*zeta4 - zeta2*zeta5 - zeta3*zeta6 + zeta4*zeta5 + zeta7*zeta8;
+        const double _t5 = zeta1*zeta3 - zeta1*zeta7 - zeta2*zeta8 - zeta3*zeta9 + zeta4*zeta6 + zeta7*zeta9;
+        const double _t6 = zeta6*zeta6;
+        const double _t7 = zeta8*zeta8;
+        const double _t8 = zeta2*zeta3 - zeta4*zeta7 + zeta5*zeta6 - zeta5*zeta8 - zeta6*zeta9 + zeta8*zeta9;
         out[0] = _t0 + _t1 - _t2 - _t3;
         out[1] = _t4;
         out[2] = _t5;
@@ -73,7 +68,7 @@ struct gl3 {
         out[6] = _t5;
         out[7] = _t8;
         out[8] = _t3 + _t6 - _t1 - _t7;
-        out[9] = (q + 1.0) * (zeta1 + zeta5 + zeta9);
+        out[9] = (q + 1.0)*(zeta1 + zeta5 + zeta9);
         break;
       }
       default:
@@ -150,18 +145,18 @@ struct gl3 {
         const double zeta8 = state[7];
         const double zeta9 = state[8];
         const double q = state[9];
-        const double _t0 = (2.0 / 3.0) * zeta5;
-        const double _t1 = (2.0 / 3.0) * zeta9;
-        const double _t2 = (2.0 / 3.0) * zeta1;
-        out[0] = (1.0 / 3.0) * zeta1 - _t0 - _t1;
+        const double _t0 = (2.0/3.0)*zeta5;
+        const double _t1 = (2.0/3.0)*zeta9;
+        const double _t2 = (2.0/3.0)*zeta1;
+        out[0] = (1.0/3.0)*zeta1 - _t0 - _t1;
         out[1] = zeta2;
         out[2] = zeta3;
         out[3] = zeta4;
-        out[4] = (1.0 / 3.0) * zeta5 - _t2 - _t1;
+        out[4] = (1.0/3.0)*zeta5 - _t2 - _t1;
         out[5] = zeta6;
         out[6] = zeta7;
         out[7] = zeta8;
-        out[8] = (1.0 / 3.0) * zeta9 - _t2 - _t0;
+        out[8] = (1.0/3.0)*zeta9 - _t2 - _t0;
         out[9] = q;
         break;
       }
@@ -185,18 +180,18 @@ struct gl3 {
         const double zeta8 = state[7];
         const double zeta9 = state[8];
         const double q = state[9];
-        const double _t0 = (2.0 / 3.0) * zeta5;
-        const double _t1 = (2.0 / 3.0) * zeta9;
-        const double _t2 = (2.0 / 3.0) * zeta1;
-        out[0] = (1.0 / 3.0) * zeta1 - _t0 - _t1;
+        const double _t0 = (2.0/3.0)*zeta5;
+        const double _t1 = (2.0/3.0)*zeta9;
+        const double _t2 = (2.0/3.0)*zeta1;
+        out[0] = (1.0/3.0)*zeta1 - _t0 - _t1;
         out[1] = zeta2;
         out[2] = zeta3;
         out[3] = zeta4;
-        out[4] = (1.0 / 3.0) * zeta5 - _t2 - _t1;
+        out[4] = (1.0/3.0)*zeta5 - _t2 - _t1;
         out[5] = zeta6;
         out[6] = zeta7;
         out[7] = zeta8;
-        out[8] = (1.0 / 3.0) * zeta9 - _t2 - _t0;
+        out[8] = (1.0/3.0)*zeta9 - _t2 - _t0;
         out[9] = q;
         break;
       }
@@ -210,15 +205,15 @@ struct gl3 {
   static void reset_jacobian(int guard, const double*, const double*, double* out) {
     switch (guard) {
       case 0: {  // guard impact: flow -> flow
-        out[0] = (1.0 / 3.0);
+        out[0] = (1.0/3.0);
         out[1] = 0.0;
         out[2] = 0.0;
         out[3] = 0.0;
-        out[4] = -(2.0 / 3.0);
+        out[4] = -(2.0/3.0);
         out[5] = 0.0;
         out[6] = 0.0;
         out[7] = 0.0;
-        out[8] = -(2.0 / 3.0);
+        out[8] = -(2.0/3.0);
         out[9] = 0.0;
         out[10] = 0.0;
         out[11] = 1.0;
@@ -250,15 +245,15 @@ struct gl3 {
         out[37] = 0.0;
         out[38] = 0.0;
         out[39] = 0.0;
-        out[40] = -(2.0 / 3.0);
+        out[40] = -(2.0/3.0);
         out[41] = 0.0;
         out[42] = 0.0;
         out[43] = 0.0;
-        out[44] = (1.0 / 3.0);
+        out[44] = (1.0/3.0);
         out[45] = 0.0;
         out[46] = 0.0;
         out[47] = 0.0;
-        out[48] = -(2.0 / 3.0);
+        out[48] = -(2.0/3.0);
         out[49] = 0.0;
         out[50] = 0.0;
         out[51] = 0.0;
@@ -290,15 +285,15 @@ struct gl3 {
         out[77] = 1.0;
         out[78] = 0.0;
         out[79] = 0.0;
-        out[80] = -(2.0 / 3.0);
+        out[80] = -(2.0/3.0);
         out[81] = 0.0;
         out[82] = 0.0;
         out[83] = 0.0;
-        out[84] = -(2.0 / 3.0);
+        out[84] = -(2.0/3.0);
         out[85] = 0.0;
         out[86] = 0.0;
         out[87] = 0.0;
-        out[88] = (1.0 / 3.0);
+        out[88] = (1.0/3.0);
         out[89] = 0.0;
         out[90] = 0.0;
         out[91] = 0.0;
@@ -347,8 +342,7 @@ struct gl3 {
     double _c0 = 0.0;
     double _c1 = 0.0;
     _c0 = q;
-    _c1 = zeta1 * zeta1 + zeta2 * zeta2 + zeta3 * zeta3 + zeta4 * zeta4 + zeta5 * zeta5 +
-          zeta6 * zeta6 + zeta7 * zeta7 + zeta8 * zeta8 + zeta9 * zeta9 - (25.0 / 4.0);
+    _c1 = zeta1*zeta1 + zeta2*zeta2 + zeta3*zeta3 + zeta4*zeta4 + zeta5*zeta5 + zeta6*zeta6 + zeta7*zeta7 + zeta8*zeta8 + zeta9*zeta9 - (25.0/4.0);
     return _c0 >= 0.0 && _c1 <= 0.0;
   }
 
@@ -368,11 +362,8 @@ struct gl3 {
         const double zeta8 = state[7];
         const double zeta9 = state[8];
         const double q = state[9];
-        const double _t0 = 2.0 * q - 1.0;
-        result = std::exp(-4.0 * (zeta1 * zeta1) - 4.0 * (zeta2 * zeta2) - 4.0 * (zeta3 * zeta3) -
-                          4.0 * (zeta4 * zeta4) - 4.0 * (zeta5 * zeta5) - 4.0 * (zeta6 * zeta6) -
-                          4.0 * (zeta7 * zeta7) - 4.0 * (zeta8 * zeta8) - 4.0 * (zeta9 * zeta9) -
-                          2.0 * (_t0 * _t0));
+        const double _t0 = 2.0*q - 1.0;
+        result = std::exp(-4.0*(zeta1*zeta1) - 4.0*(zeta2*zeta2) - 4.0*(zeta3*zeta3) - 4.0*(zeta4*zeta4) - 4.0*(zeta5*zeta5) - 4.0*(zeta6*zeta6) - 4.0*(zeta7*zeta7) - 4.0*(zeta8*zeta8) - 4.0*(zeta9*zeta9) - 2.0*(_t0*_t0));
         break;
       }
       default:
@@ -380,6 +371,7 @@ struct gl3 {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<gl3>);

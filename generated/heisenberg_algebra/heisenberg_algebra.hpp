@@ -33,10 +33,8 @@ struct heisenberg_algebra {
   static constexpr std::array<const char*, 1> mode_names{"flow"};
   /// Guard names.
   static constexpr std::array<const char*, 2> guard_names{"right", "left"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
-  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{
-      {{0, 0, 1, true, -1}, {0, 0, -1, true, -1}}};
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 0, 1, true, -1}, {0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double*, double* out) {
@@ -45,8 +43,8 @@ struct heisenberg_algebra {
         const double zeta_x = state[0];
         const double zeta_y = state[1];
         const double zeta_z = state[2];
-        out[0] = -zeta_y * zeta_z;
-        out[1] = zeta_x * zeta_z;
+        out[0] = -zeta_y*zeta_z;
+        out[1] = zeta_x*zeta_z;
         out[2] = 0.0;
         out[3] = zeta_x;
         break;
@@ -123,7 +121,7 @@ struct heisenberg_algebra {
         const double zeta_z = state[2];
         const double q = state[3];
         const double e = parameter[0];
-        out[0] = -e * zeta_x;
+        out[0] = -e*zeta_x;
         out[1] = zeta_y;
         out[2] = zeta_z;
         out[3] = q;
@@ -135,7 +133,7 @@ struct heisenberg_algebra {
         const double zeta_z = state[2];
         const double q = state[3];
         const double e = parameter[0];
-        out[0] = -e * zeta_x;
+        out[0] = -e*zeta_x;
         out[1] = zeta_y;
         out[2] = zeta_z;
         out[3] = q;
@@ -156,7 +154,7 @@ struct heisenberg_algebra {
         const double zeta_z = state[2];
         const double q = state[3];
         const double e = parameter[0];
-        out[0] = -zeta_x / e;
+        out[0] = -zeta_x/e;
         out[1] = zeta_y;
         out[2] = zeta_z;
         out[3] = q;
@@ -168,7 +166,7 @@ struct heisenberg_algebra {
         const double zeta_z = state[2];
         const double q = state[3];
         const double e = parameter[0];
-        out[0] = -zeta_x / e;
+        out[0] = -zeta_x/e;
         out[1] = zeta_y;
         out[2] = zeta_z;
         out[3] = q;
@@ -235,12 +233,12 @@ struct heisenberg_algebra {
     switch (guard) {
       case 0: {  // guard right: flow -> flow
         const double e = parameter[0];
-        result = e * e;
+        result = e*e;
         break;
       }
       case 1: {  // guard left: flow -> flow
         const double e = parameter[0];
-        result = e * e;
+        result = e*e;
         break;
       }
       default:
@@ -269,10 +267,9 @@ struct heisenberg_algebra {
         const double zeta_y = state[1];
         const double zeta_z = state[2];
         const double q = state[3];
-        const double _t0 = 2.0 * zeta_x - 1.0;
-        const double _t1 = 2.0 * zeta_z - 1.0;
-        result = std::exp(-4.0 * (q * q) - 2.0 * (zeta_y * zeta_y) - (1.0 / 2.0) * (_t0 * _t0) -
-                          (1.0 / 2.0) * (_t1 * _t1));
+        const double _t0 = 2.0*zeta_x - 1.0;
+        const double _t1 = 2.0*zeta_z - 1.0;
+        result = std::exp(-4.0*(q*q) - 2.0*(zeta_y*zeta_y) - (1.0/2.0)*(_t0*_t0) - (1.0/2.0)*(_t1*_t1));
         break;
       }
       default:
@@ -280,6 +277,7 @@ struct heisenberg_algebra {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<heisenberg_algebra>);

@@ -33,8 +33,7 @@ struct integrate_and_fire {
   static constexpr std::array<const char*, 1> mode_names{"subthreshold"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"spike"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, 1, false, 0}}};
 
   /// Vector field X of mode k.
@@ -46,7 +45,7 @@ struct integrate_and_fire {
         const double I = parameter[0];
         const double tau = parameter[1];
         out[0] = I - v - w;
-        out[1] = -w / tau;
+        out[1] = -w/tau;
         break;
       }
       default:
@@ -61,7 +60,7 @@ struct integrate_and_fire {
     switch (mode) {
       case 0: {  // mode subthreshold
         const double tau = parameter[1];
-        result = -1.0 / tau - 1.0;
+        result = -1.0/tau - 1.0;
         break;
       }
       default:
@@ -155,7 +154,7 @@ struct integrate_and_fire {
         const double w = state[1];
         const double I = parameter[0];
         const double b = parameter[2];
-        result = (I - b - w) / (I - w - 1.0);
+        result = (I - b - w)/(I - w - 1.0);
         break;
       }
       default:
@@ -165,7 +164,9 @@ struct integrate_and_fire {
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double*, const double*) { return true; }
+  static bool in_support(const double*, const double*) {
+    return true;
+  }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
   static double initial_density(int mode, const double* state, const double* parameter) {
@@ -175,9 +176,9 @@ struct integrate_and_fire {
       case 0: {  // mode subthreshold
         const double v = state[0];
         const double w = state[1];
-        const double _t0 = 2.0 * v - 1.0;
-        const double _t1 = 2.0 * w - 1.0;
-        result = std::exp(-(25.0 / 2.0) * (_t0 * _t0) - (25.0 / 2.0) * (_t1 * _t1));
+        const double _t0 = 2.0*v - 1.0;
+        const double _t1 = 2.0*w - 1.0;
+        result = std::exp(-(25.0/2.0)*(_t0*_t0) - (25.0/2.0)*(_t1*_t1));
         break;
       }
       default:
@@ -185,6 +186,7 @@ struct integrate_and_fire {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<integrate_and_fire>);

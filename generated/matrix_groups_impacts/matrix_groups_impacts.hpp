@@ -33,8 +33,7 @@ struct matrix_groups_impacts {
   static constexpr std::array<const char*, 1> mode_names{"flow"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"impact"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
@@ -44,7 +43,7 @@ struct matrix_groups_impacts {
         const double C = state[0];
         const double q = state[1];
         out[0] = 0.0;
-        out[1] = C + C * q;
+        out[1] = C + C*q;
         break;
       }
       default:
@@ -104,7 +103,7 @@ struct matrix_groups_impacts {
         const double C = state[0];
         const double q = state[1];
         const double e = parameter[0];
-        out[0] = -C * e;
+        out[0] = -C*e;
         out[1] = q;
         break;
       }
@@ -121,7 +120,7 @@ struct matrix_groups_impacts {
         const double C = state[0];
         const double q = state[1];
         const double e = parameter[0];
-        out[0] = -C / e;
+        out[0] = -C/e;
         out[1] = q;
         break;
       }
@@ -154,7 +153,7 @@ struct matrix_groups_impacts {
     switch (guard) {
       case 0: {  // guard impact: flow -> flow
         const double e = parameter[0];
-        result = e * e;
+        result = e*e;
         break;
       }
       default:
@@ -180,8 +179,8 @@ struct matrix_groups_impacts {
         const double C = state[0];
         const double q = state[1];
         const double _t0 = C + 1.0;
-        const double _t1 = 2.0 * q - 3.0;
-        result = std::exp(-2.0 * (_t0 * _t0) - (1.0 / 4.0) * (_t1 * _t1));
+        const double _t1 = 2.0*q - 3.0;
+        result = std::exp(-2.0*(_t0*_t0) - (1.0/4.0)*(_t1*_t1));
         break;
       }
       default:
@@ -189,6 +188,7 @@ struct matrix_groups_impacts {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<matrix_groups_impacts>);

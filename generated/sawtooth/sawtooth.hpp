@@ -33,8 +33,7 @@ struct sawtooth {
   static constexpr std::array<const char*, 1> mode_names{"grow"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"fire"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, 1, false, 0}}};
 
   /// Vector field X of mode k.
@@ -138,7 +137,7 @@ struct sawtooth {
     double result = 0.0;
     switch (guard) {
       case 0: {  // guard fire: grow -> grow
-        result = (1.0 / 2.0);
+        result = (1.0/2.0);
         break;
       }
       default:
@@ -169,6 +168,7 @@ struct sawtooth {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<sawtooth>);

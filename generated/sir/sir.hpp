@@ -26,18 +26,14 @@ struct sir {
   /// State variable names, in order.
   static constexpr std::array<const char*, 2> state_names{"s", "i"};
   /// Parameter names.
-  static constexpr std::array<const char*, 6> param_names{"beta", "gamma", "delta",
-                                                          "mu",   "f",     "alpha"};
+  static constexpr std::array<const char*, 6> param_names{"beta", "gamma", "delta", "mu", "f", "alpha"};
   /// Parameter defaults.
-  static constexpr std::array<double, 6> param_defaults{0.10000000000000001, 0.10000000000000001,
-                                                        0.20000000000000001, 0.10000000000000001,
-                                                        0.29999999999999999, 0.69999999999999996};
+  static constexpr std::array<double, 6> param_defaults{0.10000000000000001, 0.10000000000000001, 0.20000000000000001, 0.10000000000000001, 0.29999999999999999, 0.69999999999999996};
   /// Mode names.
   static constexpr std::array<const char*, 1> mode_names{"epidemic"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"intervention"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
@@ -50,8 +46,8 @@ struct sir {
         const double gamma = parameter[1];
         const double delta = parameter[2];
         const double mu = parameter[3];
-        out[0] = mu - i * s * (beta - delta) - mu * s;
-        out[1] = beta * i * s + delta * (i * i) - i * (delta + gamma + mu);
+        out[0] = mu - i*s*(beta - delta) - mu*s;
+        out[1] = beta*i*s + delta*(i*i) - i*(delta + gamma + mu);
         break;
       }
       default:
@@ -71,7 +67,7 @@ struct sir {
         const double gamma = parameter[1];
         const double delta = parameter[2];
         const double mu = parameter[3];
-        result = beta * s + 3.0 * delta * i - delta - gamma - 2.0 * mu - beta * i;
+        result = beta*s + 3.0*delta*i - delta - gamma - 2.0*mu - beta*i;
         break;
       }
       default:
@@ -118,7 +114,7 @@ struct sir {
         const double i = state[1];
         const double f = parameter[4];
         out[0] = s;
-        out[1] = i - f * i;
+        out[1] = i - f*i;
         break;
       }
       default:
@@ -135,7 +131,7 @@ struct sir {
         const double i = state[1];
         const double f = parameter[4];
         out[0] = s;
-        out[1] = i / (1.0 - f);
+        out[1] = i/(1.0 - f);
         break;
       }
       default:
@@ -173,10 +169,9 @@ struct sir {
         const double mu = parameter[3];
         const double f = parameter[4];
         const double alpha = parameter[5];
-        const double _t0 = alpha - alpha * f;
+        const double _t0 = alpha - alpha*f;
         const double _t1 = delta + gamma + mu;
-        result = (beta * s * _t0 + delta * (_t0 * _t0) - _t0 * _t1) /
-                 (alpha * beta * s - alpha * _t1 + alpha * alpha * delta);
+        result = (beta*s*_t0 + delta*(_t0*_t0) - _t0*_t1)/(alpha*beta*s - alpha*_t1 + alpha*alpha*delta);
         break;
       }
       default:
@@ -207,8 +202,8 @@ struct sir {
         const double s = state[0];
         const double i = state[1];
         const double _t0 = i + s - 1.0;
-        const double _t1 = 2.0 * s - 1.0;
-        result = std::exp(-10.0 * (_t0 * _t0) - (1.0 / 4.0) * (_t1 * _t1));
+        const double _t1 = 2.0*s - 1.0;
+        result = std::exp(-10.0*(_t0*_t0) - (1.0/4.0)*(_t1*_t1));
         break;
       }
       default:
@@ -216,6 +211,7 @@ struct sir {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<sir>);

@@ -26,18 +26,14 @@ struct sir_3d {
   /// State variable names, in order.
   static constexpr std::array<const char*, 3> state_names{"S", "I", "R"};
   /// Parameter names.
-  static constexpr std::array<const char*, 6> param_names{"beta", "gamma", "delta",
-                                                          "mu",   "f",     "alpha"};
+  static constexpr std::array<const char*, 6> param_names{"beta", "gamma", "delta", "mu", "f", "alpha"};
   /// Parameter defaults.
-  static constexpr std::array<double, 6> param_defaults{0.10000000000000001, 0.10000000000000001,
-                                                        0.20000000000000001, 0.10000000000000001,
-                                                        0.29999999999999999, 0.69999999999999996};
+  static constexpr std::array<double, 6> param_defaults{0.10000000000000001, 0.10000000000000001, 0.20000000000000001, 0.10000000000000001, 0.29999999999999999, 0.69999999999999996};
   /// Mode names.
   static constexpr std::array<const char*, 1> mode_names{"epidemic"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"intervention"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
@@ -51,11 +47,11 @@ struct sir_3d {
         const double gamma = parameter[1];
         const double delta = parameter[2];
         const double mu = parameter[3];
-        const double _t0 = R * mu;
-        const double _t1 = I * S * beta / (I + R + S);
-        out[0] = I * mu + _t0 - _t1;
-        out[1] = _t1 - I * (delta + gamma + mu);
-        out[2] = I * gamma - _t0;
+        const double _t0 = R*mu;
+        const double _t1 = I*S*beta/(I + R + S);
+        out[0] = I*mu + _t0 - _t1;
+        out[1] = _t1 - I*(delta + gamma + mu);
+        out[2] = I*gamma - _t0;
         break;
       }
       default:
@@ -77,7 +73,7 @@ struct sir_3d {
         const double delta = parameter[2];
         const double mu = parameter[3];
         const double _t0 = I + R + S;
-        result = S * beta / _t0 - delta - gamma - 2.0 * mu - I * beta / _t0;
+        result = S*beta/_t0 - delta - gamma - 2.0*mu - I*beta/_t0;
         break;
       }
       default:
@@ -95,7 +91,7 @@ struct sir_3d {
         const double I = state[1];
         const double R = state[2];
         const double alpha = parameter[5];
-        result = I - alpha * (I + R + S);
+        result = I - alpha*(I + R + S);
         break;
       }
       default:
@@ -128,7 +124,7 @@ struct sir_3d {
         const double I = state[1];
         const double R = state[2];
         const double f = parameter[4];
-        const double _t0 = I * f;
+        const double _t0 = I*f;
         out[0] = S;
         out[1] = I - _t0;
         out[2] = R + _t0;
@@ -149,8 +145,8 @@ struct sir_3d {
         const double R = state[2];
         const double f = parameter[4];
         out[0] = S;
-        out[1] = I / (1.0 - f);
-        out[2] = (I * f + R * f - R) / (f - 1.0);
+        out[1] = I/(1.0 - f);
+        out[2] = (I*f + R*f - R)/(f - 1.0);
         break;
       }
       default:
@@ -194,17 +190,14 @@ struct sir_3d {
         const double mu = parameter[3];
         const double f = parameter[4];
         const double alpha = parameter[5];
-        const double _t0 = I * alpha * beta;
-        const double _t1 = I * alpha * delta;
-        const double _t2 = I * beta;
-        const double _t3 = I * delta;
-        const double _t4 = I * gamma;
-        const double _t5 = I * mu;
-        const double _t6 = R * alpha * beta;
-        result = (_t0 - I * alpha * beta * f - _t1 + 2.0 * I * alpha * delta * f -
-                  I * alpha * delta * (f * f) - _t2 + I * beta * f + _t3 - I * delta * f -
-                  I * f * gamma - I * f * mu + _t4 + _t5 + _t6 - R * alpha * beta * f) /
-                 (_t0 - _t1 - _t2 + _t3 + _t4 + _t5 + _t6);
+        const double _t0 = I*alpha*beta;
+        const double _t1 = I*alpha*delta;
+        const double _t2 = I*beta;
+        const double _t3 = I*delta;
+        const double _t4 = I*gamma;
+        const double _t5 = I*mu;
+        const double _t6 = R*alpha*beta;
+        result = (_t0 - I*alpha*beta*f - _t1 + 2.0*I*alpha*delta*f - I*alpha*delta*(f*f) - _t2 + I*beta*f + _t3 - I*delta*f - I*f*gamma - I*f*mu + _t4 + _t5 + _t6 - R*alpha*beta*f)/(_t0 - _t1 - _t2 + _t3 + _t4 + _t5 + _t6);
         break;
       }
       default:
@@ -236,11 +229,10 @@ struct sir_3d {
         const double S = state[0];
         const double I = state[1];
         const double R = state[2];
-        const double _t0 = 4.0 * I - 3.0;
-        const double _t1 = 10.0 * R - 3.0;
-        const double _t2 = 10.0 * S - 3.0;
-        result = std::exp(-(5.0 / 8.0) * (_t0 * _t0) - (1.0 / 10.0) * (_t1 * _t1) -
-                          (1.0 / 10.0) * (_t2 * _t2));
+        const double _t0 = 4.0*I - 3.0;
+        const double _t1 = 10.0*R - 3.0;
+        const double _t2 = 10.0*S - 3.0;
+        result = std::exp(-(5.0/8.0)*(_t0*_t0) - (1.0/10.0)*(_t1*_t1) - (1.0/10.0)*(_t2*_t2));
         break;
       }
       default:
@@ -248,6 +240,7 @@ struct sir_3d {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<sir_3d>);

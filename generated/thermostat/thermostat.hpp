@@ -33,10 +33,8 @@ struct thermostat {
   static constexpr std::array<const char*, 2> mode_names{"heat", "cool"};
   /// Guard names.
   static constexpr std::array<const char*, 2> guard_names{"off", "on"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
-  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{
-      {{0, 1, 1, true, -1}, {1, 0, -1, true, -1}}};
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
+  static constexpr std::array<hybgen::rt::GuardInfo, 2> guards{{{0, 1, 1, true, -1}, {1, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
   static void flow(int mode, const double* state, const double*, double* out) {
@@ -186,7 +184,9 @@ struct thermostat {
   }
 
   /// Whether x lies in the state space (the model's `support` relations).
-  static bool in_support(const double*, const double*) { return true; }
+  static bool in_support(const double*, const double*) {
+    return true;
+  }
 
   /// Initial density of mode k at x (0 outside the support and the mode's region).
   static double initial_density(int mode, const double* state, const double* parameter) {
@@ -195,8 +195,8 @@ struct thermostat {
     switch (mode) {
       case 0: {  // mode heat
         const double T = state[0];
-        const double _t0 = 2.0 * T - 3.0;
-        result = std::exp(-(5.0 / 2.0) * (_t0 * _t0));
+        const double _t0 = 2.0*T - 3.0;
+        result = std::exp(-(5.0/2.0)*(_t0*_t0));
         break;
       }
       case 1: {  // mode cool
@@ -208,6 +208,7 @@ struct thermostat {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<thermostat>);

@@ -33,8 +33,7 @@ struct tilted_floor {
   static constexpr std::array<const char*, 1> mode_names{"fly"};
   /// Guard names.
   static constexpr std::array<const char*, 1> guard_names{"floor"};
-  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing),
-  /// closed-form inverse, axis of a constant reset component (-1: none).
+  /// Guards: source mode, target mode (-1: absorbing), direction (-1 decreasing, +1 increasing), closed-form inverse, axis of a constant reset component (-1: none).
   static constexpr std::array<hybgen::rt::GuardInfo, 1> guards{{{0, 0, -1, true, -1}}};
 
   /// Vector field X of mode k.
@@ -45,10 +44,10 @@ struct tilted_floor {
         const double py = state[3];
         const double m = parameter[0];
         const double g = parameter[1];
-        out[0] = px / m;
-        out[1] = py / m;
+        out[0] = px/m;
+        out[1] = py/m;
         out[2] = 0.0;
-        out[3] = -g * m;
+        out[3] = -g*m;
         break;
       }
       default:
@@ -79,7 +78,7 @@ struct tilted_floor {
         const double x = state[0];
         const double y = state[1];
         const double k = parameter[2];
-        result = y - k * x;
+        result = y - k*x;
         break;
       }
       default:
@@ -115,12 +114,12 @@ struct tilted_floor {
         const double py = state[3];
         const double k = parameter[2];
         const double e = parameter[3];
-        const double _t0 = k * k;
+        const double _t0 = k*k;
         const double _t1 = _t0 + 1.0;
         out[0] = x;
         out[1] = y;
-        out[2] = (px + e * k * py - e * _t0 * px + k * py) / _t1;
-        out[3] = (e * k * px - e * py + k * px + _t0 * py) / _t1;
+        out[2] = (px + e*k*py - e*_t0*px + k*py)/_t1;
+        out[3] = (e*k*px - e*py + k*px + _t0*py)/_t1;
         break;
       }
       default:
@@ -139,12 +138,12 @@ struct tilted_floor {
         const double py = state[3];
         const double k = parameter[2];
         const double e = parameter[3];
-        const double _t0 = k * k;
-        const double _t1 = e + e * _t0;
+        const double _t0 = k*k;
+        const double _t1 = e + e*_t0;
         out[0] = x;
         out[1] = y;
-        out[2] = (e * k * py + e * px + k * py - _t0 * px) / _t1;
-        out[3] = (e * k * px + e * _t0 * py + k * px - py) / _t1;
+        out[2] = (e*k*py + e*px + k*py - _t0*px)/_t1;
+        out[3] = (e*k*px + e*_t0*py + k*px - py)/_t1;
         break;
       }
       default:
@@ -159,9 +158,9 @@ struct tilted_floor {
       case 0: {  // guard floor: fly -> fly
         const double k = parameter[2];
         const double e = parameter[3];
-        const double _t0 = k * k;
+        const double _t0 = k*k;
         const double _t1 = _t0 + 1.0;
-        const double _t2 = (k + e * k) / _t1;
+        const double _t2 = (k + e*k)/_t1;
         out[0] = 1.0;
         out[1] = 0.0;
         out[2] = 0.0;
@@ -172,12 +171,12 @@ struct tilted_floor {
         out[7] = 0.0;
         out[8] = 0.0;
         out[9] = 0.0;
-        out[10] = (1.0 - e * _t0) / _t1;
+        out[10] = (1.0 - e*_t0)/_t1;
         out[11] = _t2;
         out[12] = 0.0;
         out[13] = 0.0;
         out[14] = _t2;
-        out[15] = (_t0 - e) / _t1;
+        out[15] = (_t0 - e)/_t1;
         break;
       }
       default:
@@ -192,7 +191,7 @@ struct tilted_floor {
     switch (guard) {
       case 0: {  // guard floor: fly -> fly
         const double e = parameter[3];
-        result = e * e;
+        result = e*e;
         break;
       }
       default:
@@ -207,7 +206,7 @@ struct tilted_floor {
     const double y = state[1];
     const double k = parameter[2];
     double _c0 = 0.0;
-    _c0 = y - k * x;
+    _c0 = y - k*x;
     return _c0 >= 0.0;
   }
 
@@ -221,12 +220,11 @@ struct tilted_floor {
         const double y = state[1];
         const double px = state[2];
         const double py = state[3];
-        const double _t0 = 2.0 * x + 1.0;
-        const double _t1 = 5.0 * px + 6.0;
-        const double _t2 = 5.0 * py + 6.0;
-        const double _t3 = 5.0 * y - 1.0;
-        result = std::exp(-(5.0 / 6.0) * (_t0 * _t0) - (2.0 / 15.0) * (_t1 * _t1) -
-                          (2.0 / 15.0) * (_t2 * _t2) - (2.0 / 15.0) * (_t3 * _t3));
+        const double _t0 = 2.0*x + 1.0;
+        const double _t1 = 5.0*px + 6.0;
+        const double _t2 = 5.0*py + 6.0;
+        const double _t3 = 5.0*y - 1.0;
+        result = std::exp(-(5.0/6.0)*(_t0*_t0) - (2.0/15.0)*(_t1*_t1) - (2.0/15.0)*(_t2*_t2) - (2.0/15.0)*(_t3*_t3));
         break;
       }
       default:
@@ -234,6 +232,7 @@ struct tilted_floor {
     }
     return result;
   }
+
 };
 
 static_assert(hybgen::rt::HybridModel<tilted_floor>);

@@ -26,6 +26,8 @@
 #include <string>
 #include <vector>
 
+#include <netcdf.h>
+
 #include "hybgen/rt/io/npy.hpp"
 #include "support/cycle_closed_forms.hpp"
 #include "support/e2e.hpp"
@@ -98,6 +100,22 @@ double shuttle_absorbed(double t) {
   return bump_mass_above(1.75 - t);
 }
 
+/// A one-dimensional variable of a NetCDF file, as doubles (empty when it is not there).
+std::vector<double> nc_values(const fs::path& file, const std::string& name) {
+  int id = -1, var = -1;
+  if (nc_open(file.c_str(), NC_NOWRITE, &id) != NC_NOERR) return {};
+  std::vector<double> out;
+  std::size_t len = 0;
+  int dim = -1, ndims = 0;
+  if (nc_inq_varid(id, name.c_str(), &var) == NC_NOERR && nc_inq_varndims(id, var, &ndims) == 0 &&
+      ndims == 1 && nc_inq_vardimid(id, var, &dim) == 0 && nc_inq_dimlen(id, dim, &len) == 0) {
+    out.resize(len);
+    nc_get_var_double(id, var, out.data());
+  }
+  nc_close(id);
+  return out;
+}
+
 constexpr double kA = 0.7;  // absorb_growth.model's a
 
 double growth_absorbed(double t) {
@@ -124,8 +142,15 @@ double first_impact_absorbed(double t) {
 }
 
 TEST(Absorbing, TheShuttlesTrapInsideTheBoxByCharacteristics) {
-  const json s = run("shuttle_characteristics", "shuttle_trap", "characteristics");
+  const json s =
+      run("shuttle_characteristics", "shuttle_trap", "characteristics", "--set outputs=npy+netcdf");
   ASSERT_FALSE(s.empty());
+  // run.nc holds the same series.
+  const fs::path nc = kWork / "shuttle_characteristics" / "run.nc";
+  EXPECT_EQ(nc_values(nc, "absorbed_trap"),
+            s["absorbed"]["trap"]["values"].get<std::vector<double>>());
+  EXPECT_EQ(nc_values(nc, "absorbed_trap_error"),
+            s["absorbed"]["trap"]["errors"].get<std::vector<double>>());
   // The density: exact at the nodes (those on the turn and on the trap left out).
   const std::vector<Axis> axes = {{0.0, 1.2, 241}};
   for (std::size_t k = 0; k < s["times"].size(); ++k) {

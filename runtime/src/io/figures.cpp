@@ -309,6 +309,21 @@ void draw_budget(cairo_t* cr, const RunRecord& run, double width, double height)
        band(run.atom_error.size() == K ? run.atom_error : b.atom_error)},
       // Not an orange beside the outflow's: a reddish purple, dashed (legend too).
       {"unaccounted", budget_defect(b), kCurve[4], 1.6, band(budget_defect_error(b)), true}};
+  // Each trap's part of the outflow (`reset absorb`), dashed in the colours after those.
+  if (run.summary.is_object() && run.summary.contains(summary_key::absorbed)) {
+    std::size_t c = 5;
+    for (const auto& [guard, a] : run.summary[summary_key::absorbed].items()) {
+      Curve curve{"absorbed by " + guard, {}, kCurve[c++ % std::size(kCurve)], 1.6, {}, true};
+      for (const auto& v : a["values"])
+        curve.y.push_back(v.is_number() ? v.get<double>() : std::nan(""));
+      if (a["errors"].is_array())
+        for (const auto& e : a["errors"])
+          curve.band.push_back(e.is_number() ? e.get<double>() : 0.0);
+      if (curve.y.size() != K) continue;
+      if (curve.band.size() != K) curve.band.clear();
+      curves.push_back(std::move(curve));
+    }
+  }
   draw_curves(cr, {kLeft + 10, kTop, width - kLeft - 30 - kLegend, height - kTop - kBottom - 10},
               run.times, curves, "t", "mass");
 }

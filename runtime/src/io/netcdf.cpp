@@ -330,6 +330,25 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
         e.owned.push_back(v.is_number() ? v.get<double>() : std::nan(""));
       budget.push_back(std::move(e));
     }
+    // What each trap (`reset absorb`) took since time 0, and its error (NaN: none).
+    if (run.summary.is_object() && run.summary.contains(summary_key::absorbed))
+      for (const auto& [guard, a] : run.summary[summary_key::absorbed].items())
+        for (const bool error : {false, true}) {
+          Series v{names("absorbed_" + guard + (error ? "_error" : "")),
+                   error ? "estimated error of absorbed_" + guard
+                         : "mass absorbed by the guard " + guard +
+                               " (reset absorb) since time 0, a part of outflow",
+                   nullptr,
+                   {},
+                   -1};
+          const nlohmann::json& x = a[error ? "errors" : "values"];
+          if (x.is_array())
+            for (const auto& y : x)
+              v.owned.push_back(y.is_number() ? y.get<double>() : std::nan(""));
+          else
+            v.owned.assign(K, std::nan(""));
+          if (v.owned.size() == K) budget.push_back(std::move(v));
+        }
     for (Series& s : budget) {
       s.var = nc.var(s.name, NC_DOUBLE, {time_dim});
       nc.text(s.var, "long_name", s.long_name);

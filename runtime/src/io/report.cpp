@@ -199,6 +199,16 @@ img { max-width: 100%; } .muted { color: #666; }
     row("mass in the box", b.mass[k], k < b.mass_error.size() ? b.mass_error[k] : 0);
     row("outflow", b.outflow[k], k < b.outflow_error.size() ? b.outflow_error[k] : 0);
     row("atom (Zeno)", b.atom[k], k < run.atom_error.size() ? run.atom_error[k] : 0);
+    // Each trap's share of the outflow (`reset absorb`).
+    if (run.summary.is_object() && run.summary.contains(summary_key::absorbed))
+      for (const auto& [guard, a] : run.summary[summary_key::absorbed].items()) {
+        const nlohmann::json& v = a["values"];
+        const nlohmann::json& e = a["errors"];
+        if (!v.is_array() || k >= v.size() || !v[k].is_number()) continue;
+        const std::string name = "absorbed by guard " + html(guard) + " (part of outflow)";
+        row(name.c_str(), v[k].get<double>(),
+            e.is_array() && k < e.size() && e[k].is_number() ? e[k].get<double>() : 0.0);
+      }
     row("unaccounted", defect[k], bar[k]);
     h << "</table>\n";
     // The transfer operator's estimated error at this time (methods.hpp, add_transfer_errors).
