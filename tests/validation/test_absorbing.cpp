@@ -227,6 +227,29 @@ TEST(Absorbing, TheBallsFirstImpactTimes) {
   expect_absorbed(p, "ground", first_impact_absorbed, "ball, particles", 2.0, 1e3, 1e-12);
 }
 
+TEST(Absorbing, DeriveJsonSaysWhichGuardIsATrap) {
+  // The outside-facing contract (docs/design.md): `absorbing` on every guard; a trap's target,
+  // reset, inverse and J are null and its reset_inverse_kind is "absorb".
+  const auto r =
+      hybgen_cli.stdout_only("derive tests/validation/models/shuttle_trap.model --format json");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const json d = json::parse(r.out);
+  ASSERT_EQ(d["guards"].size(), 2u);
+  const json& turn = d["guards"][0];
+  const json& trap = d["guards"][1];
+  EXPECT_EQ(turn["name"], "turn");
+  EXPECT_EQ(turn["absorbing"], false);
+  EXPECT_EQ(turn["to"], "down");
+  EXPECT_TRUE(turn["reset"].is_array());
+  EXPECT_EQ(trap["name"], "trap");
+  EXPECT_EQ(trap["absorbing"], true);
+  EXPECT_EQ(trap["from"], "down");
+  for (const char* key :
+       {"to", "reset", "reset_inverse", "hybrid_jacobian", "hybrid_jacobian_general"})
+    EXPECT_TRUE(trap[key].is_null()) << key;
+  EXPECT_EQ(trap["reset_inverse_kind"], "absorb");
+}
+
 TEST(Absorbing, RefusedWhereItHasNoMeaning) {
   const fs::path dir = kWork / "refused";
   fs::create_directories(dir);
