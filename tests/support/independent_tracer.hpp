@@ -422,6 +422,19 @@ class IndependentTracer {
         e0[k] = root[k] >= 0 && root[k] <= first + 1e-12 * (1 + tau) ? e1[k] : v;
       }
     }
+    // An event within 1e-7 of the trace's end that the last step did not see change sign
+    // (random model 2887: a reversed reset's branch from −1.49 backward for 0.1 at speed 1.2
+    // ends on the outgoing guard −1.5·x0 − 2.055 = 0 at x0 = −1.37, which rounding put on the
+    // near side for the tracer and the far side for hybgen): the node is on a jump, either
+    // one-sided value is right (characteristics.hpp, ties).
+    for (std::size_t k = 0; k < ev.size(); ++k) {
+      if (ev[k].support) continue;
+      Vec w1 = warm[k], w2 = warm[k];
+      const double a = value(ev[k], rk4(m, s, -1e-7).z, w1);
+      const double b = value(ev[k], rk4(m, s, 1e-7).z, w2);
+      if (std::isfinite(a) && std::isfinite(b) && (a < 0) != (b < 0))
+        flags.doubt("an event at an end of a trace");
+    }
     // `initial` without a mode is the first mode's, or split by the modes' `where` regions
     // (docs/model-language.md).
     bool holds = m == 0;
