@@ -472,17 +472,23 @@ struct Deriver {
       g.gradient.push_back(simplify(g.surface.diff(GiNaC::ex_to<GiNaC::symbol>(xi))));
     const IrMode& before = sys.modes[static_cast<std::size_t>(gs.from)];
     const std::string where = "guard '" + gs.name + "'";
+    // ∇s·X⁻, J's denominator; identically 0 where the flow of `before` never crosses S.
+    const auto normal_rate = [&] {
+      ex den = 0;
+      for (std::size_t i = 0; i < n; ++i) den += g.gradient[i] * before.flow[i];
+      den = simplify(den);
+      if (is_identically_zero(den, all_symbols))
+        throw src.error(gs.surface_loc, "the flow of mode '" + before.name +
+                                            "' is tangent to the surface of " + where +
+                                            " everywhere (∇s·X ≡ 0): it never crosses it");
+      return den;
+    };
     if (gs.reset_kind == ResetDecl::Kind::Absorb) {
       // The mass that reaches S leaves the system: S and its direction are all there is (no
       // reset, inverse or J: IrGuard::absorbing). The flow must still cross S somewhere.
       g.absorbing = true;
       g.has_inverse = true;  // nothing to invert (rt::GuardInfo: the runtime needs no Newton)
-      ex den = 0;
-      for (std::size_t i = 0; i < n; ++i) den += g.gradient[i] * before.flow[i];
-      if (is_identically_zero(simplify(den), all_symbols))
-        throw src.error(gs.surface_loc, "the flow of mode '" + before.name +
-                                            "' is tangent to the surface of " + where +
-                                            " everywhere (∇s·X ≡ 0): it never crosses it");
+      normal_rate();
       return g;
     }
     const IrMode& after = sys.modes[static_cast<std::size_t>(gs.to)];
@@ -660,18 +666,13 @@ struct Deriver {
         adj(i, j) = ((i + j) % 2 ? -det : det);
       }
     std::vector<ex> Xplus = substitute_state(after.flow, X, g.reset);
-    ex num = 0, den = 0;
+    ex num = 0;
     for (unsigned i = 0; i < n; ++i) {
       ex row = 0;
       for (unsigned j = 0; j < n; ++j) row += adj(i, j) * Xplus[j];
       num += g.gradient[i] * row;
-      den += g.gradient[i] * before.flow[i];
     }
-    den = simplify(den);
-    if (is_identically_zero(den, all_symbols))
-      throw src.error(gs.surface_loc, "the flow of mode '" + before.name +
-                                          "' is tangent to the surface of " + where +
-                                          " everywhere (∇s·X ≡ 0): it never crosses it");
+    const ex den = normal_rate();
     g.hybrid_jacobian = simplify(num / den);
     if (is_identically_zero(g.hybrid_jacobian, all_symbols))
       throw src.error(gs.reset_loc, "the hybrid Jacobian of " + where +

@@ -435,23 +435,20 @@ std::string derive_latex(const HybridSystem& sys) {
     std::vector<std::pair<std::string, std::string>> rows;
     rows.emplace_back("\\mathcal S_{" + tex_label(g.name) + "}",
                       "\\{" + pr.latex(g.surface) + " = 0\\}");
-    if (g.absorbing) {
-      aligned_display(os,
-                      "\\text{guard } " + tex_label(g.name) + "\\ (" +
-                          tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) +
-                          " \\to \\text{absorbed}):\\qquad",
-                      rows);
-      continue;
+    if (!g.absorbing) {  // a trap has its surface only
+      rows.emplace_back("\\Delta" + tuple_latex(pr, m.state_symbols), tuple_latex(pr, g.reset));
+      if (g.has_inverse)
+        rows.emplace_back("\\Delta^{-1}" + tuple_latex(pr, m.state_symbols),
+                          tuple_latex(pr, g.reset_inverse));
+      rows.emplace_back("\\mathcal J^X_\\mu(\\Delta)", pr.latex(g.hybrid_jacobian_on_surface));
     }
-    rows.emplace_back("\\Delta" + tuple_latex(pr, m.state_symbols), tuple_latex(pr, g.reset));
-    if (g.has_inverse)
-      rows.emplace_back("\\Delta^{-1}" + tuple_latex(pr, m.state_symbols),
-                        tuple_latex(pr, g.reset_inverse));
-    rows.emplace_back("\\mathcal J^X_\\mu(\\Delta)", pr.latex(g.hybrid_jacobian_on_surface));
+    const std::string target = g.absorbing
+                                   ? "\\text{absorbed}"
+                                   : tex_label(sys.modes[static_cast<std::size_t>(g.to)].name);
     aligned_display(os,
                     "\\text{guard } " + tex_label(g.name) + "\\ (" +
                         tex_label(sys.modes[static_cast<std::size_t>(g.from)].name) + " \\to " +
-                        tex_label(sys.modes[static_cast<std::size_t>(g.to)].name) + "):\\qquad",
+                        target + "):\\qquad",
                     rows);
   }
   // The PDE per mode and the jump per guard, each beside where it holds: the left column

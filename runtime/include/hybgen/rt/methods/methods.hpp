@@ -558,13 +558,13 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   // dominated; a strip of density 49 thinner than the grid's spacing that no cubature node
   // saw).
   std::vector<double> widened(defect.size(), 0.0);
+  std::vector<std::vector<double>*> bars = {&r.budget.mass_error, &r.budget.outflow_error,
+                                            &r.budget.atom_error};
+  for (std::vector<double>& a : r.budget.absorbed_error) bars.push_back(&a);
   for (std::size_t k = 0; k < defect.size(); ++k) {
     const double d = std::fabs(defect[k]);
     const bool closes = d <= kDefectFactor * bar[k] + kDefectFloor * std::fabs(mb.mass0);
     if (!closes) widened[k] = d;
-    std::vector<std::vector<double>*> bars = {&r.budget.mass_error, &r.budget.outflow_error,
-                                              &r.budget.atom_error};
-    for (std::vector<double>& a : r.budget.absorbed_error) bars.push_back(&a);
     for (std::vector<double>* e : bars)
       if (k < e->size()) (*e)[k] = closes ? std::max((*e)[k], d) : (*e)[k] + d;
   }
@@ -673,10 +673,9 @@ void add_transfer_errors(nlohmann::json& t, MethodResult<N>& r, const TensorGrid
       const double pm =
           D > 0.0 && D2 > 0.0 ? std::log2(D2 / D) : std::numeric_limits<double>::quiet_NaN();
       const double margin = order > 3 ? std::clamp(2.0 * pm - 1.0, 1.0, 3.0) : 1.0;
-      const double factor =
-          std::isfinite(pm)
-              ? std::max(error_factor(order), margin / (std::exp2(std::max(pm, 0.25)) - 1.0))
-              : error_factor(1);
+      const double factor = std::isfinite(pm)
+                                ? std::max(error_factor(order), margin / richardson_divisor(pm))
+                                : error_factor(1);
       ok = ok && std::isfinite(pm) && pm >= 0.25;
       estimate = std::max(estimate, factor * D);
       if (D > worst_d) worst_d = D, p = pm;  // the order reported: the largest difference's
@@ -708,10 +707,6 @@ void add_transfer_errors(nlohmann::json& t, MethodResult<N>& r, const TensorGrid
       "order of the mode with the largest difference";
 }
 
-}  // namespace detail
-
-namespace detail {
-
 /// The errors of the absorbed masses of a transfer run (`mb.absorbed`), from the same scheme's
 /// on the halved and quartered grids (`coarse`, in that order; either may be missing): per
 /// guard and frame, with D = |A_h − A_2h| and D' = |A_2h − A_4h|, f(p)·D with f(p) =
@@ -737,8 +732,7 @@ inline void add_absorbed_errors(MassBudget& mb, const std::vector<MassBudget>& c
       double factor = 3.0;
       if (third && D > 0.0) {
         const double D2 = std::fabs(a2[k] - coarse[1].absorbed[g][k]);
-        if (D2 > 0.0)
-          factor = std::max(factor, 1.0 / (std::exp2(std::max(std::log2(D2 / D), 0.25)) - 1.0));
+        if (D2 > 0.0) factor = std::max(factor, 1.0 / richardson_divisor(std::log2(D2 / D)));
       }
       mb.absorbed_error[g].push_back(factor * D);
     }

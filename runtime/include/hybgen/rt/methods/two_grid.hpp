@@ -66,6 +66,13 @@ constexpr double error_factor(int p) {
   return p <= 1 ? 2.0 : p <= 3 ? 1.0 : 8.0 / static_cast<double>(1 << p);
 }
 
+/// 2^p − 1 at the observed order p clamped to ≥ 1/4: a difference D between a grid and its
+/// halved one is this times the fine grid's error at order p (Richardson), so D over it is
+/// that error (4.1 D at most).
+inline double richardson_divisor(double p) {
+  return std::exp2(std::max(p, 0.25)) - 1.0;
+}
+
 /// Whether |p_obs − p| ≤ max(0.5, p/3): an observed order near the scheme's (file comment).
 inline bool order_near(double observed, double order) {
   return std::isfinite(observed) && std::fabs(observed - order) <= std::max(0.5, order / 3.0);

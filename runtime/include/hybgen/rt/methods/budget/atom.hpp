@@ -246,13 +246,15 @@ AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<c
     for (std::size_t g = 0; g < absorbed->size(); ++g)
       if (absorbs(detail::guard_info<M>(g))) (*absorbed)[g] = res;
   }
-  if (M::n_guard == 0 || times.empty() || times.back() <= 0.0) {
+  // Nothing to integrate: every integral is 0, exactly.
+  const auto none = [&] {
     res.converged = true;
     if (reset_out != nullptr) reset_out->converged = true;
     if (absorbed != nullptr)
       for (AdaptiveOutflow& a : *absorbed) a.converged = true;
     return res;
-  }
+  };
+  if (M::n_guard == 0 || times.empty() || times.back() <= 0.0) return none();
   detail::ZenoValues<M> values;
   values.times = times;
   values.par = par;
@@ -286,13 +288,7 @@ AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<c
       shi[a] = std::max(shi[a], y[a]);
     }
   }
-  if (!(slo[0] <= shi[0])) {  // no node carries mass: none reaches a Zeno point either
-    res.converged = true;
-    if (reset_out != nullptr) reset_out->converged = true;
-    if (absorbed != nullptr)
-      for (AdaptiveOutflow& a : *absorbed) a.converged = true;
-    return res;
-  }
+  if (!(slo[0] <= shi[0])) return none();  // no node carries mass: none reaches a Zeno point
   for (std::size_t a = 0; a < N; ++a) {
     const GridAxis& ax = box.axes[a];
     const double h = ax.n > 1 ? (ax.max - ax.min) / (ax.n - 1) : 0.0;
