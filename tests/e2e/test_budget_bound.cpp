@@ -72,7 +72,7 @@ TEST(BudgetBound, CompactBumpDriftingOutEndsAndItsBudgetCoversTheTruth) {
   // 124) long before ctest's.
   const hybgen::testing::ShellResult r = hybgen::testing::run_shell(
       "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && HYBGEN_CACHE='" + (dir / "cache").string() +
-      "' timeout " + std::to_string(kTimeoutSeconds) + " '" + std::string(HYBGEN_EXE) +
+      "' timeout " + std::to_string(kTimeoutSeconds) + " '" + hybgen::testing::hybgen_exe() +
       "' run tests/validation/drift_bump.model --out '" + out.string() +
       "' --set dt=0.125 --set outputs=netcdf --quiet 2>&1");
   ASSERT_EQ(r.code, 0) << r.out;

@@ -34,6 +34,14 @@ enum class Stderr {
   Discarded,  ///< To /dev/null: the output is standard output alone (e.g. JSON to parse).
 };
 
+/// The hybgen under test: this build's, or the executable named by the environment variable
+/// HYBGEN_UNDER_TEST (to list the tests an older hybgen fails: docs/hardening.md, "Against an
+/// older hybgen").
+inline std::string hybgen_exe() {
+  const char* other = std::getenv("HYBGEN_UNDER_TEST");
+  return other != nullptr && *other != '\0' ? std::string(other) : std::string(HYBGEN_EXE);
+}
+
 /// Run hybgen with `args` from the source directory with the cache `cache`; all output (or
 /// standard output alone: `err`). `prefix` goes before the command in the shell: environment
 /// assignments, or set-up ending in "&&" (`cd DIR &&`, `ulimit -f 40 &&`).
@@ -41,8 +49,7 @@ inline ShellResult run_hybgen(const std::string& args, const std::filesystem::pa
                               const std::string& prefix = "", Stderr err = Stderr::Merged) {
   return run_shell("cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + prefix +
                    (prefix.empty() ? "" : " ") + "HYBGEN_CACHE='" + cache.string() + "' '" +
-                   std::string(HYBGEN_EXE) + "' " + args +
-                   (err == Stderr::Merged ? " 2>&1" : " 2>/dev/null"));
+                   hybgen_exe() + "' " + args + (err == Stderr::Merged ? " 2>&1" : " 2>/dev/null"));
 }
 
 /// run_hybgen's prefix for runs on MPI ranks (`--ranks N`): as root (CI), and more ranks than

@@ -31,29 +31,18 @@
 #include "hybgen/rt/io/npy.hpp"
 #include "support/cycle_closed_forms.hpp"
 #include "support/e2e.hpp"
+#include "support/line_closed_forms.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using hybgen::testing::Axis;
 using hybgen::testing::Point;
+using hybgen::testing::shuttle_absorbed;
 using json = nlohmann::json;
 
 const fs::path kWork = hybgen::testing::e2e_dir("validation_absorbing");
 const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
-
-/// shuttle_trap.model's initial density.
-double bump(double x) {
-  const double s = (x - 0.4) / 0.2, v = 1.0 - s * s;
-  return v > 0.0 ? v * v : 0.0;
-}
-
-/// The mass of `bump` on [c, ∞).
-double bump_mass_above(double c) {
-  const double s = std::clamp((c - 0.4) / 0.2, -1.0, 1.0);
-  const auto G = [](double z) { return z - 2.0 * z * z * z / 3.0 + z * z * z * z * z / 5.0; };
-  return 0.2 * (G(1.0) - G(s));
-}
 
 /// `hybgen run MODEL --set method=METHOD SETS` into kWork/`dir`; its summary.json.
 json run(const std::string& dir, const std::string& model, const std::string& method,
@@ -94,10 +83,6 @@ void expect_absorbed(const json& s, const std::string& guard, double (*exact)(do
     worst = std::max(worst, d);
   }
   std::printf("[ absorbing ] %s: largest error of the absorbed mass %.2e\n", what.c_str(), worst);
-}
-
-double shuttle_absorbed(double t) {
-  return bump_mass_above(1.75 - t);
 }
 
 /// A one-dimensional variable of a NetCDF file, as doubles (empty when it is not there).
@@ -163,8 +148,8 @@ TEST(Absorbing, TheShuttlesTrapInsideTheBoxByCharacteristics) {
           u.data, axes,
           [&](const Point& p) {
             const double x = p[0];
-            if (mode == "up") return x < 1.0 ? bump(x - t) : 0.0;
-            return x > 0.25 && x < 1.0 ? bump(2.0 - x - t) : 0.0;
+            if (mode == "up") return x < 1.0 ? hybgen::testing::shuttle_bump(x - t) : 0.0;
+            return x > 0.25 && x < 1.0 ? hybgen::testing::shuttle_bump(2.0 - x - t) : 0.0;
           },
           [](const Point& p) {
             return std::fabs(p[0] - 0.25) < 1e-9 || std::fabs(p[0] - 1.0) < 1e-9;
@@ -177,7 +162,7 @@ TEST(Absorbing, TheShuttlesTrapInsideTheBoxByCharacteristics) {
   EXPECT_TRUE(s["budget"]["closes"].get<bool>()) << s["budget"].dump();
   for (std::size_t k = 0; k < s["times"].size(); ++k) {
     const double t = s["times"][k].get<double>();
-    const double left = bump_mass_above(0.0) - shuttle_absorbed(t);
+    const double left = hybgen::testing::shuttle_bump_mass_above(0.0) - shuttle_absorbed(t);
     EXPECT_LE(std::fabs(s["mass"][k].get<double>() - left),
               s["budget"]["mass_error"][k].get<double>())
         << "t = " << t;

@@ -36,10 +36,14 @@
 
 #include "hybgen/gen/fs.hpp"
 #include "support/e2e.hpp"
+#include "support/line_closed_forms.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using hybgen::testing::leap_integral;
+using hybgen::testing::leap_outflow;
+using hybgen::testing::leap_reset_outflow;
 
 const fs::path kWork = hybgen::testing::e2e_dir("validation_reset_outflow");
 const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
@@ -61,23 +65,6 @@ nlohmann::json run(const std::string& model, const std::string& name, const std:
 
 std::vector<double> numbers(const nlohmann::json& a) {
   return a.get<std::vector<double>>();
-}
-
-/// ∫_a^b exp(−(x − ½)²/0.02) dx.
-double leap_integral(double a, double b) {
-  const double s = 0.1;  // 2s² = 0.02
-  const double c = s * std::sqrt(std::numbers::pi / 2.0);
-  return c * (std::erf((b - 0.5) / (s * std::numbers::sqrt2)) -
-              std::erf((a - 0.5) / (s * std::numbers::sqrt2)));
-}
-
-double leap_reset_outflow(double t) {
-  return leap_integral(1.0 - t, 1.0);
-}
-
-double leap_outflow(double t) {
-  return leap_reset_outflow(t) + leap_integral(std::max(1.0, 1.5 - t), 1.5) -
-         leap_integral(-t, 0.0);
 }
 
 TEST(ResetOutflow, ALeapOutOfTheBoxIsOutflowByEveryMethod) {
