@@ -49,9 +49,12 @@ t0=$SECONDS
 # whose observables run sanitized on the thermostat in tests/validation/test_observables.cpp.
 # Nor the crossing switch of test_crossing_shear.cpp and the Heisenberg walls of
 # test_heisenberg_walls.cpp, one more sanitized runner each for paths that the transient closed
-# forms' runs, the differential models and LieCli.RunHeisenbergOnATinyGrid take sanitized.)
+# forms' runs, the differential models and LieCli.RunHeisenbergOnATinyGrid take sanitized.
+# Nor the particles' calibration of test_calibration.cpp, three more sanitized runners and
+# 18 runs of 10⁵ particles for the statistics of bars whose code tests/rt/test_particles.cpp
+# runs sanitized.)
 HYBGEN_RANDOM_MODELS=20 HYBGEN_DIFFERENTIAL_MODELS=2 ctest --preset asan --output-on-failure -LE e2e \
-  -E '_NOT_BUILT$|TheTimeSteppedGeneratorOnTheBall|TheTimeSteppedGeneratorSaysHowFarOff|TheElasticBallKeepsItsMeanEnergy|CrossingShear|HeisenbergWalls'
+  -E '_NOT_BUILT$|TheTimeSteppedGeneratorOnTheBall|TheTimeSteppedGeneratorSaysHowFarOff|TheElasticBallKeepsItsMeanEnergy|CrossingShear|HeisenbergWalls|Calibration\.'
 ctest --preset asan --output-on-failure --no-tests=error -L e2e -R \
   "^(Cli\.RunEveryShippedModelOnASmallGrid|Cli\.BouncingBallPaperConfigurationMatchesClosedForm|NothingLost\.OutputsOfARunKilledMidSwapAreRestored|NumericalFailure\.NonFiniteFlowAndDivergence|LieCli\.RunHeisenbergOnATinyGrid)$"
 echo "ci-hardening: sanitized tests in $((SECONDS - t0)) s" >&2
