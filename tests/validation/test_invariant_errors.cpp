@@ -126,8 +126,15 @@ TEST_P(InvariantErrors, EstimatesCoverTheTrueErrorsAndNoDecayIsClaimed) {
       r.inv["eigenvalues"][1]["error"].get<double>());
   EXPECT_GE(est, truth);
   EXPECT_LE(est, 10.0 * truth);
-  EXPECT_GE(r.inv["eigenvalues"][0]["error"].get<double>(), std::abs(l1 - 1.0));
-  EXPECT_GE(r.inv["eigenvalues"][1]["error"].get<double>(), d2);
+  // The eigenvalues' errors cover their distances from the exact spectrum and are at most 10×
+  // them (measured 1.7–7.9× for λ₂, 2026-11-30); λ₁ = 1 to rounding or to the eigensolver's
+  // tolerance (1e-10 relative, invariant.hpp) has that floor (measured 1.01e-10 at most).
+  const double e1 = r.inv["eigenvalues"][0]["error"].get<double>();
+  const double e2 = r.inv["eigenvalues"][1]["error"].get<double>();
+  EXPECT_GE(e1, std::abs(l1 - 1.0));
+  EXPECT_LE(e1, 10.0 * std::abs(l1 - 1.0) + 2e-10);
+  EXPECT_GE(e2, d2);
+  EXPECT_LE(e2, 10.0 * d2);
   if (scheme == "fv") {
     EXPECT_LE(std::abs(l1 - 1.0), 1e-9);
   }
