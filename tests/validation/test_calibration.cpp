@@ -1,4 +1,4 @@
-// Calibrated error bars of `method=particles` (docs/hardening.md, "Calibrated bars"): the
+// Calibrated error bars (docs/hardening.md, "Calibrated bars"). Of `method=particles`: the
 // budget's Monte-Carlo terms — the mass in the box, the atom at a Zeno point, the mass a trap
 // absorbed — against closed forms that do not come from hybgen, over several seeds, through
 // `hybgen run` on tests/validation/models/*.model:
@@ -130,6 +130,44 @@ TEST(Calibration, ParticleBudgetBarsAreTwoSigmaOfTheirErrors) {
   mass.expect_calibrated();
   absorbed.expect_calibrated();
   atom.expect_calibrated();
+}
+
+TEST(Calibration, TheBudgetsCubatureBarsOnALeapOutOfTheBox) {
+  // The characteristics' budget (adaptive cubature, budget/cubature.hpp) on leap_out at 32
+  // output times (dt = 0.025), `fast` and `full`, against the closed forms of the mass in the
+  // box and the outflow. Its errors are deterministic but come from where the jumps at the guard
+  // (x = 1) and at x = 1 + t fall between the Gauss nodes, which no estimate can know: over
+  // the frames they behave as a sample, and the bars are judged as the particles' are. Every
+  // bar covers its error; the RMS of 2·error/bar is at least kBudgetZRmsLow. Measured
+  // (2026-11-30): 0.18 and 0.17 for the mass, 0.19 and 0.28 for the outflow (fast, full): the
+  // bars are about 11× the errors' RMS (7–200× single errors), short of the 10× that
+  // docs/hardening.md ("Calibrated bars") aims at, with the reason there.
+  constexpr double kBudgetZRmsLow = 0.12;
+  for (const std::string budget : {"fast", "full"}) {
+    const fs::path out = kWork / ("leap_budget_" + budget);
+    fs::remove_all(out);
+    const auto r =
+        hybgen_cli("run tests/validation/models/leap_out.model --quiet --out '" + out.string() +
+                   "' --set budget=" + budget + " --set dt=0.025 --set outputs=netcdf");
+    ASSERT_EQ(r.code, 0) << r.out;
+    const json s = hybgen::testing::read_json_file(out / "summary.json");
+    for (const std::string term : {"mass", "outflow"}) {
+      Term t{term + " by characteristics, budget=" + budget, {}, {}};
+      t.add(s["times"], s[term], s["budget"][term + "_error"],
+            term == "mass" ? hybgen::testing::leap_mass : hybgen::testing::leap_outflow);
+      ASSERT_GE(t.error.size(), 30u);
+      double z2 = 0.0;
+      for (std::size_t i = 0; i < t.error.size(); ++i) {
+        EXPECT_LE(std::fabs(t.error[i]), t.bar[i]) << t.name << " frame " << i;
+        const double z = 2.0 * t.error[i] / t.bar[i];
+        z2 += z * z;
+      }
+      const double rms = std::sqrt(z2 / static_cast<double>(t.error.size()));
+      std::printf("[ calibration ] %s: %zu frames, RMS of 2 error/bar %.3f\n", t.name.c_str(),
+                  t.error.size(), rms);
+      EXPECT_GE(rms, kBudgetZRmsLow) << t.name << ": bars wider than about 17x the errors' RMS";
+    }
+  }
 }
 
 }  // namespace
