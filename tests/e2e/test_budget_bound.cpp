@@ -71,10 +71,10 @@ TEST(BudgetBound, CompactBumpDriftingOutEndsAndItsBudgetCoversTheTruth) {
   // The default budget (fast), 17 output times; `timeout` turns a hang into a failure (exit
   // 124) long before ctest's.
   const hybgen::testing::ShellResult r = hybgen::testing::run_shell(
-      "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && HYBGEN_CACHE='" + (dir / "cache").string() +
-      "' timeout " + std::to_string(kTimeoutSeconds) + " '" + hybgen::testing::hybgen_exe() +
-      "' run tests/validation/drift_bump.model --out '" + out.string() +
-      "' --set dt=0.125 --set outputs=netcdf --quiet 2>&1");
+      "cd '" + hybgen::testing::hybgen_source_dir() + "' && HYBGEN_CACHE='" +
+      (dir / "cache").string() + "' timeout " + std::to_string(kTimeoutSeconds) + " '" +
+      hybgen::testing::hybgen_exe() + "' run tests/validation/drift_bump.model --out '" +
+      out.string() + "' --set dt=0.125 --set outputs=netcdf --quiet 2>&1");
   ASSERT_EQ(r.code, 0) << r.out;
   const json s = hybgen::testing::read_json_file(out / "summary.json");
   ASSERT_EQ(s["budget"]["kind"], "fast");

@@ -339,6 +339,20 @@ TEST(Cli, ParameterValuesReuseTheRunner) {
   EXPECT_EQ(s["parameters"]["g"].get<double>(), 2.0);
 }
 
+TEST(Cli, BuildVerboseNamesTheCompilerCommandOfACachedRunner) {
+  // `hybgen build -v` says how the runner it hands over was compiled, also when it comes
+  // from the cache (a81ba15 printed "runner (cached) PATH" and nothing of the command, which
+  // it had printed only on the miss).
+  const Result first = hybgen("build models/bouncing_ball.model");
+  ASSERT_EQ(first.code, exit_status(ExitCode::Success)) << first.out;
+  const Result again = hybgen("build -v models/bouncing_ball.model");
+  ASSERT_EQ(again.code, exit_status(ExitCode::Success)) << again.out;
+  EXPECT_NE(again.out.find("cached runner "), std::string::npos) << again.out;
+  EXPECT_NE(again.out.find(", compiled by: "), std::string::npos) << again.out;
+  EXPECT_NE(again.out.find("-std=c++20"), std::string::npos) << again.out;
+  EXPECT_EQ(built_runner(first), built_runner(again));
+}
+
 TEST(Cli, OneRunnerForEveryMethodAndValue) {
   // One runner per model (generator/src/build.cpp): parameter values, the method and every
   // setting are read at run time, so after the first build nothing compiles. A private

@@ -258,8 +258,8 @@ TEST(Sweep, AnInterruptedSweepLeavesTheEarlierOutputsAsTheyWere) {
   // after a fixed delay: on a loaded machine the derivation and build can take seconds.
   const std::string staging_glob = (kWork / "interrupted.partial-").string() + "*/*/config.json";
   const std::string cmd =
-      "cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && HYBGEN_CACHE='" + cache.string() + "' '" +
-      hybgen::testing::hybgen_exe() +
+      "cd '" + hybgen::testing::hybgen_source_dir() + "' && HYBGEN_CACHE='" + cache.string() +
+      "' '" + hybgen::testing::hybgen_exe() +
       "' sweep models/bouncing_ball.model --set e=0.8,0.9 --set method=particles "
       "--set particles=1e7 --set t_end=5 --out '" +
       out.string() + "' 2>&1 & pid=$!; for i in $(seq 600); do ls " + staging_glob +

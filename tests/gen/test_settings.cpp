@@ -269,5 +269,23 @@ TEST(Settings, DocsPageIsTheTable) {
       << rt::settings_markdown();
 }
 
+TEST(Settings, TheOutputsPageGivesTheTablesDefaultAndDocumentsConfigJson) {
+  // docs/outputs.md gave `outputs`' default as netcdf+png+pdf where the table (and
+  // docs/settings.md, --help) said netcdf+png+pdf+gif+html, and left the output folder's
+  // config.json undocumented (a81ba15): the page quotes the table's default and says what
+  // config.json holds.
+  const std::string page = read_file(std::string(HYBGEN_SOURCE_DIR) + "/docs/outputs.md");
+  const rt::SettingSpec* outputs = rt::find_setting("outputs");
+  ASSERT_NE(outputs, nullptr);
+  const std::string quoted = "default `" + std::string(outputs->word) + "`";
+  EXPECT_NE(page.find(quoted), std::string::npos) << "docs/outputs.md lacks " << quoted;
+  EXPECT_NE(page.find("- `config.json`:"), std::string::npos);
+  std::size_t at = 0;
+  while ((at = page.find("default `netcdf", at)) != std::string::npos) {
+    EXPECT_EQ(page.compare(at, quoted.size(), quoted), 0) << page.substr(at, 60);
+    ++at;
+  }
+}
+
 }  // namespace
 }  // namespace hybgen::gen

@@ -42,14 +42,22 @@ inline std::string hybgen_exe() {
   return other != nullptr && *other != '\0' ? std::string(other) : std::string(HYBGEN_EXE);
 }
 
+/// The directory hybgen runs from (its relative paths, models/…, are read there): the source
+/// tree, or the one named by HYBGEN_UNDER_TEST_SOURCE (an older hybgen's own tree, whose
+/// shipped models it can read).
+inline std::string hybgen_source_dir() {
+  const char* other = std::getenv("HYBGEN_UNDER_TEST_SOURCE");
+  return other != nullptr && *other != '\0' ? std::string(other) : std::string(HYBGEN_SOURCE_DIR);
+}
+
 /// Run hybgen with `args` from the source directory with the cache `cache`; all output (or
 /// standard output alone: `err`). `prefix` goes before the command in the shell: environment
 /// assignments, or set-up ending in "&&" (`cd DIR &&`, `ulimit -f 40 &&`).
 inline ShellResult run_hybgen(const std::string& args, const std::filesystem::path& cache,
                               const std::string& prefix = "", Stderr err = Stderr::Merged) {
-  return run_shell("cd '" + std::string(HYBGEN_SOURCE_DIR) + "' && " + prefix +
-                   (prefix.empty() ? "" : " ") + "HYBGEN_CACHE='" + cache.string() + "' '" +
-                   hybgen_exe() + "' " + args + (err == Stderr::Merged ? " 2>&1" : " 2>/dev/null"));
+  return run_shell("cd '" + hybgen_source_dir() + "' && " + prefix + (prefix.empty() ? "" : " ") +
+                   "HYBGEN_CACHE='" + cache.string() + "' '" + hybgen_exe() + "' " + args +
+                   (err == Stderr::Merged ? " 2>&1" : " 2>/dev/null"));
 }
 
 /// run_hybgen's prefix for runs on MPI ranks (`--ranks N`): as root (CI), and more ranks than
