@@ -110,6 +110,14 @@ TEST(Newcomer, ValuesAtTheEdgesAreRefusedOrRunNeverACrash) {
   const auto e = hybgen("run models/bouncing_ball.model -q --set e=1e308 --set grid=21x21");
   EXPECT_EQ(e.code, exit_status(ExitCode::Numerical)) << e.out;
   EXPECT_TRUE(has(e.out, "non-finite reset")) << e.out;
+  // The transfer operator's step at the edge of its range: step = 1e-300 asked the march for
+  // 2e300 steps and ended in "error: vector::reserve" (exit 70; found 2026-11-30 by running
+  // every numeric setting at its extremes through `hybgen run`). Now a loud cap, before anything
+  // runs.
+  const auto step =
+      hybgen("run models/sawtooth.model -q --set method=transfer --set step=1e-300 --set t_end=2");
+  EXPECT_EQ(step.code, exit_status(ExitCode::UsageError)) << step.out;
+  EXPECT_TRUE(has(step.out, "steps, more than the 1e+07 a run may take")) << step.out;
 }
 
 }  // namespace

@@ -33,6 +33,7 @@
 #include "hybgen/gen/parse.hpp"
 #include "hybgen/gen/reduce.hpp"
 #include "hybgen/rt/settings.hpp"
+#include "support/setting_edges.hpp"
 
 namespace hybgen::gen {
 namespace {
@@ -96,24 +97,9 @@ TEST(FuzzRegressions, OverrideFindingsEndCleanly) {
 // the runner cannot use: fuzz/overrides_pipeline.hpp's invariant), and the values just
 // outside must be refused. The fuzzer draws such values by chance; this walks all of them.
 TEST(FuzzPipeline, EverySettingAtTheEdgesOfItsRangeEndsCleanly) {
-  constexpr double kInf = std::numeric_limits<double>::infinity();
   int checked = 0;
   for (const rt::SettingSpec& spec : rt::kSettings) {
-    const bool integer = spec.type == rt::SettingType::integer;
-    if (!integer && spec.type != rt::SettingType::real) continue;
-    const double lo_in = !spec.lo_open ? spec.lo
-                         : integer     ? spec.lo + 1
-                                       : std::nextafter(spec.lo, kInf);
-    const double below = spec.lo_open ? spec.lo
-                         : integer    ? spec.lo - 1
-                                      : std::nextafter(spec.lo, -kInf);
-    // (hi + 1 is hi itself at 2^53, the seed's largest: the next double then.)
-    const double above =
-        integer && spec.hi + 1 > spec.hi ? spec.hi + 1 : std::nextafter(spec.hi, kInf);
-    const struct {
-      double value;
-      bool inside;
-    } cases[] = {{lo_in, true}, {spec.hi, true}, {below, false}, {above, false}};
+    const std::vector<hybgen::testing::EdgeValue> cases = hybgen::testing::edge_values(spec);
     for (const auto& c : cases) {
       char text[128];
       std::snprintf(text, sizeof text, "%s=%.17g", std::string(spec.name).c_str(), c.value);

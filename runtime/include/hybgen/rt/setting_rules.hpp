@@ -87,6 +87,25 @@ inline std::string frames_rule(const Settings& s) {
   return b;
 }
 
+/// Most time steps `method=transfer` may march (its operator's step, or with scheme=fv the
+/// cap of its step): a loud cap, before anything is allocated (t_end = 2 with step = 1e-300
+/// asked for 2e300 steps and ended in std::length_error, exit 70).
+inline constexpr double kMaxTransferSteps = 1e7;
+
+/// method=transfer with step > 0 marches at most kMaxTransferSteps steps to t_end.
+inline std::string steps_rule(const Settings& s) {
+  if (s.word<"method">() != method_spec(Method::transfer).name) return "";
+  const double step = s.real<"step">(), t_end = s.real<"t_end">();
+  if (!(step > 0.0) || t_end / step <= kMaxTransferSteps) return "";
+  char b[300];
+  std::snprintf(b, sizeof b,
+                "t_end = %g with step = %g asks the transfer operator for %.3g steps, more than "
+                "the %.0e a run may take: raise step (0 takes dt, or with scheme=fv the "
+                "stability bound)",
+                t_end, step, t_end / step, kMaxTransferSteps);
+  return b;
+}
+
 /// ranks > 1 runs MPI ranks: it needs backend=mpi.
 inline std::string ranks_rule(const Settings& s) {
   if (s.integer<"ranks">() > 1 && s.word<"backend">() != "mpi")
@@ -202,6 +221,7 @@ inline std::vector<SettingConflict> setting_conflicts(const Settings& s, const R
     if (!why.empty()) out.push_back({setting, guard, std::move(why)});
   };
   add("dt", frames_rule(s));
+  add("step", steps_rule(s));
   add("ranks", ranks_rule(s));
   if (facts.guards_without_inverse)
     for (const auto& [g, name] : *facts.guards_without_inverse)

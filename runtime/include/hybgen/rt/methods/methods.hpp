@@ -313,6 +313,21 @@ inline void add_density_error_json(nlohmann::json& j, double error,
   j["coarse_grid"] = coarse_nodes;
 }
 
+/// The warning of an invariant density that is not unique (λ₂ within the errors of λ₁:
+/// two_grid.hpp, `leading_eigenvalue_repeats`; the fv generator: μ₂ ties with μ₁).
+inline std::string not_unique_warning(std::complex<double> l1, std::complex<double> l2,
+                                      double step) {
+  char b[700];
+  std::snprintf(b, sizeof b,
+                "lambda2 = %.12g%+.3gi is within the errors of lambda1 = %.12g: the invariant "
+                "density is not unique (the system has several invariant sets, or the "
+                "transfer operator over step = %g is the identity to within the eigen-solver's "
+                "tolerance: raise step), and the frame is one of them, the solver's choice; no "
+                "error is estimated",
+                l2.real(), l2.imag(), l1.real(), step);
+  return b;
+}
+
 /// What a spectrum's decisions tell the user (two_grid.hpp): no decay, mass that leaves.
 inline void spectrum_warnings(const SpectrumErrors& e, std::vector<std::string>& warnings) {
   if (e.leaks == true)
@@ -904,10 +919,17 @@ template <HybridModel M>
   // Throws: a guard it cannot cut (without `planes`, found by scheme=auto already).
   const FvInvariantResult inv =
       planes ? fv_invariant<M>(grid, par, o, *planes) : fv_invariant<M>(grid, par, o);
+  // μ₂ ties with μ₁ (within kFvTie·rate, as the generator's own choice of λ₁): the null space
+  // is not one-dimensional, the invariant density not unique, and the grids' solvers need not
+  // pick the same one (tests/validation/models/two_sawtooths.model: λ₂ = 1 − 3e-16, and the
+  // two grids' densities 0.42 apart, reported as the density's error). The frame is then a
+  // vector of that null space, possibly of both signs: not an oscillation.
+  const bool unique =
+      inv.fine.mu.size() < 2 || std::abs(inv.fine.mu[1] - inv.fine.mu[0]) > kFvTie * inv.fine.rate;
   // scheme=auto: a density with features below the grid spacing (a measure concentrated near
   // an attracting cycle) makes the high-order reconstruction oscillate.
   if (const auto [lo, hi] = std::minmax_element(inv.fine.density.begin(), inv.fine.density.end());
-      oscillates && inv.fine.failure.empty() && lo != inv.fine.density.end() &&
+      oscillates && unique && inv.fine.failure.empty() && lo != inv.fine.density.end() &&
       *lo < -kFvNegativeTolerance * *hi) {
     char b[400];
     std::snprintf(b, sizeof b,
@@ -955,14 +977,27 @@ template <HybridModel M>
     j["eigenvalues"][k]["mu_re"] = inv.fine.mu[k].real();
     j["eigenvalues"][k]["mu_im"] = inv.fine.mu[k].imag();
   }
-  detail::add_density_error_json(j, inv.error, inv.mode_errors, inv.observed_order,
-                                 inv.error_reliable, inv.coarse_nodes);
+  std::vector<std::string> notes = inv.notes;
+  double error = inv.error;
+  std::vector<double> mode_errors = inv.mode_errors;
+  std::optional<bool> reliable = inv.error_reliable;
+  if (!unique) {
+    error = std::numeric_limits<double>::quiet_NaN();
+    for (double& e : mode_errors) e = error;
+    reliable = false;
+    const std::string w = detail::not_unique_warning(inv.lambda[0], inv.lambda[1], o.step);
+    notes.push_back(w);
+    r.warnings.push_back(w);
+  }
+  detail::add_density_error_json(j, error, mode_errors, inv.observed_order, reliable,
+                                 inv.coarse_nodes);
+  j["unique"] = unique;
   std::string note =
       "error: estimated relative L1 error of the density (max over modes; nodes on a cut "
       "excluded), the difference from the grid of coarse_grid nodes" +
       std::string(o.order <= 1 ? " times 2" : "") +
       "; each eigenvalue's error likewise (docs/methods.md, \"invariant\")";
-  for (const std::string& n : inv.notes) note += ". " + n;
+  for (const std::string& n : notes) note += ". " + n;
   j["note"] = note;
   detail::spectrum_warnings(inv.spectrum, r.warnings);
   if (inv.fine.leaks && inv.spectrum.leaks != true)
@@ -1063,7 +1098,21 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
                       "not fall like the grid spacing here); scheme=fv converges at order 3 "
                       "where it applies");
   }
-  if (spec.decays == false)
+  // λ₂ within the errors of λ₁: the invariant density is not unique, and the two grids'
+  // solvers need not return the same one, so their difference is no error estimate (the
+  // sawtooth with step=1e-300, an operator equal to the identity: the solver's start vector,
+  // 17 % off the closed form, with an "error" of 9e-13).
+  const bool unique = !leading_eigenvalue_repeats(inv.eigenvalues, spec.lambda_error, io.tol);
+  if (!unique) {
+    error = std::numeric_limits<double>::quiet_NaN();
+    for (double& e : mode_errors) e = error;
+    reliable = false;
+    const std::string w =
+        detail::not_unique_warning(inv.eigenvalues[0], inv.eigenvalues[1], o.step);
+    notes.push_back(w);
+    r.warnings.push_back(w);
+  }
+  if (spec.decays == false && unique)
     notes.push_back(
         "the spectral gap is within its estimated error of 0: no decay is claimed "
         "(the scheme's numerical diffusion moves a cycle's eigenvalues inside the "
@@ -1093,6 +1142,7 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   j["file"] = r.frame_names.front() + ".npy";
   detail::add_spectrum_json(j, inv.eigenvalues, spec);
   detail::add_density_error_json(j, error, mode_errors, observed, reliable, coarse_nodes);
+  j["unique"] = unique;
   j["order"] = kOrder;
   j["max_growth"] = {detail::number_or_null(g2), detail::number_or_null(g1)};
   j["concentrated"] = concentrated;

@@ -211,6 +211,20 @@ inline Rates rates(std::complex<double> l1, std::complex<double> l2, double h) {
 
 }  // namespace detail
 
+/// Whether λ₂ lies within the errors of λ₁ (`l` by decreasing modulus, `error` per eigenvalue;
+/// NaN errors: `floor` each): the leading eigenvalue is then not simple, and P has several
+/// independent invariant densities — a system with several invariant sets, or an operator
+/// that is the identity to within the eigen-solver's tolerance (a step that moves no sample
+/// measurably). Which one the solver returns is its start vector's choice, on each grid.
+inline bool leading_eigenvalue_repeats(std::span<const std::complex<double>> l,
+                                       std::span<const double> error, double floor) {
+  if (l.size() < 2) return false;
+  const auto err = [&](std::size_t k) {
+    return k < error.size() && std::isfinite(error[k]) ? error[k] : floor;
+  };
+  return std::abs(l[1] - l[0]) <= err(0) + err(1);
+}
+
 /// The spectrum's rates and their errors from the eigenvalues on the grid (`fine`, by
 /// decreasing modulus, λ₁ first) and on the coarse grid (`coarse`; empty: no estimate), for
 /// an operator of step h; `factor` as for the density (file comment). `floor` is added to
