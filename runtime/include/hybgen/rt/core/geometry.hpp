@@ -4,6 +4,7 @@
 /// algebra, Newton's method for a reset's pre-image, RK4 steps, and THE grazing criterion
 /// (the pre-flight scan, the backward tracer and the forward flow use the same function).
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -197,6 +198,25 @@ inline void describe_grazing(std::ostream& os, double ratio) {
 /// orbit is followed 1e-3 of the horizon each way, the time resolution of the solution.
 inline double graze_delta(double horizon) {
   return 1e-3 * std::fabs(horizon);
+}
+
+/// Whether the flow of mode m reaches the point z of a guard's surface from inside
+/// `M::in_support`: tested just BEFORE z, at z − δ·X_m(z) with δ|X| = 1e-7·(1 + ‖z‖∞) (z is on
+/// the surface only to rounding, and a support that is open at the surface, x > 0 for the
+/// ball, or curved there must keep its crossings). The backward tracer spawns no pre-image
+/// where this fails (characteristics.hpp), and a forward flow that meets a guard outside the
+/// support has left the state space before it (forward.hpp).
+template <HybridModel M>
+bool reaches_from_support(int m, const std::array<double, state_dim_v<M>>& z, const double* par) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> X{}, zb{};
+  M::flow(m, z.data(), par, X.data());
+  const double speed = std::sqrt(dot<N>(X.data(), X.data()));
+  double zn = 0.0;
+  for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
+  const double delta = speed > 0.0 && std::isfinite(speed) ? 1e-7 * (1.0 + zn) / speed : 0.0;
+  for (std::size_t i = 0; i < N; ++i) zb[i] = z[i] - delta * X[i];
+  return M::in_support(zb.data(), par);
 }
 
 }  // namespace detail

@@ -378,19 +378,9 @@ class Tracer {
     project_onto_guard(g, z);
     // A pre-image outside the state space has no history: the branch would contribute
     // nothing, and from there its own reversed resets could spawn pre-images without end
-    // (tests/validation/test_support_pruning.cpp). Tested just BEFORE the crossing, at
-    // z − δ·X_from(z) with δ|X| = 1e-7·(1 + ‖z‖∞): z itself is on S_g only to rounding, and a
-    // support that is open at S_g (x > 0 for the ball) or curved there must keep its histories.
-    {
-      State Xf, zb;
-      M::flow(gi.from, z.data(), par_, Xf.data());
-      const double speed = std::sqrt(dot<N>(Xf.data(), Xf.data()));
-      double zn = 0.0;
-      for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
-      const double delta = speed > 0.0 && std::isfinite(speed) ? 1e-7 * (1.0 + zn) / speed : 0.0;
-      for (std::size_t i = 0; i < N; ++i) zb[i] = z[i] - delta * Xf[i];
-      if (!M::in_support(zb.data(), par_)) return;
-    }
+    // (tests/validation/test_support_pruning.cpp). Tested just before the crossing
+    // (core/geometry.hpp).
+    if (!reaches_from_support<M>(gi.from, z, par_)) return;
     // A pre-image where the flow of `from` grazes S_g: the forward guard fires at a tangency.
     const double ratio = grazing<M>(g, gi.from, z, par_, opt_.graze_tol,
                                     [this](double) { return graze_delta(times_.back()); });
