@@ -34,20 +34,24 @@ enum class Stderr {
   Discarded,  ///< To /dev/null: the output is standard output alone (e.g. JSON to parse).
 };
 
+/// The environment variable `name`, or `fallback` where it is unset or empty.
+inline std::string env_or(const char* name, const char* fallback) {
+  const char* v = std::getenv(name);
+  return std::string(v != nullptr && *v != '\0' ? v : fallback);
+}
+
 /// The hybgen under test: this build's, or the executable named by the environment variable
 /// HYBGEN_UNDER_TEST (to list the tests an older hybgen fails: docs/hardening.md, "Against an
 /// older hybgen").
 inline std::string hybgen_exe() {
-  const char* other = std::getenv("HYBGEN_UNDER_TEST");
-  return other != nullptr && *other != '\0' ? std::string(other) : std::string(HYBGEN_EXE);
+  return env_or("HYBGEN_UNDER_TEST", HYBGEN_EXE);
 }
 
 /// The directory hybgen runs from (its relative paths, models/…, are read there): the source
 /// tree, or the one named by HYBGEN_UNDER_TEST_SOURCE (an older hybgen's own tree, whose
 /// shipped models it can read).
 inline std::string hybgen_source_dir() {
-  const char* other = std::getenv("HYBGEN_UNDER_TEST_SOURCE");
-  return other != nullptr && *other != '\0' ? std::string(other) : std::string(HYBGEN_SOURCE_DIR);
+  return env_or("HYBGEN_UNDER_TEST_SOURCE", HYBGEN_SOURCE_DIR);
 }
 
 /// Run hybgen with `args` from the source directory with the cache `cache`; all output (or

@@ -80,21 +80,29 @@ struct Term {
     }
   }
 
+  /// The root mean square of z = 2·error/bar (error/σ̂ for a 2σ bar) over the frames.
+  double rms_z() const {
+    double z2 = 0.0;
+    for (std::size_t i = 0; i < error.size(); ++i) {
+      const double z = 2.0 * error[i] / bar[i];
+      z2 += z * z;
+    }
+    return std::sqrt(z2 / static_cast<double>(error.size()));
+  }
+
   /// The calibration's assertions (file comment), with what they measured.
   void expect_calibrated() const {
     ASSERT_GE(error.size(), 10u) << name << ": too few frames to judge";
-    double z2 = 0.0, widest = 0.0;
+    double widest = 0.0;
     std::size_t covered = 0;
     for (std::size_t i = 0; i < error.size(); ++i) {
       ASSERT_GT(bar[i], 0.0) << name << " frame " << i;
-      const double z = 2.0 * error[i] / bar[i];  // error/σ̂
-      z2 += z * z;
       if (std::fabs(error[i]) <= bar[i]) ++covered;
       widest = std::max(widest, std::fabs(error[i]) / bar[i]);
       EXPECT_LE(std::fabs(error[i]), 2.0 * bar[i]) << name << " frame " << i << ": beyond 4σ";
     }
     const double n = static_cast<double>(error.size());
-    const double rms = std::sqrt(z2 / n);
+    const double rms = rms_z();
     std::printf(
         "[ calibration ] %s: %zu frames, RMS of error/sigma %.2f, %zu within their 2-sigma bar, "
         "largest |error|/bar %.2f\n",
@@ -156,13 +164,9 @@ TEST(Calibration, TheBudgetsCubatureBarsOnALeapOutOfTheBox) {
       t.add(s["times"], s[term], s["budget"][term + "_error"],
             term == "mass" ? hybgen::testing::leap_mass : hybgen::testing::leap_outflow);
       ASSERT_GE(t.error.size(), 30u);
-      double z2 = 0.0;
-      for (std::size_t i = 0; i < t.error.size(); ++i) {
+      for (std::size_t i = 0; i < t.error.size(); ++i)
         EXPECT_LE(std::fabs(t.error[i]), t.bar[i]) << t.name << " frame " << i;
-        const double z = 2.0 * t.error[i] / t.bar[i];
-        z2 += z * z;
-      }
-      const double rms = std::sqrt(z2 / static_cast<double>(t.error.size()));
+      const double rms = t.rms_z();
       std::printf("[ calibration ] %s: %zu frames, RMS of 2 error/bar %.3f\n", t.name.c_str(),
                   t.error.size(), rms);
       EXPECT_GE(rms, kBudgetZRmsLow) << t.name << ": bars wider than about 17x the errors' RMS";

@@ -204,8 +204,8 @@ inline double graze_delta(double horizon) {
 /// `M::in_support`: tested just BEFORE z, at z − δ·X_m(z) with δ|X| = 1e-7·(1 + ‖z‖∞) (z is on
 /// the surface only to rounding, and a support that is open at the surface, x > 0 for the
 /// ball, or curved there must keep its crossings). The backward tracer spawns no pre-image
-/// where this fails (characteristics.hpp), and a forward flow that meets a guard outside the
-/// support has left the state space before it (forward.hpp).
+/// where this fails (characteristics.hpp). The forward flow tests its crossings off the
+/// surface instead (`crossing_in_support`, below).
 template <HybridModel M>
 bool reaches_from_support(int m, const std::array<double, state_dim_v<M>>& z, const double* par) {
   constexpr std::size_t N = state_dim_v<M>;
@@ -216,6 +216,32 @@ bool reaches_from_support(int m, const std::array<double, state_dim_v<M>>& z, co
   for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
   const double delta = speed > 0.0 && std::isfinite(speed) ? 1e-7 * (1.0 + zn) / speed : 0.0;
   for (std::size_t i = 0; i < N; ++i) zb[i] = z[i] - delta * X[i];
+  return M::in_support(zb.data(), par);
+}
+
+/// Whether guard g's crossing at z (on S_g) by the flow of mode m lies in `M::in_support`:
+/// tested just off S_g on the side the flow comes from, at z − ε·sign(∇s·X)·∇s/|∇s| with
+/// ε = 1e-7·(1 + ‖z‖∞) (at z itself where the flow is tangent or ∇s vanishes). Off the surface
+/// along its normal, not back along the flow as `reaches_from_support`: where S_g is the
+/// support's own edge (the ball's ground, x ≥ 0), a crossing deep in a Zeno accumulation moves
+/// along the flow by less than rounding (|p| → 0) and would read as outside
+/// (tests/validation/test_two_balls.cpp's particles lost 1.6e-4 that way). A forward flow
+/// whose crossing fails it has left the state space before the guard (forward.hpp).
+template <HybridModel M>
+bool crossing_in_support(int g, int m, const std::array<double, state_dim_v<M>>& z,
+                         const double* par) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> grad{}, X{}, zb{};
+  M::guard_gradient(g, z.data(), par, grad.data());
+  M::flow(m, z.data(), par, X.data());
+  const double gn = std::sqrt(dot<N>(grad.data(), grad.data()));
+  const double gx = dot<N>(grad.data(), X.data());
+  if (!(gn > 0.0) || !std::isfinite(gn) || !std::isfinite(gx) || gx == 0.0)
+    return M::in_support(z.data(), par);
+  double zn = 0.0;
+  for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
+  const double step = (gx > 0.0 ? 1.0 : -1.0) * 1e-7 * (1.0 + zn) / gn;
+  for (std::size_t i = 0; i < N; ++i) zb[i] = z[i] - step * grad[i];
   return M::in_support(zb.data(), par);
 }
 

@@ -24,8 +24,8 @@
 ///  * `in_support` is checked at step ends (as in the tracer): the first step end outside it
 ///    stops the flow with `left_support` at that time; outputs inside that step are delivered.
 ///    A guard crossed outside it (tested just off the surface, on the side the flow comes
-///    from: `crossed_in_support`) stops the flow the same way, at the crossing, without its
-///    reset.
+///    from: `detail::crossing_in_support`) stops the flow the same way, at the crossing, without
+///    its reset.
 ///  * Grazing: a crossing where the flow is tangent to the guard and the orbit crosses it (the
 ///    pre-flight's criterion, `detail::grazing` of core/geometry.hpp, with δ = 1e-3·t_end)
 ///    ends the flow `failed` with TraceError::grazing at the crossing (state, time, guard).
@@ -270,7 +270,7 @@ class ForwardFlow {
       // it: no reset, no trap. (The density-level campaign's random model 3675: a trap beyond
       // the support's edge, x ≤ 1.2 against the trap at x = 1.242, took the mass that had left
       // through the edge, 0.028 in the budget's forward flows.)
-      if (!crossed_in_support(g, m, xe)) {
+      if (!detail::crossing_in_support<M>(g, m, xe, par_)) {
         res.status = ForwardStatus::left_support;
         res.x = xe;
         res.t_stop = root.t;
@@ -392,27 +392,6 @@ class ForwardFlow {
   }
 
   /// Two Newton steps onto S_g along ∇s_g (see the file doc).
-  /// Whether guard g's crossing at z (on S_g) lies in `M::in_support`: tested just off S_g on
-  /// the side the flow of mode m comes from, at z − ε·sign(∇s·X)·∇s/|∇s| with ε = 1e-7·(1 +
-  /// ‖z‖∞). Off the surface along its normal, not back along the flow: where S_g is the
-  /// support's own edge (the ball's ground, x ≥ 0), a crossing deep in a Zeno accumulation
-  /// moves along the flow by less than rounding (|p| → 0), and would read as outside
-  /// (tests/validation/test_two_balls.cpp's particles lost 1.6e-4 that way).
-  bool crossed_in_support(int g, int m, const State& z) const {
-    State grad, X, zb;
-    M::guard_gradient(g, z.data(), par_, grad.data());
-    M::flow(m, z.data(), par_, X.data());
-    const double gn = std::sqrt(detail::dot<N>(grad.data(), grad.data()));
-    const double gx = detail::dot<N>(grad.data(), X.data());
-    if (!(gn > 0.0) || !std::isfinite(gn) || !std::isfinite(gx) || gx == 0.0)
-      return M::in_support(z.data(), par_);
-    double zn = 0.0;
-    for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
-    const double step = (gx > 0.0 ? 1.0 : -1.0) * 1e-7 * (1.0 + zn) / gn;
-    for (std::size_t i = 0; i < N; ++i) zb[i] = z[i] - step * grad[i];
-    return M::in_support(zb.data(), par_);
-  }
-
   void project(int g, State& z) const {
     State grad;
     for (int it = 0; it < 2; ++it) {

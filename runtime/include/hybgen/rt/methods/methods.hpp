@@ -313,10 +313,18 @@ inline void add_density_error_json(nlohmann::json& j, double error,
   j["coarse_grid"] = coarse_nodes;
 }
 
-/// The warning of an invariant density that is not unique (λ₂ within the errors of λ₁:
-/// two_grid.hpp, `leading_eigenvalue_repeats`; the fv generator: μ₂ ties with μ₁).
-inline std::string not_unique_warning(std::complex<double> l1, std::complex<double> l2,
-                                      double step) {
+/// An invariant density that is not unique (λ₂ within the errors of λ₁: two_grid.hpp,
+/// `leading_eigenvalue_repeats`; the fv generator: μ₂ ties with μ₁): the grids' solvers need
+/// not pick the same one, so their difference is no error estimate. The density's error, its
+/// modes' and `reliable` are withdrawn, and a warning says why, in `notes` and `warnings`.
+inline void withdraw_not_unique_error(std::complex<double> l1, std::complex<double> l2, double step,
+                                      double& error, std::vector<double>& mode_errors,
+                                      std::optional<bool>& reliable,
+                                      std::vector<std::string>& notes,
+                                      std::vector<std::string>& warnings) {
+  error = std::numeric_limits<double>::quiet_NaN();
+  for (double& e : mode_errors) e = error;
+  reliable = false;
   char b[700];
   std::snprintf(b, sizeof b,
                 "lambda2 = %.12g%+.3gi is within the errors of lambda1 = %.12g: the invariant "
@@ -325,7 +333,8 @@ inline std::string not_unique_warning(std::complex<double> l1, std::complex<doub
                 "tolerance: raise step), and the frame is one of them, the solver's choice; no "
                 "error is estimated",
                 l2.real(), l2.imag(), l1.real(), step);
-  return b;
+  notes.push_back(b);
+  warnings.push_back(b);
 }
 
 /// What a spectrum's decisions tell the user (two_grid.hpp): no decay, mass that leaves.
@@ -981,14 +990,9 @@ template <HybridModel M>
   double error = inv.error;
   std::vector<double> mode_errors = inv.mode_errors;
   std::optional<bool> reliable = inv.error_reliable;
-  if (!unique) {
-    error = std::numeric_limits<double>::quiet_NaN();
-    for (double& e : mode_errors) e = error;
-    reliable = false;
-    const std::string w = detail::not_unique_warning(inv.lambda[0], inv.lambda[1], o.step);
-    notes.push_back(w);
-    r.warnings.push_back(w);
-  }
+  if (!unique)
+    detail::withdraw_not_unique_error(inv.lambda[0], inv.lambda[1], o.step, error, mode_errors,
+                                      reliable, notes, r.warnings);
   detail::add_density_error_json(j, error, mode_errors, inv.observed_order, reliable,
                                  inv.coarse_nodes);
   j["unique"] = unique;
@@ -1103,15 +1107,9 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
   // sawtooth with step=1e-300, an operator equal to the identity: the solver's start vector,
   // 17 % off the closed form, with an "error" of 9e-13).
   const bool unique = !leading_eigenvalue_repeats(inv.eigenvalues, spec.lambda_error, io.tol);
-  if (!unique) {
-    error = std::numeric_limits<double>::quiet_NaN();
-    for (double& e : mode_errors) e = error;
-    reliable = false;
-    const std::string w =
-        detail::not_unique_warning(inv.eigenvalues[0], inv.eigenvalues[1], o.step);
-    notes.push_back(w);
-    r.warnings.push_back(w);
-  }
+  if (!unique)
+    detail::withdraw_not_unique_error(inv.eigenvalues[0], inv.eigenvalues[1], o.step, error,
+                                      mode_errors, reliable, notes, r.warnings);
   if (spec.decays == false && unique)
     notes.push_back(
         "the spectral gap is within its estimated error of 0: no decay is claimed "
