@@ -290,6 +290,15 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
       put_last(row, "absorbed_" + name, a, "values");
       put_last(row, "absorbed_" + name + "_error", a, "errors");
     }
+  // The impacts on each guard by the final time and their last mean rate, with errors
+  // (impacts_NAME, impact_rate_NAME, …_error; empty cells where they are infinite).
+  if (s.contains(k::impacts) && s[k::impacts].is_object())
+    for (const auto& [name, a] : s[k::impacts].items()) {
+      put_last(row, "impacts_" + name, a, "values");
+      put_last(row, "impacts_" + name + "_error", a, "errors");
+      put_last(row, "impact_rate_" + name, a, "rate");
+      put_last(row, "impact_rate_" + name + "_error", a, "rate_errors");
+    }
   // Each observable's mean at the final time and its error (E_NAME, E_NAME_error).
   if (s.contains(k::observables) && s[k::observables].is_object())
     for (const auto& [name, o] : s[k::observables].items()) {

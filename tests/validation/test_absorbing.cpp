@@ -26,17 +26,17 @@
 #include <string>
 #include <vector>
 
-#include <netcdf.h>
-
 #include "hybgen/rt/io/npy.hpp"
 #include "support/cycle_closed_forms.hpp"
 #include "support/e2e.hpp"
 #include "support/line_closed_forms.hpp"
+#include "support/netcdf_series.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using hybgen::testing::Axis;
+using hybgen::testing::nc_values;
 using hybgen::testing::Point;
 using hybgen::testing::shuttle_absorbed;
 using json = nlohmann::json;
@@ -83,22 +83,6 @@ void expect_absorbed(const json& s, const std::string& guard, double (*exact)(do
     worst = std::max(worst, d);
   }
   std::printf("[ absorbing ] %s: largest error of the absorbed mass %.2e\n", what.c_str(), worst);
-}
-
-/// A one-dimensional variable of a NetCDF file, as doubles (empty when it is not there).
-std::vector<double> nc_values(const fs::path& file, const std::string& name) {
-  int id = -1, var = -1;
-  if (nc_open(file.c_str(), NC_NOWRITE, &id) != NC_NOERR) return {};
-  std::vector<double> out;
-  std::size_t len = 0;
-  int dim = -1, ndims = 0;
-  if (nc_inq_varid(id, name.c_str(), &var) == NC_NOERR && nc_inq_varndims(id, var, &ndims) == 0 &&
-      ndims == 1 && nc_inq_vardimid(id, var, &dim) == 0 && nc_inq_dimlen(id, dim, &len) == 0) {
-    out.resize(len);
-    nc_get_var_double(id, var, out.data());
-  }
-  nc_close(id);
-  return out;
 }
 
 constexpr double kA = 0.7;  // absorb_growth.model's a

@@ -286,15 +286,37 @@ void draw_curves(cairo_t* cr, const Rect& r, const std::vector<double>& x,
   for (const Curve& c : curves) {
     if (c.width <= 0) continue;  // sets the range only
     cairo_new_path(cr);          // no segment from a text's current point
+    // A value that is not finite (NaN: undefined, infinite, none) is a gap in the line and
+    // its band: each run of finite values is drawn on its own.
+    const auto finite = [&](std::size_t i) {
+      return i < c.y.size() && std::isfinite(c.y[i]) &&
+             (c.band.empty() || std::isfinite(c.band[i]));
+    };
     if (!c.band.empty()) {
-      for (std::size_t i = 0; i < x.size(); ++i) cairo_line_to(cr, X(x[i]), Y(c.y[i] + c.band[i]));
-      for (std::size_t i = x.size(); i-- > 0;) cairo_line_to(cr, X(x[i]), Y(c.y[i] - c.band[i]));
-      cairo_close_path(cr);
+      for (std::size_t b = 0; b < x.size();) {
+        if (!finite(b)) {
+          ++b;
+          continue;
+        }
+        std::size_t e = b;
+        while (e < x.size() && finite(e)) ++e;
+        cairo_new_sub_path(cr);
+        for (std::size_t i = b; i < e; ++i) cairo_line_to(cr, X(x[i]), Y(c.y[i] + c.band[i]));
+        for (std::size_t i = e; i-- > b;) cairo_line_to(cr, X(x[i]), Y(c.y[i] - c.band[i]));
+        cairo_close_path(cr);
+        b = e;
+      }
       set_colour(cr, c.colour, 0.22);
       cairo_fill(cr);
     }
     cairo_new_path(cr);
-    for (std::size_t i = 0; i < x.size(); ++i) cairo_line_to(cr, X(x[i]), Y(c.y[i]));
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      if (!(i < c.y.size() && std::isfinite(c.y[i]))) {
+        cairo_new_sub_path(cr);  // pen up
+        continue;
+      }
+      cairo_line_to(cr, X(x[i]), Y(c.y[i]));
+    }
     set_colour(cr, c.colour);
     cairo_set_line_width(cr, c.width);
     const double dash[] = {6.0, 4.0};

@@ -349,6 +349,43 @@ void draw_observables(cairo_t* cr, const RunRecord& run, double width, double he
               run.times, curves, "t", curves.size() == 1 ? curves.front().label : "mean");
 }
 
+/// The mean impact rate on each guard over time (methods/impacts.hpp), each with its error as a
+/// band; a gap where it is undefined (the first frame) or infinite (Zeno).
+void draw_impacts(cairo_t* cr, const RunRecord& run, double width, double height) {
+  cairo_set_source_rgb(cr, 1, 1, 1);
+  cairo_paint(cr);
+  draw_title(cr, width,
+             run.model + "  ·  impacts on the guards per unit time (" + run.method + ")");
+  std::vector<Curve> curves;
+  std::size_t c = 0;
+  for (const auto& [guard, a] : run.summary[summary_key::impacts].items()) {
+    Curve curve{"rate on " + guard, {}, kCurve[c++ % std::size(kCurve)], 2.0, {}};
+    for (const auto& v : a["rate"])
+      curve.y.push_back(v.is_number() ? v.get<double>() : std::nan(""));
+    if (a["rate_errors"].is_array())
+      for (const auto& e : a["rate_errors"])
+        curve.band.push_back(e.is_number() ? e.get<double>() : 0.0);
+    if (curve.y.size() != run.times.size()) continue;
+    if (curve.band.size() != curve.y.size()) curve.band.clear();
+    curves.push_back(std::move(curve));
+  }
+  const Rect plot{kLeft + 10, kTop, width - kLeft - 30 - kLegend, height - kTop - kBottom - 10};
+  draw_curves(
+      cr, plot, run.times, curves, "t",
+      curves.size() == 1 ? curves.front().label + " (mass per unit time)" : "mass per unit time");
+  // Where the impacts are infinite the curve stops; say why, inside the plot.
+  set_font(cr, 12);
+  set_colour(cr, kInk);
+  double y = plot.y + 22;
+  for (const auto& [guard, a] : run.summary[summary_key::impacts].items())
+    if (a["infinite_from"].is_number()) {
+      text(cr, plot.x + 12, y,
+           "on " + guard + ": infinite from t = " + tick_label(a["infinite_from"].get<double>()) +
+               " (mass at a Zeno point)");
+      y += 18;
+    }
+}
+
 /// Eigenvalues of the transfer operator in the complex plane, with the unit circle.
 void draw_spectrum(cairo_t* cr, const RunRecord& run, double width, double height) {
   cairo_set_source_rgb(cr, 1, 1, 1);
@@ -551,9 +588,14 @@ void write_figures(const RunRecord& run, FigureRequest& request, const std::stri
   // The observables over time (a time series of two frames or more).
   const bool observables = run.times.size() > 1 && run.summary.is_object() &&
                            run.summary.contains(summary_key::observables);
+  // The impact rates over time (methods/impacts.hpp).
+  const bool impacts = run.times.size() > 1 && run.summary.is_object() &&
+                       run.summary.contains(summary_key::impacts) &&
+                       !run.summary[summary_key::impacts].empty();
   for (const auto& [name, wanted] :
        {std::pair{std::string("budget"), budget}, std::pair{std::string("spectrum"), spectrum},
-        std::pair{std::string("observables"), observables}}) {
+        std::pair{std::string("observables"), observables},
+        std::pair{std::string("impacts"), impacts}}) {
     if (!wanted) continue;
     const double w = 760, h = 480;
     const auto draw = [&](cairo_t* cr) {
@@ -561,6 +603,8 @@ void write_figures(const RunRecord& run, FigureRequest& request, const std::stri
         draw_budget(cr, run, w, h);
       else if (name == "spectrum")
         draw_spectrum(cr, run, w, h);
+      else if (name == "impacts")
+        draw_impacts(cr, run, w, h);
       else
         draw_observables(cr, run, w, h);
     };

@@ -330,25 +330,44 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
         e.owned.push_back(v.is_number() ? v.get<double>() : std::nan(""));
       budget.push_back(std::move(e));
     }
+    // A per-guard series of summary.json (`member` of a guard's block) as `name`; NaN where
+    // it holds none (null: not estimated, or infinite impacts).
+    const auto guard_series = [&](const std::string& name, const std::string& long_name,
+                                  const nlohmann::json& x) {
+      Series v{names(name), long_name, nullptr, {}, -1};
+      if (x.is_array())
+        for (const auto& y : x) v.owned.push_back(y.is_number() ? y.get<double>() : std::nan(""));
+      else
+        v.owned.assign(K, std::nan(""));
+      if (v.owned.size() == K) budget.push_back(std::move(v));
+    };
     // What each trap (`reset absorb`) took since time 0, and its error (NaN: none).
     if (run.summary.is_object() && run.summary.contains(summary_key::absorbed))
-      for (const auto& [guard, a] : run.summary[summary_key::absorbed].items())
-        for (const bool error : {false, true}) {
-          Series v{names("absorbed_" + guard + (error ? "_error" : "")),
-                   error ? "estimated error of absorbed_" + guard
-                         : "mass absorbed by the guard " + guard +
-                               " (reset absorb) since time 0, a part of outflow",
-                   nullptr,
-                   {},
-                   -1};
-          const nlohmann::json& x = a[error ? "errors" : "values"];
-          if (x.is_array())
-            for (const auto& y : x)
-              v.owned.push_back(y.is_number() ? y.get<double>() : std::nan(""));
-          else
-            v.owned.assign(K, std::nan(""));
-          if (v.owned.size() == K) budget.push_back(std::move(v));
-        }
+      for (const auto& [guard, a] : run.summary[summary_key::absorbed].items()) {
+        guard_series("absorbed_" + guard,
+                     "mass absorbed by the guard " + guard +
+                         " (reset absorb) since time 0, a part of outflow",
+                     a["values"]);
+        guard_series("absorbed_" + guard + "_error", "estimated error of absorbed_" + guard,
+                     a["errors"]);
+      }
+    // The impacts on each guard since time 0 and their mean rate over the interval ending at
+    // each time (methods/impacts.hpp), with their errors; NaN where infinite (Zeno) or none.
+    if (run.summary.is_object() && run.summary.contains(summary_key::impacts))
+      for (const auto& [guard, a] : run.summary[summary_key::impacts].items()) {
+        guard_series("impacts_" + guard,
+                     "mass crossing the guard " + guard +
+                         " since time 0, counted once per crossing (NaN: infinite, Zeno)",
+                     a["values"]);
+        guard_series("impacts_" + guard + "_error", "estimated error of impacts_" + guard,
+                     a["errors"]);
+        guard_series("impact_rate_" + guard,
+                     "mean rate of impacts_" + guard +
+                         " per unit time over the interval from the previous time",
+                     a["rate"]);
+        guard_series("impact_rate_" + guard + "_error", "estimated error of impact_rate_" + guard,
+                     a["rate_errors"]);
+      }
     for (Series& s : budget) {
       s.var = nc.var(s.name, NC_DOUBLE, {time_dim});
       nc.text(s.var, "long_name", s.long_name);

@@ -226,6 +226,32 @@ img { max-width: 100%; } .muted { color: #666; }
           << "</p>\n";
     }
   }
+  // The impacts on each guard by the last frame and their last mean rate (methods/impacts.hpp).
+  if (run.summary.is_object() && run.summary.contains(summary_key::impacts) &&
+      !run.summary[summary_key::impacts].empty() && !run.times.empty()) {
+    h << "<h2>Impacts</h2>\n<p>The mass that has crossed each guard, counted once per crossing, "
+         "and the mean rate at which it crosses over the last interval (docs/methods.md, "
+         "\"Impacts\").</p>\n";
+    if (has(files, "impacts.png"))
+      h << "<img src=\"impacts.png\" alt=\"the impact rates on the guards over time\">\n";
+    h << "<table>\n<tr><th>guard</th><th>impacts by t = " << number(run.times.back())
+      << "</th><th>± estimate</th><th>rate</th><th>± estimate</th></tr>\n";
+    const auto cell = [&](const nlohmann::json& x) {
+      return x.is_array() && !x.empty() && x.back().is_number() ? number(x.back().get<double>())
+                                                                : std::string();
+    };
+    for (const auto& [guard, a] : run.summary[summary_key::impacts].items()) {
+      h << "<tr><td>" << html(guard) << "</td>";
+      if (a["infinite_from"].is_number())
+        h << "<td colspan=\"4\">infinite from t = " << number(a["infinite_from"].get<double>())
+          << " (mass at a Zeno point)</td></tr>\n";
+      else
+        h << "<td class=\"n\">" << cell(a["values"]) << "</td><td class=\"n\">" << cell(a["errors"])
+          << "</td><td class=\"n\">" << cell(a["rate"]) << "</td><td class=\"n\">"
+          << cell(a["rate_errors"]) << "</td></tr>\n";
+    }
+    h << "</table>\n";
+  }
   // The observables at the last frame, with their errors (methods/observables.hpp).
   if (run.summary.is_object() && run.summary.contains(summary_key::observables) &&
       !run.summary[summary_key::observables].empty()) {

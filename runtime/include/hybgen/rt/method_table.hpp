@@ -43,6 +43,11 @@ inline constexpr const char* atom_error = "atom_error";      ///< Its estimated 
 /// Per absorbing guard (`reset absorb`), by its name: the mass it took by each frame
 /// (`values`, part of `outflow`) and its estimated error (`errors`).
 inline constexpr const char* absorbed = "absorbed";
+/// Per guard, by its name: the impacts by each frame (`values`, mass-weighted firings,
+/// methods/impacts.hpp) and their `errors`, the mean rate over the interval that ends at each
+/// frame (`rate`, `rate_errors`), and `infinite_from` (the time from which they are infinite:
+/// a Zeno accumulation, null values there; null if never).
+inline constexpr const char* impacts = "impacts";
 inline constexpr const char* warnings = "warnings";                ///< The method's warnings.
 inline constexpr const char* output_warnings = "output_warnings";  ///< The outputs' warnings.
 /// Per observable (`observe`): its expectation per frame (`values`) and error (`errors`).

@@ -37,6 +37,7 @@
 #include "hybgen/rt/io/json_text.hpp"
 #include "hybgen/rt/io/run_outputs.hpp"
 #include "hybgen/rt/method_table.hpp"
+#include "hybgen/rt/methods/impacts.hpp"
 #include "hybgen/rt/methods/methods.hpp"
 #include "hybgen/rt/methods/preflight.hpp"
 #include "hybgen/rt/model.hpp"
@@ -363,6 +364,37 @@ void record_geometry(const RunPlan<state_dim_v<M>>& p, RunRecord& rec) {
   }
 }
 
+/// summary.json's `impacts` (methods/impacts.hpp, summary_key::impacts): per guard its impacts
+/// and their errors by each frame, the mean rates between frames, and where they become
+/// infinite; null when the method counted none. Values that are infinite or undefined are null.
+template <HybridModel M>
+nlohmann::json impacts_summary(const std::vector<double>& times, const MassBudget& mb) {
+  if (mb.impacts.empty()) return nullptr;
+  const auto series = [](const std::vector<double>& v, std::size_t until) {
+    nlohmann::json a = nlohmann::json::array();
+    for (std::size_t k = 0; k < v.size(); ++k)
+      a.push_back(k < until && std::isfinite(v[k]) ? nlohmann::json(v[k]) : nlohmann::json());
+    return a;
+  };
+  nlohmann::json s = nlohmann::json::object();
+  for (std::size_t g = 0; g < mb.impacts.size(); ++g) {
+    const std::vector<double>& n = mb.impacts[g];
+    if (n.size() != times.size()) continue;
+    const std::vector<double> none;
+    const std::vector<double>& e = g < mb.impacts_error.size() ? mb.impacts_error[g] : none;
+    const std::size_t until =
+        g < mb.impacts_infinite_from.size() ? mb.impacts_infinite_from[g] : times.size();
+    const ImpactRates r = impact_rates(times, n, e, until);
+    s[M::guard_names[g]] = {
+        {"values", series(n, until)},
+        {"errors", e.size() == n.size() ? series(e, until) : nlohmann::json()},
+        {"rate", series(r.rate, until)},
+        {"rate_errors", e.size() == n.size() ? series(r.error, until) : nlohmann::json()},
+        {"infinite_from", until < times.size() ? nlohmann::json(times[until]) : nlohmann::json()}};
+  }
+  return s;
+}
+
 /// summary.json's `observables` (methods/observables.hpp): per observable its expectation and
 /// error per frame, and how the error was estimated; null when the model observes nothing.
 /// Collective (a distributed solution's sums).
@@ -460,6 +492,8 @@ nlohmann::json run_summary(const RunPlan<state_dim_v<M>>& p,
         {"values", mb.absorbed[g]},
         {"errors", has_error ? nlohmann::json(mb.absorbed_error[g]) : nlohmann::json(nullptr)}};
   }
+  if (nlohmann::json imp = impacts_summary<M>(res.frame_times, mb); !imp.is_null())
+    s[k::impacts] = std::move(imp);
   for (const auto& [key, value] : res.summary.items()) s[key] = value;
   if (nlohmann::json obs = observables_summary<M>(p, res); !obs.is_null())
     s[k::observables] = std::move(obs);

@@ -187,6 +187,16 @@ struct MassBudget {
   std::vector<std::vector<double>> absorbed;
   /// Estimated |error| of absorbed[g][k] (as `absorbed`; empty without an estimate).
   std::vector<std::vector<double>> absorbed_error;
+  /// Per guard g: the impacts on g in (0, t_k], Σ_m ∫ u0·(number of times g fires on the flow
+  /// from (m, x) by t_k) — each firing weighted by the mass it carries, so impacts[g][k] −
+  /// impacts[g][k − 1] over t_k − t_{k−1} is the mean rate at which mass crosses g
+  /// (methods/impacts.hpp); empty where the method does not count impacts.
+  std::vector<std::vector<double>> impacts;
+  /// Estimated |error| of impacts[g][k] (empty without an estimate).
+  std::vector<std::vector<double>> impacts_error;
+  /// Per guard g: the first frame from which impacts[g] is infinite — mass has come to rest at
+  /// a Zeno point whose impacts accumulate on g — or the number of frames (as `impacts`).
+  std::vector<std::size_t> impacts_infinite_from;
 };
 
 /// mass0 − mass[k] − outflow[k] − atom[k]: what no term of the budget accounts for.

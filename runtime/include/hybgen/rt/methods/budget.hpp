@@ -28,6 +28,7 @@
 /// bound on work (budget/cubature.hpp).
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstddef>
 #include <span>
@@ -51,10 +52,12 @@ namespace hybgen::rt {
 
 /// Diagnostics of `adaptive_mass_budget`.
 struct AdaptiveBudgetInfo {
-  AdaptiveMass volume;      ///< The volume integral (masses).
-  AdaptiveOutflow surface;  ///< The face integral (outflow).
-  AdaptiveOutflow atom;     ///< The atom's integral (`outflow` holds the atom).
-  AdaptiveOutflow reset;    ///< The reset outflow's integral (part of the budget's outflow).
+  AdaptiveMass volume;            ///< The volume integral (masses).
+  AdaptiveOutflow surface;        ///< The face integral (outflow).
+  AdaptiveOutflow atom;           ///< The atom's integral (`outflow` holds the atom).
+  AdaptiveOutflow reset;          ///< The reset outflow's integral (part of the budget's outflow).
+  std::size_t impact_points = 0;  ///< Points of the impacts' cubature (`adaptive_impacts`).
+  double impact_seconds = 0.0;    ///< Its wall time.
 };
 
 /// The mass budget by adaptive cubature, every term measured on its own:
@@ -63,7 +66,9 @@ struct AdaptiveBudgetInfo {
 ///    along each to rel_tol/10), target rel_tol·max(mass0, max_k mass_k), plus the net mass
 ///    that resets carry out of the box (forward flows from the box, `adaptive_atom`);
 ///  * atom: `adaptive_atom` (forward flows from the box to their Zeno points), same target;
-///  * absorbed: the same flows, the mass each absorbing guard took (part of the outflow).
+///  * absorbed: the same flows, the mass each absorbing guard took (part of the outflow);
+///  * impacts: forward flows too, the firings of every guard (`adaptive_impacts`; not a term
+///    of the budget, methods/impacts.hpp).
 /// Each has its estimated error (mass_error, outflow_error, atom_error); the DEFECT
 /// mass0 − mass − outflow − atom (`budget_defect`) checks them against each other: it is what
 /// no term accounts for (mass that started outside the box and is reset into it, or an error
@@ -92,8 +97,28 @@ BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M
   if (res.failure.ok()) res.failure = flux_failure;
   AdaptiveOutflow reset;
   std::vector<AdaptiveOutflow> absorbed;
-  AdaptiveOutflow az =
-      adaptive_atom<M>(grid, times, par, opt, aopt, scale, res.message, &reset, &absorbed);
+  std::vector<double> zeno_time;
+  AdaptiveOutflow az = adaptive_atom<M>(grid, times, par, opt, aopt, scale, res.message, &reset,
+                                        &absorbed, &zeno_time);
+  // The impacts on every guard, in their own cubature; infinite from the earliest Zeno time
+  // the atom's flows saw on each guard (methods/impacts.hpp).
+  mb.impacts_infinite_from = impacts_infinite_from(times, zeno_time);
+  std::vector<AdaptiveOutflow> impacts;
+  const auto t_impacts = std::chrono::steady_clock::now();
+  if (res.message.empty())
+    impacts = adaptive_impacts<M>(grid, times, par, opt, aopt, scale, mb.impacts_infinite_from,
+                                  res.message);
+  if (info != nullptr) {
+    info->impact_points = impacts.empty() ? 0 : impacts.front().points;
+    info->impact_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t_impacts).count();
+  }
+  mb.impacts.assign(impacts.size(), {});
+  mb.impacts_error.assign(impacts.size(), {});
+  for (std::size_t g = 0; g < impacts.size(); ++g) {
+    mb.impacts[g] = std::move(impacts[g].outflow);
+    mb.impacts_error[g] = std::move(impacts[g].error);
+  }
   mb.absorbed.assign(absorbed.size(), {});
   mb.absorbed_error.assign(absorbed.size(), {});
   for (std::size_t g = 0; g < absorbed.size(); ++g) {

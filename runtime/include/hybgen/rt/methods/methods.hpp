@@ -611,6 +611,8 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
                                     {"check_points", info.volume.check_points},
                                     {"face_points", info.surface.points},
                                     {"atom_points", info.atom.points},
+                                    {"impact_points", info.impact_points},
+                                    {"impact_seconds", info.impact_seconds},
                                     {"converged", converged},
                                     {"time_capped", info.surface.time_capped},
                                     {"defect", defect},

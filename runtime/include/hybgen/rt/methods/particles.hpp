@@ -92,6 +92,7 @@
 #include "hybgen/rt/core/solution.hpp"
 #include "hybgen/rt/io/progress.hpp"
 #include "hybgen/rt/methods/forward.hpp"
+#include "hybgen/rt/methods/impacts.hpp"
 #include "hybgen/rt/methods/observables.hpp"
 #include "hybgen/rt/model.hpp"
 
@@ -460,17 +461,20 @@ namespace detail {
 
 /// Push one particle through `times`: visit(k, ParticleFate, int mode, const State& x, int
 /// guard) for every k (in order) unless the trajectory fails; `guard` is the absorbing guard
-/// for ParticleFate::absorbed, else −1. Returns its result.
-template <HybridModel M, class Visit>
+/// for ParticleFate::absorbed, else −1; on_reset(double t, int g, const State& before, const
+/// State& after) at every reset (ForwardFlow::run). Returns its result.
+template <HybridModel M, class Visit, class OnReset>
 ForwardResult<state_dim_v<M>> push_one(ForwardFlow<M>& flow,
                                        const ParticleSample<state_dim_v<M>>& s,
-                                       std::span<const double> times, Visit& visit) {
+                                       std::span<const double> times, Visit& visit,
+                                       OnReset&& on_reset) {
   std::size_t delivered = 0;
   auto on_output = [&](std::size_t k, int mode, const std::array<double, state_dim_v<M>>& x) {
     delivered = k + 1;
     visit(k, ParticleFate::state, mode, x, -1);
   };
-  const ForwardResult<state_dim_v<M>> r = flow.run(s.mode, s.x, times, on_output);
+  const ForwardResult<state_dim_v<M>> r =
+      flow.run(s.mode, s.x, times, on_output, std::forward<OnReset>(on_reset));
   if (r.status == ForwardStatus::event_cap || r.status == ForwardStatus::failed) return r;
   const ParticleFate fate = r.status == ForwardStatus::zeno       ? ParticleFate::zeno
                             : r.status == ForwardStatus::absorbed ? ParticleFate::absorbed
@@ -480,6 +484,16 @@ ForwardResult<state_dim_v<M>> push_one(ForwardFlow<M>& flow,
   const int guard = fate == ParticleFate::absorbed ? r.guard : -1;
   for (std::size_t k = delivered; k < times.size(); ++k) visit(k, fate, r.mode, r.x, guard);
   return r;
+}
+
+/// As above, without a reset callback.
+template <HybridModel M, class Visit>
+ForwardResult<state_dim_v<M>> push_one(ForwardFlow<M>& flow,
+                                       const ParticleSample<state_dim_v<M>>& s,
+                                       std::span<const double> times, Visit& visit) {
+  return push_one<M>(flow, s, times, visit,
+                     [](double, int, const std::array<double, state_dim_v<M>>&,
+                        const std::array<double, state_dim_v<M>>&) {});
 }
 
 }  // namespace detail
@@ -641,7 +655,9 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   const bool private_acc = threads * acc.size() * sizeof(std::int64_t) <= opt.private_deposit_bytes;
   // Budget accumulators: [0] mass, [1] atom, [2] outflow, [3] the box's and [4] the atom's
   // collapsed-strata sum (below), then per guard g [5 + 2g] Σ W and [6 + 2g] the collapsed-
-  // strata sum of the particles it absorbed (absorbing guards).
+  // strata sum of the particles it absorbed (absorbing guards), then per guard g [5 + 2G + 2g]
+  // Σ W·(firings of g) and [6 + 2G + 2g] their collapsed-strata sum (the impacts,
+  // methods/impacts.hpp).
   //
   // Collapsed strata: particle i draws from its own slice of the proposal (stratified), so
   // the sum T = Σ zᵢ (zᵢ = wᵢ·[particle i counts]) has variance Σ σᵢ², which the i.i.d.
@@ -652,9 +668,17 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
   // of mean only (a chunk's last particle left alone adds z_a²). Each pair's square is added
   // in fixed point at scale2/4 (|z_a − z_b| ≤ 2 max|w|, n/2 pairs: the sum stays below 2⁶¹).
   const std::size_t G = static_cast<std::size_t>(M::n_guard);
-  const std::size_t z_stride = 2 + G;  // per frame: box, atom, each guard's absorbed
+  const std::size_t z_stride = 2 + 2 * G;  // per frame: box, atom, absorbed, impacts per guard
+  // A particle fires at most max_events times (beyond, its flow fails), so its impacts are
+  // summed at scale/C and their pairs' squares at scale2/(4C²), C = 2^⌈log₂(max_events + 1)⌉:
+  // the same bounds below 2⁶¹ hold for any count.
   const double pair_scale = 0.25 * scale2;
-  const std::size_t n_sums = (5 + 2 * G) * K;
+  const double impact_c =
+      std::ldexp(1.0, std::ilogb(static_cast<double>(std::max(opt.forward.max_events, 1))) + 1);
+  const double impact_scale = scale / impact_c;
+  const double impact_pair_scale = pair_scale / (impact_c * impact_c);
+  const std::size_t n_sums = (5 + 4 * G) * K;
+  std::vector<double> zeno_time(G, HUGE_VAL);  // per guard, the earliest Zeno time seen
   std::vector<std::int64_t> sums(n_sums, 0);
   std::int64_t mass0 = 0, sampled = 0;
   std::atomic<long long> first_fail{n};
@@ -717,6 +741,11 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
             for (std::size_t q = 0; q < z_stride; ++q) {
               const double d = a[k * z_stride + q] - (b ? b[k * z_stride + q] : 0.0);
               if (d == 0.0) continue;
+              if (q >= 2 + G) {  // impacts: a count, at a smaller scale (above)
+                const std::size_t at = (6 + 2 * G + 2 * (q - 2 - G)) * K + k;
+                local[at] += std::llround(d * d * impact_pair_scale);
+                continue;
+              }
               const std::size_t at = (q < 2 ? 3 + q : 6 + 2 * (q - 2)) * K + k;
               local[at] += std::llround(d * d * pair_scale);
             }
@@ -745,6 +774,7 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
             continue;
           }
           const std::int64_t W = std::llround(s.weight * scale);
+          const std::int64_t W_imp = std::llround(s.weight * impact_scale);
           const bool b0 = in_box(s.x);
           local_sampled += W;
           if (b0) local_mass0 += W;
@@ -756,6 +786,8 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
               const auto g = static_cast<std::size_t>(guard);
               L[(5 + 2 * g) * K + k] += W;
               zk[2 + g] = s.weight;
+              L[(5 + 2 * G + 2 * g) * K + k] += W_imp;  // and its last impact
+              zk[2 + G + g] += s.weight;
             }
             if (fate == ParticleFate::zeno && inside) {
               L[K + k] += W;
@@ -830,7 +862,22 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
               add(off + node, part);
             }
           };
-          const ForwardResult<N> r = detail::push_one<M>(flow, s, times, visit);
+          // Every firing counts from the first frame at or after it (right-continuous).
+          auto on_reset = [&](double t, int g, const State&, const State&) {
+            const auto gu = static_cast<std::size_t>(g);
+            for (std::size_t k = K; k-- > 0 && times[k] >= t;) {
+              local[(5 + 2 * G + 2 * gu) * K + k] += W_imp;
+              z[k * z_stride + 2 + G + gu] += s.weight;
+            }
+          };
+          const ForwardResult<N> r = detail::push_one<M>(flow, s, times, visit, on_reset);
+          if (r.status == ForwardStatus::zeno && r.guard >= 0 && r.t_stop > 0.0) {
+#pragma omp critical(hybgen_rt_particles_zeno)
+            {
+              double& zt = zeno_time[static_cast<std::size_t>(r.guard)];
+              zt = std::min(zt, r.t_stop);
+            }
+          }
           if (r.status == ForwardStatus::event_cap || r.status == ForwardStatus::failed) {
 #pragma omp critical(hybgen_rt_particles_failure)
             {
@@ -993,6 +1040,21 @@ ParticleRun<state_dim_v<M>> solve_particles(const TensorGrid<state_dim_v<M>>& gr
       mb.absorbed_error[g].push_back(std::max(2.0 * std::sqrt(var), one_in_n));
     }
   }
+  // The impacts on every guard (methods/impacts.hpp), with 2σ̂ as for the absorbed mass;
+  // infinite from the earliest Zeno time (t_Z > 0) any rank saw on the guard.
+  for (double& zt : zeno_time) zt = -zt;
+  backend.max(std::span<double>(zeno_time));
+  for (double& zt : zeno_time) zt = -zt;
+  mb.impacts_infinite_from = impacts_infinite_from(times, zeno_time);
+  mb.impacts.assign(G, {});
+  mb.impacts_error.assign(G, {});
+  for (std::size_t g = 0; g < G; ++g)
+    for (std::size_t k = 0; k < K; ++k) {
+      const std::size_t at = (5 + 2 * G + 2 * g) * K + k;
+      const double var = static_cast<double>(sums[at + K]) / impact_pair_scale;
+      mb.impacts[g].push_back(static_cast<double>(sums[at]) / impact_scale);
+      mb.impacts_error[g].push_back(std::max(2.0 * std::sqrt(var), one_in_n));
+    }
   return run;
 }
 

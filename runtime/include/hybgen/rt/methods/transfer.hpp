@@ -193,6 +193,13 @@ struct TransferOperator {
   /// absorbed[r·n_guard + g]: the fraction of cell r that guard g absorbs within h (a part of
   /// outflow_r); valid where outflow is. Empty without absorbing guards.
   std::vector<double> absorbed;
+  /// impacts[r·n_guard + g]: the firings of guard g within h per unit mass of cell r (its
+  /// samples' mean count, an absorption included; methods/impacts.hpp); valid where outflow
+  /// is. Empty without guards.
+  std::vector<double> impacts;
+  /// Per guard g, whether a sample came to rest at a Zeno point on g within h (its impacts
+  /// are then infinite once mass reaches the atom); all ranks agree.
+  std::vector<char> zeno_guard;
   /// max_r |Σ_j P_jr + outflow_r + atom_r − 1| (≤ kColumnTol, or the assembly failed).
   double column_defect = 0.0;
   /// First failure (smallest index r), if any; status.tau is the FORWARD time of the failure.
@@ -504,6 +511,9 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   const bool any_absorbing =
       std::any_of(op.absorbing.begin(), op.absorbing.end(), [](char c) { return c != 0; });
   if (any_absorbing) op.absorbed.assign(static_cast<std::size_t>(R) * G, 0.0);
+  op.impacts.assign(static_cast<std::size_t>(R) * G, 0.0);
+  op.zeno_guard.assign(G, 0);
+  const std::array<double, 1> step_time{opt.step};
   const int Ka = opt.samples_per_axis > 0 ? opt.samples_per_axis : default_samples_per_axis(N);
   op.samples_per_axis = Ka;
   std::size_t K = 1;
@@ -550,6 +560,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
     std::vector<char> valid(K);            // … in the support, status ok
     std::vector<char> flowed(K);           // whether the sample was in the support
     std::vector<std::size_t> n_absorbed(any_absorbing ? G : 0);  // per guard, in one cell
+    std::vector<std::size_t> n_fired(G);                         // per guard, in one cell
+    std::vector<char> zeno_guard(G, 0);                          // this thread's
 #pragma omp for schedule(dynamic, 64)
     for (auto r = static_cast<std::int64_t>(op.owned.begin);
          r < static_cast<std::int64_t>(op.owned.end); ++r) {
@@ -567,6 +579,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       }
       dest.clear();
       std::fill(n_absorbed.begin(), n_absorbed.end(), 0);
+      std::fill(n_fired.begin(), n_fired.end(), 0);
       std::size_t n_out = 0, n_atom = 0, n_void = 0;
       bool failed = false;
       auto sample = [&](std::size_t q) {
@@ -597,9 +610,16 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
           ++n_void;  // no state there
           continue;
         }
-        end[q] = flow.run(m, x0, opt.step);
+        end[q] = flow.run(
+            m, x0, std::span<const double>(step_time), [](std::size_t, int, const State&) {},
+            [&](double, int g, const State&, const State&) {
+              ++n_fired[static_cast<std::size_t>(g)];
+            });
         flowed[q] = 1;
         const ForwardResult<N>& res = end[q];
+        if (res.status == ForwardStatus::absorbed) ++n_fired[static_cast<std::size_t>(res.guard)];
+        if (res.status == ForwardStatus::zeno && res.guard >= 0 && res.t_stop > 0.0)
+          zeno_guard[static_cast<std::size_t>(res.guard)] = 1;
         valid[q] = res.status == ForwardStatus::ok && M::in_support(res.x.data(), par) ? 1 : 0;
         if (res.status == ForwardStatus::event_cap || res.status == ForwardStatus::failed) {
           failed = true;
@@ -693,6 +713,8 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       op.atom[static_cast<std::size_t>(r)] = static_cast<double>(n_atom) * inv;
       for (std::size_t g = 0; g < n_absorbed.size(); ++g)
         op.absorbed[static_cast<std::size_t>(r) * G + g] = static_cast<double>(n_absorbed[g]) * inv;
+      for (std::size_t g = 0; g < G; ++g)
+        op.impacts[static_cast<std::size_t>(r) * G + g] = static_cast<double>(n_fired[g]) * inv;
       std::sort(dest.begin(), dest.end());
       for (std::size_t k = 0; k < dest.size();) {
         double w = 0.0;
@@ -703,6 +725,14 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         k = e;
       }
     }
+#pragma omp critical(hybgen_rt_transfer_zeno)
+    for (std::size_t g = 0; g < G; ++g)
+      op.zeno_guard[g] = static_cast<char>(op.zeno_guard[g] | zeno_guard[g]);
+  }
+  if (backend.ranks() > 1 && G > 0) {
+    std::vector<double> z(op.zeno_guard.begin(), op.zeno_guard.end());
+    backend.max(std::span<double>(z));
+    for (std::size_t g = 0; g < G; ++g) op.zeno_guard[g] = z[g] > 0.0 ? 1 : 0;
   }
   // The failure of the smallest state index over all ranks, then the columns' mass check.
   agree_first_failure(backend, first_fail.load(), op.failure, R, &op.failure_message);
@@ -913,6 +943,15 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   const std::size_t G = op.absorbed.empty() ? 0 : op.absorbing.size();
   std::vector<double> absorbed_cum(G, 0.0), absorbed_step(G, 0.0);
   if (G > 0) mb.absorbed.assign(G, {});
+  // The impacts per guard, Σ_r impacts_rg x_r per step, cumulated (methods/impacts.hpp);
+  // infinite, on a guard with Zeno samples, from the first frame whose atom exceeds the
+  // budget's rounding tolerance (`tol`: a node at rest carries no measurable mass).
+  const std::size_t GI = op.impacts.empty() ? 0 : op.zeno_guard.size();
+  std::vector<double> impacts_cum(GI, 0.0), impacts_step(GI, 0.0);
+  mb.impacts.assign(GI, {});
+  mb.impacts_infinite_from.assign(GI, times.size());
+  const double scale = std::max(std::fabs(mass0), std::numeric_limits<double>::min());
+  const double tol = kStepBudgetTol * std::max(1.0, static_cast<double>(R) / 1e6);
   auto emit = [&](long n) {
     for (; k < times.size() && at[k] == n; ++k) {
       double* dst = sol.u.data() + k * L;
@@ -926,11 +965,14 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
       mb.atom.push_back(atom_cum);
       for (std::size_t g = 0; g < G; ++g)
         if (op.absorbing[g]) mb.absorbed[g].push_back(absorbed_cum[g]);
+      for (std::size_t g = 0; g < GI; ++g) {
+        mb.impacts[g].push_back(impacts_cum[g]);
+        if (op.zeno_guard[g] && atom_cum > tol * scale)
+          mb.impacts_infinite_from[g] = std::min(mb.impacts_infinite_from[g], k);
+      }
     }
   };
   emit(0);
-  const double scale = std::max(std::fabs(mass0), std::numeric_limits<double>::min());
-  const double tol = kStepBudgetTol * std::max(1.0, static_cast<double>(R) / 1e6);
   for (long n = 0; n < run.n_steps; ++n) {
     detail::StepSums s;
     if (op.distributed) {
@@ -978,6 +1020,14 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
         for (std::size_t g = 0; g < G; ++g) absorbed_step[g] += ab[r * G + g] * x[r];
       if (op.distributed) b.sum(std::span<double>(absorbed_step));
       for (std::size_t g = 0; g < G; ++g) absorbed_cum[g] += absorbed_step[g];
+    }
+    if (GI > 0) {
+      std::fill(impacts_step.begin(), impacts_step.end(), 0.0);
+      const double* im = op.impacts.data() + own.begin * GI;
+      for (std::size_t r = 0; r < L; ++r)
+        for (std::size_t g = 0; g < GI; ++g) impacts_step[g] += im[r * GI + g] * x[r];
+      if (op.distributed) b.sum(std::span<double>(impacts_step));
+      for (std::size_t g = 0; g < GI; ++g) impacts_cum[g] += impacts_step[g];
     }
     std::swap(x, y);
     out_cum += s.outflow;
