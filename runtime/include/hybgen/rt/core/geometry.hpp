@@ -200,6 +200,23 @@ inline double graze_delta(double horizon) {
   return 1e-3 * std::fabs(horizon);
 }
 
+/// Whether z + side·δ·X_m(z) lies in `M::in_support`, δ|X| = 1e-7·(1 + ‖z‖∞): just after z
+/// along the flow of mode m (side = 1) or just before it (side = −1); z itself where X_m(z) is
+/// 0 or not finite.
+template <HybridModel M>
+bool in_support_along(int m, const std::array<double, state_dim_v<M>>& z, const double* par,
+                      double side) {
+  constexpr std::size_t N = state_dim_v<M>;
+  std::array<double, N> X{}, zb{};
+  M::flow(m, z.data(), par, X.data());
+  const double speed = std::sqrt(dot<N>(X.data(), X.data()));
+  double zn = 0.0;
+  for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
+  const double delta = speed > 0.0 && std::isfinite(speed) ? 1e-7 * (1.0 + zn) / speed : 0.0;
+  for (std::size_t i = 0; i < N; ++i) zb[i] = z[i] + side * delta * X[i];
+  return M::in_support(zb.data(), par);
+}
+
 /// Whether the flow of mode m reaches the point z of a guard's surface from inside
 /// `M::in_support`: tested just BEFORE z, at z − δ·X_m(z) with δ|X| = 1e-7·(1 + ‖z‖∞) (z is on
 /// the surface only to rounding, and a support that is open at the surface, x > 0 for the
@@ -208,15 +225,16 @@ inline double graze_delta(double horizon) {
 /// surface instead (`crossing_in_support`, below).
 template <HybridModel M>
 bool reaches_from_support(int m, const std::array<double, state_dim_v<M>>& z, const double* par) {
-  constexpr std::size_t N = state_dim_v<M>;
-  std::array<double, N> X{}, zb{};
-  M::flow(m, z.data(), par, X.data());
-  const double speed = std::sqrt(dot<N>(X.data(), X.data()));
-  double zn = 0.0;
-  for (std::size_t i = 0; i < N; ++i) zn = std::max(zn, std::fabs(z[i]));
-  const double delta = speed > 0.0 && std::isfinite(speed) ? 1e-7 * (1.0 + zn) / speed : 0.0;
-  for (std::size_t i = 0; i < N; ++i) zb[i] = z[i] - delta * X[i];
-  return M::in_support(zb.data(), par);
+  return in_support_along<M>(m, z, par, -1.0);
+}
+
+/// Whether the flow of mode m leaves the point z into `M::in_support`: tested just AFTER z, at
+/// z + δ·X_m(z) (δ as in `reaches_from_support`). The backward tracer spawns no pre-image
+/// through a reset whose image point z fails it: its path left the state space before it met
+/// the image (characteristics.hpp, try_spawn).
+template <HybridModel M>
+bool leaves_into_support(int m, const std::array<double, state_dim_v<M>>& z, const double* par) {
+  return in_support_along<M>(m, z, par, 1.0);
 }
 
 /// Whether guard g's crossing at z (on S_g) by the flow of mode m lies in `M::in_support`:

@@ -286,8 +286,6 @@ class Tracer {
     return v;
   }
 
-  /// Try the reversed reset through guard g at (τ, x) found by event e; `dir` is the sign
-  /// b_g takes after the crossing (0 for a root at the branch start).
   /// The seed points of guard g for enumerating its pre-images (N doubles each), or none.
   std::span<const double> seeds(int g) const {
     if (opt_.preimage_seeds == nullptr ||
@@ -301,9 +299,21 @@ class Tracer {
   /// from z = x and from every seed; converged roots on S_g (after projection) closer than
   /// 1e-8·(1 + ‖z‖∞) are one. (A multi-start: the pre-flight checks at sampled image points
   /// that its seeds find as many pre-images as starts from every crossing point it met.)
+  /// `dir` is the sign b_g takes after the crossing (0 for a root at the branch start).
   void try_spawn(int e, double tau, const Vec& x, const FaceContext<N>* face, bool at_start,
                  int dir) {
     const int g = guard_[static_cast<std::size_t>(e)];
+    // The path meets the reset's image at x. Where x lies outside the state space just after
+    // the reset (forward in time: the side the path comes from), the path left the support
+    // before this crossing, between the step ends where the support is tested: nothing was
+    // reset there, and no pre-image has mass to give. (The differential campaign's random
+    // model 3733: a backward path left its support at τ = 0.42996 and met the image at
+    // 0.43173, just outside; it took the pre-image's density, 2.7e-5 for 0.)
+    {
+      State y;
+      for (std::size_t i = 0; i < N; ++i) y[i] = x[i];
+      if (!leaves_into_support<M>(mode_, y, par_)) return;
+    }
     const std::span<const double> sd = seeds(g);
     if (sd.empty()) {
       State z;
