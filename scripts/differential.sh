@@ -27,6 +27,6 @@ fi
 # gtest's own lines are left out; the verdict is the test's exit status.
 set +e
 HYBGEN_DIFFERENTIAL_MODELS="$1" HYBGEN_DIFFERENTIAL_SEED="$first" "$exe" \
-  --gtest_filter='Differential.*' --gtest_brief=1 | grep --line-buffered -v '^\(Running main\|\[\)'
+  --gtest_filter='Differential.RandomModelsAgreeWithAnIndependentTracer' --gtest_brief=1 | grep --line-buffered -v '^\(Running main\|\[\)'
 status=${PIPESTATUS[0]}
 exit "$status"
