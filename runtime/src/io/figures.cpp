@@ -292,6 +292,20 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
   }
 }
 
+/// A summary.json series of K frames into `curve`: `values` (NaN where not a number: a gap) and
+/// `errors` as its band (0 where not a number; no band unless K of them). False when `values`
+/// does not hold K frames (the curve is not drawn).
+bool fill_series(Curve& curve, const nlohmann::json& values, const nlohmann::json& errors,
+                 std::size_t K) {
+  if (values.is_array())
+    for (const auto& v : values) curve.y.push_back(v.is_number() ? v.get<double>() : std::nan(""));
+  if (errors.is_array())
+    for (const auto& e : errors) curve.band.push_back(e.is_number() ? e.get<double>() : 0.0);
+  if (curve.y.size() != K) return false;
+  if (curve.band.size() != K) curve.band.clear();
+  return true;
+}
+
 /// The mass budget over time.
 void draw_budget(cairo_t* cr, const RunRecord& run, double width, double height) {
   cairo_set_source_rgb(cr, 1, 1, 1);
@@ -314,14 +328,7 @@ void draw_budget(cairo_t* cr, const RunRecord& run, double width, double height)
     std::size_t c = 5;
     for (const auto& [guard, a] : run.summary[summary_key::absorbed].items()) {
       Curve curve{"absorbed by " + guard, {}, kCurve[c++ % std::size(kCurve)], 1.6, {}, true};
-      for (const auto& v : a["values"])
-        curve.y.push_back(v.is_number() ? v.get<double>() : std::nan(""));
-      if (a["errors"].is_array())
-        for (const auto& e : a["errors"])
-          curve.band.push_back(e.is_number() ? e.get<double>() : 0.0);
-      if (curve.y.size() != K) continue;
-      if (curve.band.size() != K) curve.band.clear();
-      curves.push_back(std::move(curve));
+      if (fill_series(curve, a["values"], a["errors"], K)) curves.push_back(std::move(curve));
     }
   }
   draw_curves(cr, {kLeft + 10, kTop, width - kLeft - 30 - kLegend, height - kTop - kBottom - 10},
@@ -338,12 +345,8 @@ void draw_observables(cairo_t* cr, const RunRecord& run, double width, double he
   std::size_t c = 0;
   for (const auto& [name, o] : run.summary[summary_key::observables].items()) {
     Curve curve{"E[" + name + "]", {}, kCurve[c++ % std::size(kCurve)], 2.0, {}};
-    for (const auto& v : o["values"])
-      curve.y.push_back(v.is_number() ? v.get<double>() : std::nan(""));
-    for (const auto& e : o["errors"]) curve.band.push_back(e.is_number() ? e.get<double>() : 0.0);
-    if (curve.y.size() != run.times.size()) continue;
-    if (curve.band.size() != curve.y.size()) curve.band.clear();
-    curves.push_back(std::move(curve));
+    if (fill_series(curve, o["values"], o["errors"], run.times.size()))
+      curves.push_back(std::move(curve));
   }
   draw_curves(cr, {kLeft + 10, kTop, width - kLeft - 30 - kLegend, height - kTop - kBottom - 10},
               run.times, curves, "t", curves.size() == 1 ? curves.front().label : "mean");
@@ -360,14 +363,8 @@ void draw_impacts(cairo_t* cr, const RunRecord& run, double width, double height
   std::size_t c = 0;
   for (const auto& [guard, a] : run.summary[summary_key::impacts].items()) {
     Curve curve{"rate on " + guard, {}, kCurve[c++ % std::size(kCurve)], 2.0, {}};
-    for (const auto& v : a["rate"])
-      curve.y.push_back(v.is_number() ? v.get<double>() : std::nan(""));
-    if (a["rate_errors"].is_array())
-      for (const auto& e : a["rate_errors"])
-        curve.band.push_back(e.is_number() ? e.get<double>() : 0.0);
-    if (curve.y.size() != run.times.size()) continue;
-    if (curve.band.size() != curve.y.size()) curve.band.clear();
-    curves.push_back(std::move(curve));
+    if (fill_series(curve, a["rate"], a["rate_errors"], run.times.size()))
+      curves.push_back(std::move(curve));
   }
   const Rect plot{kLeft + 10, kTop, width - kLeft - 30 - kLegend, height - kTop - kBottom - 10};
   draw_curves(
