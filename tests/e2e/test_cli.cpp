@@ -185,7 +185,7 @@ TEST(Cli, BadCommandLinesExitTwo) {
 }
 
 fs::path run_dir(const std::string& name) {
-  return kWork / "runs" / name;
+  return hybgen::testing::own_dir(kWork) / "runs" / name;
 }
 
 /// The runs these tests read arrays of: run.nc and pictures (the default) and the .npy

@@ -71,7 +71,7 @@ void expect_previous_outputs_kept(const Result& r, const fs::path& out,
 /// A fresh output directory for test `name`: removed, with the leftovers of earlier runs
 /// of the test beside it (a stale `.partial-<pid>` would name another process).
 fs::path fresh_out(const std::string& name) {
-  const fs::path out = kWork / "runs" / name;
+  const fs::path out = hybgen::testing::own_dir(kWork) / "runs" / name;
   fs::create_directories(out.parent_path());
   fs::remove_all(out);
   for (const auto& n : leftovers(out)) fs::remove_all(out.parent_path() / n);

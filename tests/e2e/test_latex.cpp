@@ -91,7 +91,7 @@ TEST(Latex, NamesWithSubscriptsAndUnderscoresCompile) {
                      "\\mathrm{heat\\_off})"),
             std::string::npos)
       << tex;
-  EXPECT_EQ(pdflatex(kWork / "room_heater", tex), "");
+  EXPECT_EQ(pdflatex(hybgen::testing::own_dir(kWork) / "room_heater", tex), "");
 }
 
 /// The lines of pdflatex's log in `dir` that report a line wider than the page.
@@ -121,8 +121,8 @@ TEST(Latex, EveryShippedAndValidationModelCompilesWithinThePage) {
       ++compiled;
       // stderr (warnings) is part of r.out: keep the document only.
       const std::string tex = r.out.substr(r.out.find("% hybgen"));
-      EXPECT_EQ(pdflatex(kWork / name, tex), "") << name;
-      EXPECT_EQ(overfull_lines(kWork / name), "") << name;
+      EXPECT_EQ(pdflatex(hybgen::testing::own_dir(kWork) / name, tex), "") << name;
+      EXPECT_EQ(overfull_lines(hybgen::testing::own_dir(kWork) / name), "") << name;
     }
   }
   EXPECT_GE(compiled, 15u + 30u);

@@ -159,7 +159,7 @@ TEST(LieCli, UnreducedTwin) {
 
 /// Run a shipped model into a fresh directory; return its summary.
 json run(const std::string& model, const std::string& tag, const std::string& sets) {
-  const fs::path out = kWork / "runs" / tag;
+  const fs::path out = hybgen::testing::own_dir(kWork) / "runs" / tag;
   fs::remove_all(out);
   const Result r =
       hybgen("run models/" + model + ".model --quiet --out '" + out.string() + "' " + sets +
@@ -173,8 +173,9 @@ TEST(LieCli, RunGl2OnATinyGrid) {
   ASSERT_EQ(s["grid"]["axes"].size(), 5u);
   EXPECT_EQ(s["grid"]["axes"][4]["name"], "q");
   ASSERT_EQ(s["times"].size(), 2u);
-  const auto arr =
-      hybgen::rt::read_npy((kWork / "runs" / "gl2" / s["files"][1].get<std::string>()).string());
+  const auto arr = hybgen::rt::read_npy(
+      (hybgen::testing::own_dir(kWork) / "runs" / "gl2" / s["files"][1].get<std::string>())
+          .string());
   EXPECT_EQ(arr.shape, (std::vector<std::size_t>{5, 5, 5, 5, 5}));
   for (double v : arr.data) EXPECT_TRUE(std::isfinite(v) && v >= 0);
 }
@@ -185,15 +186,16 @@ TEST(LieCli, RunHeisenbergOnATinyGrid) {
   ASSERT_EQ(s["grid"]["axes"].size(), 4u);
   ASSERT_EQ(s["times"].size(), 3u);
   for (const auto& f : s["files"]) {
-    const auto arr =
-        hybgen::rt::read_npy((kWork / "runs" / "heisenberg" / f.get<std::string>()).string());
+    const auto arr = hybgen::rt::read_npy(
+        (hybgen::testing::own_dir(kWork) / "runs" / "heisenberg" / f.get<std::string>()).string());
     EXPECT_EQ(arr.shape, (std::vector<std::size_t>{7, 7, 7, 7}));
     for (double v : arr.data) EXPECT_TRUE(std::isfinite(v) && v >= 0);
   }
   // div X = 0 and J = 1 (e = 1): the density is transported, so its maximum
   // over the grid cannot exceed the initial maximum (1 at the grid's nodes).
   const auto last = hybgen::rt::read_npy(
-      (kWork / "runs" / "heisenberg" / s["files"][2].get<std::string>()).string());
+      (hybgen::testing::own_dir(kWork) / "runs" / "heisenberg" / s["files"][2].get<std::string>())
+          .string());
   for (double v : last.data) EXPECT_LE(v, 1.0 + 1e-9);
 }
 
@@ -207,9 +209,11 @@ TEST(LieCli, RunHeisenbergByStructureConstantsLikeTheParametrisedGroup) {
   ASSERT_EQ(a["files"], b["files"]);
   for (const auto& f : a["files"]) {
     const auto ua = hybgen::rt::read_npy(
-        (kWork / "runs" / "heisenberg_algebra" / f.get<std::string>()).string());
-    const auto ub =
-        hybgen::rt::read_npy((kWork / "runs" / "heisenberg_b" / f.get<std::string>()).string());
+        (hybgen::testing::own_dir(kWork) / "runs" / "heisenberg_algebra" / f.get<std::string>())
+            .string());
+    const auto ub = hybgen::rt::read_npy(
+        (hybgen::testing::own_dir(kWork) / "runs" / "heisenberg_b" / f.get<std::string>())
+            .string());
     ASSERT_EQ(ua.shape, ub.shape);
     ASSERT_EQ(ua.data.size(), ub.data.size());
     // The same flow, resets and J derived by two routes; the kernels may differ only in the
@@ -225,7 +229,8 @@ TEST(LieCli, RunChaplyginOnASmallGrid) {
   EXPECT_EQ(s["grid"]["axes"][2]["name"], "theta");
   ASSERT_EQ(s["times"].size(), 3u);
   const auto arr = hybgen::rt::read_npy(
-      (kWork / "runs" / "chaplygin" / s["files"][2].get<std::string>()).string());
+      (hybgen::testing::own_dir(kWork) / "runs" / "chaplygin" / s["files"][2].get<std::string>())
+          .string());
   EXPECT_EQ(arr.shape, (std::vector<std::size_t>{11, 11, 11}));
   for (double v : arr.data) EXPECT_TRUE(std::isfinite(v) && v >= 0);
 }
@@ -243,8 +248,9 @@ TEST(LieCli, MatrixGroupsImpactsMatchesClosedForm) {
   const json s =
       run("matrix_groups_impacts", "mgi", "--set grid=41x31 --set e=0.5 --set t_end=2 --set dt=1");
   ASSERT_EQ(s["times"].size(), 3u);
-  const auto arr =
-      hybgen::rt::read_npy((kWork / "runs" / "mgi" / s["files"][2].get<std::string>()).string());
+  const auto arr = hybgen::rt::read_npy(
+      (hybgen::testing::own_dir(kWork) / "runs" / "mgi" / s["files"][2].get<std::string>())
+          .string());
   ASSERT_EQ(arr.shape, (std::vector<std::size_t>{41, 31}));
   auto u0 = [](double C, double q) {
     return q >= 0 ? std::exp(-2 * (C + 1) * (C + 1) - (q - 1.5) * (q - 1.5)) : 0.0;

@@ -38,7 +38,7 @@ std::string chromium() {
 /// Chromium headless as root in a sandbox-less container, with no network (the flags the
 /// machine's notes give), a fresh profile, and time for the page's script.
 std::string headless(const std::string& browser, const std::string& args) {
-  const fs::path profile = kWork / "profile";
+  const fs::path profile = hybgen::testing::own_dir(kWork) / "profile";
   fs::remove_all(profile);
   return "timeout 120 " + browser +
          " --headless --no-sandbox --disable-gpu --disable-quic --no-first-run "
@@ -51,7 +51,7 @@ const std::string kRun =
     "run models/bouncing_ball.model --set grid=31x31 --set t_end=2 --set dt=0.5 --quiet ";
 
 TEST(Report, RendersItsEquationsAndItsSliderMovesTheFrames) {
-  const fs::path out = kWork / "ball";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "ball";
   fs::remove_all(out);
   const auto r = run_hybgen(kRun + "--out '" + out.string() + "'", kWork / "cache");
   ASSERT_EQ(r.code, exit_status(ExitCode::Success)) << r.out;
@@ -87,7 +87,7 @@ TEST(Report, RendersItsEquationsAndItsSliderMovesTheFrames) {
       << dom.out.substr(0, 2000);
   EXPECT_NE(dom.out.find("class=\"katex-display\""), std::string::npos);
   // A screenshot of the page as a reader sees it.
-  const fs::path shot = kWork / "report.png";
+  const fs::path shot = hybgen::testing::own_dir(kWork) / "report.png";
   fs::remove(shot);
   (void)run_shell(headless(
       browser, "--window-size=1200,2000 --screenshot='" + shot.string() + "' '" + url + "'"));
@@ -96,7 +96,7 @@ TEST(Report, RendersItsEquationsAndItsSliderMovesTheFrames) {
 }
 
 TEST(Report, WithoutKatexTheEquationsAreSourceAndTheRunSaysWhy) {
-  const fs::path out = kWork / "no_katex";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "no_katex";
   fs::remove_all(out);
   // HYBGEN_KATEX_DIR points the runner at a directory without KaTeX.
   const auto r2 = run_hybgen(kRun + "--set outputs=png+html --out '" + out.string() + "'",
@@ -111,7 +111,7 @@ TEST(Report, WithoutKatexTheEquationsAreSourceAndTheRunSaysWhy) {
 }
 
 TEST(Report, TheNextRunReplacesTheReportButNotAUsersFile) {
-  const fs::path out = kWork / "replace";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "replace";
   fs::remove_all(out);
   ASSERT_EQ(run_hybgen(kRun + "--out '" + out.string() + "'", kWork / "cache").code,
             exit_status(ExitCode::Success));

@@ -39,7 +39,7 @@ std::string xarray_reads(const std::string& python, const fs::path& out, const s
 fs::path run_made_up(const std::string& name, const std::string& text, std::string& model,
                      const std::string& sets = "") {
   model = write_model_file(kWork, name + ".model", text);
-  const fs::path out = kWork / name;
+  const fs::path out = hybgen::testing::own_dir(kWork) / name;
   fs::remove_all(out);
   const auto r =
       run_hybgen("run '" + model + "' --out '" + out.string() + "' " + sets, kWork / "cache");
@@ -233,7 +233,7 @@ simulation {
 
 TEST(RunOutputs, AConcentratingFlowIsFlaggedAsUnderResolved) {
   const std::string model = write_model_file(kWork, "sink.model", kSink);
-  const fs::path out = kWork / "sink";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "sink";
   fs::remove_all(out);
   auto r = run_hybgen("run '" + model + "' --out '" + out.string() + "' --set outputs=npy",
                       kWork / "cache");

@@ -47,7 +47,7 @@ TEST(SettingEdges, EveryNumberAtTheEdgesOfItsRangeRunsOrIsRefusedCleanly) {
       char value[64];
       std::snprintf(value, sizeof value, "%.17g", c.value);
       const std::string method = reader(spec);
-      const fs::path out = kWork / "out";
+      const fs::path out = hybgen::testing::own_dir(kWork) / "out";
       fs::remove_all(out);
       const std::string args =
           "run models/sawtooth.model -q --out '" + out.string() +

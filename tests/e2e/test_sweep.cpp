@@ -53,7 +53,7 @@ TEST(Sweep, SixValuesOfEShareOneRunner) {
   // The issue's case: 6 values of e; the first point's build compiles (a private cache), no
   // other compile happens, and each row is what `hybgen run` gives for that value.
   const fs::path cache = kWork / "cache_six";
-  const fs::path out = kWork / "six";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "six";
   fs::remove_all(cache);
   fs::remove_all(out);
   const auto r = run_hybgen(
@@ -92,7 +92,7 @@ TEST(Sweep, SixValuesOfEShareOneRunner) {
   EXPECT_EQ(table["rows"][5]["atom"].get<double>(), 0.0);
 
   // A separate run of one value: the same runner (cached) and the same numbers.
-  const fs::path one = kWork / "six_one";
+  const fs::path one = hybgen::testing::own_dir(kWork) / "six_one";
   const auto single =
       run_ball("run", "--set e=0.7 --set grid=21x21 --set t_end=2 --set dt=0.5", one, cache);
   ASSERT_EQ(single.code, exit_status(ExitCode::Success)) << single.out;
@@ -119,7 +119,7 @@ TEST(Sweep, AWarningSaysWhichPointItIsAboutAndCountsInTheTable) {
   // The ball with e = 0.5 on a coarse grid by t = 6 concentrates below the grid's spacing (the
   // output stage warns); e = 1 does not. The warning names its point on stderr, the point's
   // progress line says it has one, and its row counts it.
-  const fs::path out = kWork / "warned";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "warned";
   const auto r =
       run_ball("sweep",
                "--set e=0.5,1 --set grid=21x21 --set t_end=6 --set dt=2 --set outputs=npy "
@@ -157,7 +157,7 @@ simulation {
   dt 0.5
 }
 )");
-  const fs::path out = kWork / "drift";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "drift";
   fs::remove_all(out);
   // 1 - kT = 0.5, 0.4, 0.3, 0.2, 0.1: none, a tail, half, nearly all and all of the bump out.
   const auto r =
@@ -206,7 +206,7 @@ simulation {
   dt 0.1
 }
 )");
-  const fs::path out = kWork / "failed";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "failed";
   fs::remove_all(out);
   const auto r = run_hybgen("sweep '" + model + "' --set k=1,0 --out '" + out.string() + "'",
                             kWork / "cache_failed");
@@ -223,7 +223,7 @@ simulation {
 }
 
 TEST(Sweep, AValueTheModelRefusesStopsItBeforeAnythingRuns) {
-  const fs::path out = kWork / "refused";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "refused";
   fs::remove_all(out);
   const auto r =
       run_hybgen("sweep models/bouncing_ball.model --set tol=1e-6,0.5 --out '" + out.string() + "'",
@@ -245,7 +245,7 @@ TEST(Sweep, AnInterruptedSweepLeavesTheEarlierOutputsAsTheyWere) {
   // hybgen stops them, removes its staging directory, leaves OUT as it was and ends by the
   // signal. (SIGTERM: a shell's background job ignores SIGINT.)
   const fs::path cache = kWork / "cache_interrupt";
-  const fs::path out = kWork / "interrupted";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "interrupted";
   fs::remove_all(out);
   const auto first = run_hybgen(
       "sweep models/bouncing_ball.model --set e=0.8,0.9 --set grid=11x11 "
@@ -256,7 +256,8 @@ TEST(Sweep, AnInterruptedSweepLeavesTheEarlierOutputsAsTheyWere) {
   const std::string before = hybgen::gen::read_file((out / "sweep.csv").string());
   // Stopped once its runners run (their configurations are in the staging directory), not
   // after a fixed delay: on a loaded machine the derivation and build can take seconds.
-  const std::string staging_glob = (kWork / "interrupted.partial-").string() + "*/*/config.json";
+  const std::string staging_glob =
+      (hybgen::testing::own_dir(kWork) / "interrupted.partial-").string() + "*/*/config.json";
   const std::string cmd =
       "cd '" + hybgen::testing::hybgen_source_dir() + "' && HYBGEN_CACHE='" + cache.string() +
       "' '" + hybgen::testing::hybgen_exe() +
@@ -284,7 +285,7 @@ TEST(Sweep, TheThreadCountDoesNotChangeTheDensities) {
   // The setting `threads` (settings.hpp), swept: the characteristics densities (one
   // characteristic per node) and the particles' histograms (counter-based streams, one per
   // particle) are bit-identical on 1 and 2 threads.
-  const fs::path out = kWork / "threads";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "threads";
   fs::remove_all(out);
   const auto r = run_hybgen(
       "sweep models/bouncing_ball.model --set method=characteristics,particles "

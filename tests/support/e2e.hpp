@@ -28,6 +28,20 @@ inline std::filesystem::path e2e_dir(const std::string& name) {
   return d;
 }
 
+/// `base`/SUITE.TEST for the running test (created; `base`/outside_tests outside one): where a
+/// test writes its runs. ctest runs each test in a process of its own, several at once, so two
+/// tests that run the same case (one model by two methods, say) must never share an output
+/// directory: hybgen refuses the second writer (the output lock) and a shared directory can
+/// hand one test the other's files.
+inline std::filesystem::path own_dir(const std::filesystem::path& base) {
+  const ::testing::TestInfo* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  const std::filesystem::path d =
+      base / (info == nullptr ? std::string("outside_tests")
+                              : std::string(info->test_suite_name()) + "." + info->name());
+  std::filesystem::create_directories(d);
+  return d;
+}
+
 /// Where run_hybgen sends hybgen's standard error.
 enum class Stderr {
   Merged,     ///< Into the captured output, after standard output.

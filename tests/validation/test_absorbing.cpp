@@ -47,7 +47,7 @@ const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
 /// `hybgen run MODEL --set method=METHOD SETS` into kWork/`dir`; its summary.json.
 json run(const std::string& dir, const std::string& model, const std::string& method,
          const std::string& sets = "") {
-  const fs::path out = kWork / dir;
+  const fs::path out = hybgen::testing::own_dir(kWork) / dir;
   fs::remove_all(out);
   const auto r =
       hybgen_cli("run tests/validation/models/" + model + ".model --quiet --out '" + out.string() +
@@ -115,7 +115,7 @@ TEST(Absorbing, TheShuttlesTrapInsideTheBoxByCharacteristics) {
       run("shuttle_characteristics", "shuttle_trap", "characteristics", "--set outputs=npy+netcdf");
   ASSERT_FALSE(s.empty());
   // run.nc holds the same series.
-  const fs::path nc = kWork / "shuttle_characteristics" / "run.nc";
+  const fs::path nc = hybgen::testing::own_dir(kWork) / "shuttle_characteristics" / "run.nc";
   EXPECT_EQ(nc_values(nc, "absorbed_trap"),
             s["absorbed"]["trap"]["values"].get<std::vector<double>>());
   EXPECT_EQ(nc_values(nc, "absorbed_trap_error"),
@@ -127,7 +127,8 @@ TEST(Absorbing, TheShuttlesTrapInsideTheBoxByCharacteristics) {
     for (const std::string mode : {"up", "down"}) {
       char name[64];
       std::snprintf(name, sizeof name, "u_%04zu_%s.npy", k, mode.c_str());
-      const auto u = hybgen::rt::read_npy((kWork / "shuttle_characteristics" / name).string());
+      const auto u = hybgen::rt::read_npy(
+          (hybgen::testing::own_dir(kWork) / "shuttle_characteristics" / name).string());
       const double e = hybgen::testing::relative_l1(
           u.data, axes,
           [&](const Point& p) {
@@ -236,7 +237,7 @@ TEST(Absorbing, DeriveJsonSaysWhichGuardIsATrap) {
 }
 
 TEST(Absorbing, RefusedWhereItHasNoMeaning) {
-  const fs::path dir = kWork / "refused";
+  const fs::path dir = hybgen::testing::own_dir(kWork) / "refused";
   fs::create_directories(dir);
   // A target mode for an absorbing guard: located, with the way out.
   const std::string with_to = hybgen::testing::write_model_file(

@@ -51,7 +51,7 @@ constexpr double kCoveredShare = 0.9;  ///< Of the errors within their (2σ) bar
 /// `hybgen run tests/validation/models/MODEL.model --set method=particles` with `seed` and
 /// 100000 particles into its own directory; its summary.json.
 json run_particles(const std::string& model, int seed) {
-  const fs::path out = kWork / (model + "_" + std::to_string(seed));
+  const fs::path out = hybgen::testing::own_dir(kWork) / (model + "_" + std::to_string(seed));
   fs::remove_all(out);
   const auto r = hybgen_cli(
       "run tests/validation/models/" + model + ".model --quiet --out '" + out.string() +
@@ -152,7 +152,7 @@ TEST(Calibration, TheBudgetsCubatureBarsOnALeapOutOfTheBox) {
   // docs/hardening.md ("Calibrated bars") aims at, with the reason there.
   constexpr double kBudgetZRmsLow = 0.12;
   for (const std::string budget : {"fast", "full"}) {
-    const fs::path out = kWork / ("leap_budget_" + budget);
+    const fs::path out = hybgen::testing::own_dir(kWork) / ("leap_budget_" + budget);
     fs::remove_all(out);
     const auto r =
         hybgen_cli("run tests/validation/models/leap_out.model --quiet --out '" + out.string() +

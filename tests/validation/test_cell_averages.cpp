@@ -56,7 +56,8 @@ constexpr double kPi = 3.14159265358979323846;
 /// `hybgen run MODEL --quiet EXTRA` with .npy frames into its own directory: summary.json
 /// (null when the run failed; the output is in the test's message).
 json run(const std::string& model, const std::string& tag, const std::string& extra) {
-  return hybgen::testing::run_summary(kModels + model + ".model", kWork / tag,
+  return hybgen::testing::run_summary(kModels + model + ".model",
+                                      hybgen::testing::own_dir(kWork) / tag,
                                       "--set outputs=npy " + extra, kCache);
 }
 
@@ -153,8 +154,10 @@ void check_clock(const Clock& c, const std::string& extra, double tol) {
   ASSERT_EQ(estimate.size(), times.size());
   double worst_node = 0.0;
   for (std::size_t k = 0; k < times.size(); ++k) {
-    const double err = relative_l1(c, kWork / (c.model + "_cells"), k, times[k]);
-    const double node_err = relative_l1(c, kWork / (c.model + "_nodes"), k, times[k]);
+    const double err =
+        relative_l1(c, hybgen::testing::own_dir(kWork) / (c.model + "_cells"), k, times[k]);
+    const double node_err =
+        relative_l1(c, hybgen::testing::own_dir(kWork) / (c.model + "_nodes"), k, times[k]);
     worst_node = std::max(worst_node, node_err);
     std::printf("[ cells ] %s t = %g: cell averages %.3e (estimate %.3e, %.1fx), nodes %.3e\n",
                 c.model.c_str(), times[k], err, estimate[k], estimate[k] / err, node_err);

@@ -111,7 +111,8 @@ std::vector<double> relative_l1(const fs::path& dir, std::size_t k, double t, Re
 }
 
 json run(const std::string& tag, const std::string& sets) {
-  return hybgen::testing::run_summary(kModel, kWork / tag, "--set outputs=npy " + sets, kCache);
+  return hybgen::testing::run_summary(kModel, hybgen::testing::own_dir(kWork) / tag,
+                                      "--set outputs=npy " + sets, kCache);
 }
 
 TEST(CrossingShear, CharacteristicsAreTheClosedFormOnBothSides) {
@@ -121,7 +122,7 @@ TEST(CrossingShear, CharacteristicsAreTheClosedFormOnBothSides) {
   ASSERT_EQ(times.size(), 4u);
   for (std::size_t k = 0; k < times.size(); ++k) {
     const double t = times[k];
-    const auto e = relative_l1(kWork / "characteristics", k, t,
+    const auto e = relative_l1(hybgen::testing::own_dir(kWork) / "characteristics", k, t,
                                [&](int m, int i, int j) { return exact(m, node(i), node(j), t); });
     std::printf("[ crossing shear ] characteristics t = %g: relative L1 A %.2e, B %.2e\n", t, e[0],
                 e[1]);
@@ -148,7 +149,7 @@ TEST(CrossingShear, TheTimeSteppedGeneratorIsCloseAndItsEstimatesCover) {
     const double t = times[k];
     // fv's node values are its reconstruction at the nodes (generator.hpp, fv_node_values):
     // point values, compared with the closed form's.
-    const auto e = relative_l1(kWork / "fv", k, t,
+    const auto e = relative_l1(hybgen::testing::own_dir(kWork) / "fv", k, t,
                                [&](int m, int i, int j) { return exact(m, node(i), node(j), t); });
     const double worst = std::max(e[0], e[1]);
     const double est = tr["errors"][k].get<double>();

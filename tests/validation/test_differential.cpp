@@ -271,7 +271,7 @@ Outcome check_model(std::uint64_t seed, const std::string& method) {
   const auto& m = r.model;
   const std::string name = "random_run_" + std::to_string(seed);
   const std::string path = hybgen::testing::write_model_file(kWork, name + ".model", m.text);
-  const fs::path out = kWork / "runs" / name;
+  const fs::path out = hybgen::testing::own_dir(kWork) / "runs" / name;
   fs::remove_all(out);
   // The node values are compared (values=nodes: not the cell averages that values=auto
   // gives where the nodes under-resolve the density).

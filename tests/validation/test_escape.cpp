@@ -47,7 +47,7 @@ std::string model(const std::string& name) {
 
 /// `hybgen run MODEL --set method=escape SETS` into kWork/`dir`.
 ShellResult run_escape(const std::string& dir, const std::string& file, const std::string& sets) {
-  const fs::path out = kWork / dir;
+  const fs::path out = hybgen::testing::own_dir(kWork) / dir;
   fs::remove_all(out);
   return run_hybgen("run '" + model(file) + "' --quiet --set method=escape " + sets + " --out '" +
                         out.string() + "'",
@@ -56,7 +56,7 @@ ShellResult run_escape(const std::string& dir, const std::string& file, const st
 
 /// The escape block of kWork/`dir`/summary.json.
 json escape_block(const std::string& dir) {
-  const json s = read_json_file(kWork / dir / "summary.json");
+  const json s = read_json_file(hybgen::testing::own_dir(kWork) / dir / "summary.json");
   EXPECT_EQ(s["method"], "escape");
   EXPECT_TRUE(s["times"].empty());  // one frame, no time series
   return s["escape"];
@@ -108,7 +108,8 @@ TEST(Escape, LinearLeakHasRateAAndAUniformDensity) {
     EXPECT_LE(err, 10.0 * truth + solver_floor * 1.0000001);
     EXPECT_EQ(e["closed"], false);
     EXPECT_EQ(e["file"], "escape.npy");
-    const auto u = hybgen::rt::read_npy((kWork / dir / "escape.npy").string());
+    const auto u =
+        hybgen::rt::read_npy((hybgen::testing::own_dir(kWork) / dir / "escape.npy").string());
     ASSERT_EQ(u.data.size(), 201u);
     const double l1 = rel_l1_1d(u.data, uniform, 0.0, 1.0);
     std::printf("escape_linear a = %g: density rel L1 from uniform %.3e\n", a, l1);
@@ -129,7 +130,8 @@ TEST(Escape, LogisticLeakCalibratesTheErrorEstimate) {
               err, truth, err / truth);
   EXPECT_LE(truth, err);
   EXPECT_LE(err, 10.0 * truth);
-  const auto u = hybgen::rt::read_npy((kWork / "logistic" / "escape.npy").string());
+  const auto u =
+      hybgen::rt::read_npy((hybgen::testing::own_dir(kWork) / "logistic" / "escape.npy").string());
   ASSERT_EQ(u.data.size(), 201u);
   const double l1 = rel_l1_1d(u.data, logistic_density, 0.0, 1.0);
   std::printf("escape_logistic: density rel L1 %.3e\n", l1);
@@ -161,7 +163,8 @@ TEST(Escape, HybridThermostatTimesAnOpenAxis) {
   double num = 0.0, den = 0.0;
   for (const char* mode : {"heat", "cool"}) {
     const auto u = hybgen::rt::read_npy(
-        (kWork / "thermostat" / (std::string("escape_") + mode + ".npy")).string());
+        (hybgen::testing::own_dir(kWork) / "thermostat" / (std::string("escape_") + mode + ".npy"))
+            .string());
     ASSERT_EQ(u.data.size(), n * n) << mode;
     for (std::size_t i = 0; i < n; ++i)
       for (std::size_t j = 0; j < n; ++j) {
@@ -200,7 +203,7 @@ TEST(Escape, RunNcAndTheReportCarryTheRate) {
                                    "--set a=2 --set grid=51 --set outputs=netcdf+html");
   ASSERT_EQ(r.code, 0) << r.out;
   const json e = escape_block("outputs");
-  std::ifstream in(kWork / "outputs" / "report.html");
+  std::ifstream in(hybgen::testing::own_dir(kWork) / "outputs" / "report.html");
   std::stringstream html;
   html << in.rdbuf();
   EXPECT_NE(html.str().find("escape rate 2 ± "), std::string::npos);
@@ -208,7 +211,7 @@ TEST(Escape, RunNcAndTheReportCarryTheRate) {
   HYBGEN_REQUIRE_PYTHON(python, "netCDF4");
   const ShellResult nc = hybgen::testing::run_shell(
       python + " -c \"import netCDF4; d = netCDF4.Dataset('" +
-      (kWork / "outputs" / "run.nc").string() +
+      (hybgen::testing::own_dir(kWork) / "outputs" / "run.nc").string() +
       "'); print(float(d.escape_rate), float(d.escape_rate_error), d.escape_rate_units, "
       "d.variables['density'].long_name)\" 2>&1");
   ASSERT_EQ(nc.code, 0) << nc.out;
@@ -224,7 +227,7 @@ TEST(Escape, RunNcAndTheReportCarryTheRate) {
 
 TEST(Escape, SweepHasTheEscapeRateColumn) {
   // `hybgen sweep` over a: the escape_rate and escape_rate_error columns, κ = a per row.
-  const fs::path out = kWork / "sweep";
+  const fs::path out = hybgen::testing::own_dir(kWork) / "sweep";
   fs::remove_all(out);
   const ShellResult r =
       run_hybgen("sweep '" + model("escape_linear.model") +

@@ -104,8 +104,9 @@ bool density(State s, double t, double& u, int& walls) {
 }
 
 TEST(HeisenbergWalls, CharacteristicsAreTheBracketsBackwardTraceAtEveryNode) {
-  const nlohmann::json sum = hybgen::testing::run_summary(
-      kModel, kWork / "run", "--set outputs=npy --set values=nodes", kWork / "cache");
+  const nlohmann::json sum =
+      hybgen::testing::run_summary(kModel, hybgen::testing::own_dir(kWork) / "run",
+                                   "--set outputs=npy --set values=nodes", kWork / "cache");
   ASSERT_FALSE(sum.is_null());
   const auto times = sum["times"].get<std::vector<double>>();
   ASSERT_EQ(times.size(), 5u);
@@ -114,7 +115,8 @@ TEST(HeisenbergWalls, CharacteristicsAreTheBracketsBackwardTraceAtEveryNode) {
   for (std::size_t k = 0; k < times.size(); ++k) {
     char name[32];
     std::snprintf(name, sizeof name, "u_%04zu.npy", k);
-    const std::vector<double> uh = hybgen::rt::read_npy((kWork / "run" / name).string()).data;
+    const std::vector<double> uh =
+        hybgen::rt::read_npy((hybgen::testing::own_dir(kWork) / "run" / name).string()).data;
     ASSERT_EQ(uh.size(), total);
     double num = 0, den = 0, worst = 0, top = 0;
     long left_out = 0, walls_crossed = 0;

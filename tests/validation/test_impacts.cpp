@@ -37,7 +37,7 @@ const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
 /// its summary.json (empty on a failed run).
 json run(const std::string& dir, const std::string& model, const std::string& method,
          const std::string& sets = "") {
-  const fs::path out = kWork / dir;
+  const fs::path out = hybgen::testing::own_dir(kWork) / dir;
   fs::remove_all(out);
   const auto r = hybgen_cli("run tests/validation/models/" + model + ".model --quiet --out '" +
                             out.string() + "' --set method=" + method + " " + sets);
@@ -110,7 +110,7 @@ TEST(Impacts, TheShuttleCountsItsTurnAndItsTrap) {
   expect_impacts(c, "trap", hybgen::testing::shuttle_absorbed, "characteristics", {1.0, 1e4, 1e-9});
   // An absorbing guard's impacts are its absorbed mass, and run.nc holds the series.
   EXPECT_EQ(c["impacts"]["trap"]["values"], c["absorbed"]["trap"]["values"]);
-  const fs::path nc = kWork / "shuttle_characteristics" / "run.nc";
+  const fs::path nc = hybgen::testing::own_dir(kWork) / "shuttle_characteristics" / "run.nc";
   EXPECT_EQ(hybgen::testing::nc_values(nc, "impacts_turn"),
             c["impacts"]["turn"]["values"].get<std::vector<double>>());
   EXPECT_EQ(hybgen::testing::nc_values(nc, "impacts_turn_error"),

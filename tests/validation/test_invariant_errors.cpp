@@ -68,7 +68,7 @@ struct InvRun {
 
 InvRun run(const Case& c, const std::string& scheme) {
   InvRun r;
-  r.dir = kWork / (c.name + "_" + scheme);
+  r.dir = hybgen::testing::own_dir(kWork) / (c.name + "_" + scheme);
   fs::remove_all(r.dir);
   const auto res = hybgen_cli("run '" + c.model + "' --out '" + r.dir.string() +
                               "' --set method=invariant --set scheme=" + scheme +
@@ -159,7 +159,7 @@ TEST(InvariantErrors, AStepThatMovesNothingIsToldNotEstimated) {
   // a warning, `unique` false and no error estimate.
   const Case c = cases()[1];  // sawtooth
   ASSERT_EQ(c.name, "sawtooth");
-  const fs::path dir = kWork / "sawtooth_tiny_step";
+  const fs::path dir = hybgen::testing::own_dir(kWork) / "sawtooth_tiny_step";
   fs::remove_all(dir);
   const auto res = hybgen_cli("run '" + c.model + "' --out '" + dir.string() +
                               "' --set method=invariant --set scheme=hat --set step=1e-300 "
@@ -180,7 +180,7 @@ TEST(InvariantErrors, TwoInvariantSetsAreToldNotUnique) {
   // disagreement, 0.42, as its error. (hat's deposit leaks the first cycle's mass across
   // x = 1 into the second, its known defect at a guard that no `where` bounds: for hat only
   // the density on [2, 3] is invariant, and λ₂ is the cycle's rotation, 0.81 + 0.59i.)
-  const fs::path dir = kWork / "two_sawtooths";
+  const fs::path dir = hybgen::testing::own_dir(kWork) / "two_sawtooths";
   fs::remove_all(dir);
   const auto res = hybgen_cli("run tests/validation/models/two_sawtooths.model --out '" +
                               dir.string() + "' --set outputs=npy");

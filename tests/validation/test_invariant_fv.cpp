@@ -52,7 +52,7 @@ struct FvRun {
 FvRun run(const std::string& model, const std::string& tag, const std::string& extra,
           const std::string& method = "invariant") {
   FvRun r;
-  r.dir = kWork / tag;
+  r.dir = hybgen::testing::own_dir(kWork) / tag;
   fs::remove_all(r.dir);
   const auto res =
       run_hybgen("run '" + model + "' --quiet --out '" + r.dir.string() +

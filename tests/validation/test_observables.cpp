@@ -55,8 +55,8 @@ const std::string kModels = std::string(HYBGEN_SOURCE_DIR) + "/tests/validation/
 /// `hybgen run MODEL --quiet EXTRA` into its own directory: summary.json (null when the run
 /// failed; the output is in the test's message).
 json run(const std::string& model, const std::string& tag, const std::string& extra) {
-  return hybgen::testing::run_summary(kModels + model, kWork / tag, "--set outputs=netcdf " + extra,
-                                      kCache);
+  return hybgen::testing::run_summary(kModels + model, hybgen::testing::own_dir(kWork) / tag,
+                                      "--set outputs=netcdf " + extra, kCache);
 }
 
 /// The observables every run of the thermostat adds (the heating fraction is a mode piece).

@@ -53,7 +53,7 @@ const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
 /// if the run failed, with the failure reported). The run's output into *out.
 nlohmann::json run(const std::string& model, const std::string& name, const std::string& method,
                    const std::string& sets = "", std::string* out = nullptr) {
-  const fs::path dir = kWork / name;
+  const fs::path dir = hybgen::testing::own_dir(kWork) / name;
   fs::remove_all(dir);
   const auto r = hybgen_cli("run " + model + ".model --quiet --out '" + dir.string() +
                             "' --set method=" + method + " --set outputs=netcdf " + sets);
@@ -248,9 +248,9 @@ TEST(ResetOutflow, AResetOnTheSupportsEdgeIsInsideItUpToRounding) {
               std::string::npos)
         << r.out;
   }
-  const auto r =
-      hybgen_cli("run '" + model + "' --quiet --out '" + (kWork / "disc").string() +
-                 "' --set grid=11x11x11x11 --set e=1 --set budget=off --set outputs=netcdf");
+  const auto r = hybgen_cli(
+      "run '" + model + "' --quiet --out '" + (hybgen::testing::own_dir(kWork) / "disc").string() +
+      "' --set grid=11x11x11x11 --set e=1 --set budget=off --set outputs=netcdf");
   EXPECT_EQ(r.code, 0) << r.out;
 }
 

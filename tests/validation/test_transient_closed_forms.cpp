@@ -77,7 +77,7 @@ struct Transient {
 std::vector<double> frame_errors(const Transient& c, nlohmann::json* summary = nullptr,
                                  const std::string& method = "characteristics",
                                  bool skip_jumps = true) {
-  const fs::path dir = kWork / c.name;
+  const fs::path dir = hybgen::testing::own_dir(kWork) / c.name;
   fs::remove_all(dir);
   const std::string model =
       c.model.empty() ? "tests/validation/models/" + c.name + ".model" : c.model;
