@@ -45,7 +45,7 @@ struct RunDir {
 /// OpenMP runner), writing `outputs`; the run must succeed.
 RunDir run_model(const std::string& model, const std::string& sets, const std::string& name,
                  int ranks, const std::string& outputs = "npy") {
-  const fs::path dir = e2e_dir("mpi") / name;
+  const fs::path dir = hybgen::testing::own_dir(e2e_dir("mpi")) / name;
   fs::remove_all(dir);
   const std::string args = "run " + model + " " + sets + " --set outputs=" + outputs +
                            " -q --out '" + dir.string() + "'" +
