@@ -44,17 +44,13 @@ using json = nlohmann::json;
 const fs::path kWork = hybgen::testing::e2e_dir("validation_absorbing");
 const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
 
-/// `hybgen run MODEL --set method=METHOD SETS` into kWork/`dir`; its summary.json.
+/// `hybgen run tests/validation/models/MODEL.model --set method=METHOD SETS` (node values
+/// in .npy) into this test's directory `dir`; its summary.json (null on a failed run).
 json run(const std::string& dir, const std::string& model, const std::string& method,
          const std::string& sets = "") {
-  const fs::path out = hybgen::testing::own_dir(kWork) / dir;
-  fs::remove_all(out);
-  const auto r =
-      hybgen_cli("run tests/validation/models/" + model + ".model --quiet --out '" + out.string() +
-                 "' --set method=" + method + " --set outputs=npy --set values=nodes " + sets);
-  EXPECT_EQ(r.code, 0) << r.out;
-  if (r.code != 0) return json::object();
-  return hybgen::testing::read_json_file(out / "summary.json");
+  return hybgen::testing::run_summary(
+      "tests/validation/models/" + model + ".model", hybgen::testing::own_dir(kWork) / dir,
+      "--set method=" + method + " --set outputs=npy --set values=nodes " + sets, kWork / "cache");
 }
 
 /// summary["absorbed"][guard]'s values and errors against `exact(t)`: each within

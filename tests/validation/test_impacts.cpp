@@ -31,19 +31,14 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 const fs::path kWork = hybgen::testing::e2e_dir("validation_impacts");
-const hybgen::testing::Hybgen hybgen_cli{kWork / "cache"};
 
-/// `hybgen run tests/validation/models/MODEL.model --set method=METHOD SETS` into kWork/`dir`;
-/// its summary.json (empty on a failed run).
+/// `hybgen run tests/validation/models/MODEL.model --set method=METHOD SETS` into this test's
+/// directory `dir`; its summary.json (null on a failed run).
 json run(const std::string& dir, const std::string& model, const std::string& method,
          const std::string& sets = "") {
-  const fs::path out = hybgen::testing::own_dir(kWork) / dir;
-  fs::remove_all(out);
-  const auto r = hybgen_cli("run tests/validation/models/" + model + ".model --quiet --out '" +
-                            out.string() + "' --set method=" + method + " " + sets);
-  EXPECT_EQ(r.code, 0) << r.out;
-  if (r.code != 0) return json::object();
-  return hybgen::testing::read_json_file(out / "summary.json");
+  return hybgen::testing::run_summary("tests/validation/models/" + model + ".model",
+                                      hybgen::testing::own_dir(kWork) / dir,
+                                      "--set method=" + method + " " + sets, kWork / "cache");
 }
 
 /// How closely a method's impacts must follow the closed form.

@@ -341,32 +341,31 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
         v.owned.assign(K, std::nan(""));
       if (v.owned.size() == K) budget.push_back(std::move(v));
     };
+    // A series NAME and its error NAME_error.
+    const auto with_error = [&](const std::string& name, const std::string& long_name,
+                                const nlohmann::json& values, const nlohmann::json& errors) {
+      guard_series(name, long_name, values);
+      guard_series(name + "_error", "estimated error of " + name, errors);
+    };
     // What each trap (`reset absorb`) took since time 0, and its error (NaN: none).
     if (run.summary.is_object() && run.summary.contains(summary_key::absorbed))
-      for (const auto& [guard, a] : run.summary[summary_key::absorbed].items()) {
-        guard_series("absorbed_" + guard,
-                     "mass absorbed by the guard " + guard +
-                         " (reset absorb) since time 0, a part of outflow",
-                     a["values"]);
-        guard_series("absorbed_" + guard + "_error", "estimated error of absorbed_" + guard,
-                     a["errors"]);
-      }
+      for (const auto& [guard, a] : run.summary[summary_key::absorbed].items())
+        with_error("absorbed_" + guard,
+                   "mass absorbed by the guard " + guard +
+                       " (reset absorb) since time 0, a part of outflow",
+                   a["values"], a["errors"]);
     // The impacts on each guard since time 0 and their mean rate over the interval ending at
     // each time (methods/impacts.hpp), with their errors; NaN where infinite (Zeno) or none.
     if (run.summary.is_object() && run.summary.contains(summary_key::impacts))
       for (const auto& [guard, a] : run.summary[summary_key::impacts].items()) {
-        guard_series("impacts_" + guard,
-                     "mass crossing the guard " + guard +
-                         " since time 0, counted once per crossing (NaN: infinite, Zeno)",
-                     a["values"]);
-        guard_series("impacts_" + guard + "_error", "estimated error of impacts_" + guard,
-                     a["errors"]);
-        guard_series("impact_rate_" + guard,
-                     "mean rate of impacts_" + guard +
-                         " per unit time over the interval from the previous time",
-                     a["rate"]);
-        guard_series("impact_rate_" + guard + "_error", "estimated error of impact_rate_" + guard,
-                     a["rate_errors"]);
+        with_error("impacts_" + guard,
+                   "mass crossing the guard " + guard +
+                       " since time 0, counted once per crossing (NaN: infinite, Zeno)",
+                   a["values"], a["errors"]);
+        with_error("impact_rate_" + guard,
+                   "mean rate of impacts_" + guard +
+                       " per unit time over the interval from the previous time",
+                   a["rate"], a["rate_errors"]);
       }
     for (Series& s : budget) {
       s.var = nc.var(s.name, NC_DOUBLE, {time_dim});

@@ -948,6 +948,19 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   // budget's rounding tolerance (`tol`: a node at rest carries no measurable mass).
   const std::size_t GI = op.impacts.empty() ? 0 : op.zeno_guard.size();
   std::vector<double> impacts_cum(GI, 0.0), impacts_step(GI, 0.0);
+  // One step's per-guard totals of a column table (`table`[r·n + g] per unit mass in column
+  // r, n = step.size(): op.absorbed, op.impacts) applied to the marched masses x, summed
+  // over the ranks, and added to `cum`.
+  const auto per_guard = [&](const std::vector<double>& table, std::vector<double>& step,
+                             std::vector<double>& cum) {
+    const std::size_t n = step.size();
+    std::fill(step.begin(), step.end(), 0.0);
+    const double* t = table.data() + own.begin * n;
+    for (std::size_t r = 0; r < L; ++r)
+      for (std::size_t g = 0; g < n; ++g) step[g] += t[r * n + g] * x[r];
+    if (op.distributed) b.sum(std::span<double>(step));
+    for (std::size_t g = 0; g < n; ++g) cum[g] += step[g];
+  };
   mb.impacts.assign(GI, {});
   mb.impacts_infinite_from.assign(GI, times.size());
   const double scale = std::max(std::fabs(mass0), std::numeric_limits<double>::min());
@@ -1013,22 +1026,8 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
       run.failure = os.str();
       break;
     }
-    if (G > 0) {
-      std::fill(absorbed_step.begin(), absorbed_step.end(), 0.0);
-      const double* ab = op.absorbed.data() + own.begin * G;
-      for (std::size_t r = 0; r < L; ++r)
-        for (std::size_t g = 0; g < G; ++g) absorbed_step[g] += ab[r * G + g] * x[r];
-      if (op.distributed) b.sum(std::span<double>(absorbed_step));
-      for (std::size_t g = 0; g < G; ++g) absorbed_cum[g] += absorbed_step[g];
-    }
-    if (GI > 0) {
-      std::fill(impacts_step.begin(), impacts_step.end(), 0.0);
-      const double* im = op.impacts.data() + own.begin * GI;
-      for (std::size_t r = 0; r < L; ++r)
-        for (std::size_t g = 0; g < GI; ++g) impacts_step[g] += im[r * GI + g] * x[r];
-      if (op.distributed) b.sum(std::span<double>(impacts_step));
-      for (std::size_t g = 0; g < GI; ++g) impacts_cum[g] += impacts_step[g];
-    }
+    if (G > 0) per_guard(op.absorbed, absorbed_step, absorbed_cum);
+    if (GI > 0) per_guard(op.impacts, impacts_step, impacts_cum);
     std::swap(x, y);
     out_cum += s.outflow;
     atom_cum += s.atom;
