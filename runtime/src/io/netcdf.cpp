@@ -343,9 +343,9 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
     };
     // A series NAME and its error NAME_error.
     const auto with_error = [&](const std::string& name, const std::string& long_name,
-                                const nlohmann::json& values, const nlohmann::json& errors) {
+                                const nlohmann::json& values, const nlohmann::json& value_errors) {
       guard_series(name, long_name, values);
-      guard_series(name + "_error", "estimated error of " + name, errors);
+      guard_series(name + "_error", "estimated error of " + name, value_errors);
     };
     // What each trap (`reset absorb`) took since time 0, and its error (NaN: none).
     if (run.summary.is_object() && run.summary.contains(summary_key::absorbed))
