@@ -284,6 +284,13 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
     put_number(row, "escape_rate", s[k::escape], "rate");
     put_number(row, "escape_rate_error", s[k::escape], "rate_error");
   }
+  // Each almost-invariant set's mass and invariance ratio with their errors (set1_mass, …).
+  if (s.contains(k::almost_invariant) && s[k::almost_invariant].contains("sets"))
+    for (const auto& set : s[k::almost_invariant]["sets"]) {
+      const std::string p = "set" + std::to_string(set.value("set", 0));
+      for (const char* key : {"mass", "mass_error", "ratio", "ratio_error"})
+        put_number(row, p + "_" + key, set, key);
+    }
   // Each trap's absorbed mass at the final time and its error (absorbed_NAME, …_error).
   if (s.contains(k::absorbed) && s[k::absorbed].is_object())
     for (const auto& [name, a] : s[k::absorbed].items()) {

@@ -117,6 +117,7 @@ std::string fixed3(double v) {
 std::string frame_title(const RunRecord& run, std::size_t k) {
   // A one-frame method's frame says what it is (method_table.hpp, frame_what).
   const MethodSpec* method = find_method(run.method);
+  if (!run.what.empty()) return run.model + "  ·  " + run.what;
   return run.model + "  ·  " +
          (run.times.empty()
               ? (method != nullptr ? std::string(method->frame_what) : std::string("density"))
@@ -243,11 +244,12 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
     for (std::size_t i = 0; i < x.size(); ++i) x[i] = axis_node(run.axes[0], static_cast<int>(i));
     // With several modes the sum is drawn first, thin and dashed, so that a mode holding all
     // the mass (where the sum equals it) stays visible on top of it.
+    // (Not for frames that hold labels, `what`: their sum over the modes means nothing.)
     std::vector<Curve> curves;
     Curve sum = curve(run.n_mode() > 1 ? "sum" : "u", run.total_density(k), kInk,
                       run.n_mode() > 1 ? 1.2 : 2.0);
     sum.dashed = run.n_mode() > 1;
-    curves.push_back(std::move(sum));
+    if (run.n_mode() == 1 || run.what.empty()) curves.push_back(std::move(sum));
     if (run.n_mode() > 1)
       for (std::size_t m = 0; m < run.n_mode(); ++m) {
         const auto u = run.mode_density(k, m);
@@ -259,7 +261,7 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
     with_range.insert(with_range.begin(),
                       curve("", std::vector<double>(x.size(), plan.line_max), {1, 1, 1}, 0.0));
     const Rect r{kLeft + 10, kTop, l.width - kLeft - 30 - kLegend, l.height - kTop - kBottom - 10};
-    draw_curves(cr, r, x, with_range, run.axis_names[0], "density u");
+    draw_curves(cr, r, x, with_range, run.axis_names[0], run.what.empty() ? "density u" : "set");
     draw_guard_marks(cr, r, x, run.guards);
     return;
   }
@@ -268,8 +270,10 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
     const Rect r = panel_rect(l, i);
     const ColourScale& s = plan.scales[panels[i].scale];
     draw_heat_panel(cr, r, panels[i], s);
-    const std::string label = std::string(s.log ? "log scale: " : "") +
-                              (run.axes.size() > 2 ? "marginal density" : "density u");
+    const std::string label = !run.what.empty()
+                                  ? std::string("set (0: none)")
+                                  : std::string(s.log ? "log scale: " : "") +
+                                        (run.axes.size() > 2 ? "marginal density" : "density u");
     draw_colour_bar(cr, {r.x + r.w + 12, r.y, kBar, r.h}, s, label);
   }
   // The guards' legend (names), under the title.
@@ -506,6 +510,40 @@ FigureGeometry frame_geometry(const RunRecord& run) {
   return g;
 }
 
+namespace {
+
+/// sets.png (and .pdf, .svg as asked): the almost-invariant sets' labels drawn as a frame, a
+/// panel per mode (a marginal's panels in 3-D and more show the labels' sums: the picture is
+/// for 1-D and 2-D).
+void write_sets_figure(const RunRecord& run, FigureRequest& request,
+                       const std::filesystem::path& out) {
+  const std::vector<double> labels(run.set_label.begin(), run.set_label.end());
+  RunRecord sets = run;
+  sets.density = labels;
+  sets.times.clear();
+  sets.frame_names = {"sets"};
+  sets.what = "almost-invariant sets (run.nc set_label; 0: in none)";
+  sets.marginals = nullptr;
+  const FramePlan plan = plan_frames(sets, "linear");
+  const double W = plan.layout.width, H = plan.layout.height;
+  const auto draw = [&](cairo_t* cr) { draw_frame(cr, sets, plan, 0); };
+  if (request.png) {
+    Raster raster;
+    to_png((out / "sets.png").string(), W, H, draw, raster);
+    request.out.push_back("sets.png");
+  }
+  if (request.svg) {
+    to_svg((out / "sets.svg").string(), W, H, draw);
+    request.out.push_back("sets.svg");
+  }
+  if (request.pdf) {
+    to_pdf((out / "sets.pdf").string(), W, H, 1, [&](cairo_t* cr, std::size_t) { draw(cr); });
+    request.out.push_back("sets.pdf");
+  }
+}
+
+}  // namespace
+
 void write_figures(const RunRecord& run, FigureRequest& request, const std::string& dir) {
 #if defined(__SANITIZE_ADDRESS__)
   // Under AddressSanitizer (CI's hardening stage), free Cairo's and fontconfig's caches at
@@ -579,6 +617,7 @@ void write_figures(const RunRecord& run, FigureRequest& request, const std::stri
     if (request.svg) request.out.push_back(run.frame_names[k] + ".svg");
   }
   if (request.pdf) request.out.push_back(stem + ".pdf");
+  if (!run.set_label.empty() && !run.distributed) write_sets_figure(run, request, out);
   // The budget and the spectrum, in each format asked for.
   const bool budget = !run.times.empty() && run.budget.mass.size() == run.times.size();
   const bool spectrum = run.summary.is_object() && run.summary.contains(summary_key::invariant);

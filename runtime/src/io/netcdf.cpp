@@ -459,6 +459,45 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
             "tolerance/transfer_step");
   }
 
+  // The almost-invariant sets (almost_invariant): each node's set, and per set its mass and
+  // invariance ratio with their errors (methods/almost_invariant.hpp).
+  int label_var = -1;
+  std::vector<std::pair<int, std::vector<double>>> set_vars;
+  if (!run.set_label.empty() && !run.distributed && run.set_label.size() == n_mode * n_node) {
+    std::vector<int> dims;
+    if (n_mode > 1) dims.push_back(mode_dim);
+    dims.insert(dims.end(), axis_dims.begin(), axis_dims.end());
+    label_var = nc.var(names("set_label"), NC_INT, dims);
+    nc.text(label_var, "long_name", "almost-invariant set of each node (0: none)");
+    nc.text(label_var, "description",
+            "the set (1 ... K) whose SEBA vector of the reversibilised transfer operator's K "
+            "leading eigenvectors is largest at the node; 0 where none exceeds the vectors' "
+            "leakage, or the invariant density vanishes");
+    const nlohmann::json* sets = nullptr;
+    if (run.summary.is_object() && run.summary.contains(summary_key::almost_invariant))
+      sets = &run.summary[summary_key::almost_invariant]["sets"];
+    if (sets != nullptr && sets->is_array() && !sets->empty()) {
+      const int set_dim = nc.dim(names("set"), sets->size());
+      for (const auto& [key, long_name] :
+           {std::pair{"mass", "invariant mass of the set"},
+            std::pair{"mass_error", "estimated error of set_mass"},
+            std::pair{"ratio",
+                      "invariance ratio: the probability that invariant mass in the set is in it "
+                      "one transfer step later"},
+            std::pair{"ratio_error", "estimated error of set_ratio"},
+            std::pair{"exit_rate", "-ln(set_ratio)/step: rate at which mass leaves the set"}}) {
+        const int v = nc.var(names(std::string("set_") + key), NC_DOUBLE, {set_dim});
+        nc.text(v, "long_name", long_name);
+        nc.text(v, "units", std::string(key) == "exit_rate" ? "per unit time" : "1");
+        std::vector<double> values;
+        for (const auto& a : *sets)
+          values.push_back(a.contains(key) && a[key].is_number() ? a[key].get<double>()
+                                                                 : std::nan(""));
+        set_vars.emplace_back(v, std::move(values));
+      }
+    }
+  }
+
   // Global attributes.
   const nlohmann::json& pv = run.provenance;
   const std::string version = json_text(pv, "hybgen_version");
@@ -487,6 +526,9 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
   }
   if (series) nc.put(time_var, run.times);
   if (n_mode > 1) nc.put_strings(mode_var, run.mode_names);
+  if (label_var >= 0)
+    nc.check(nc_put_var_int(nc.id(), label_var, run.set_label.data()), "write a variable");
+  for (const auto& [v, values] : set_vars) nc.put(v, values);
   for (std::size_t k = 0; k < run.n_frame() && mg; ++k)
     for (std::size_t p = 0; p < mg->pairs.size(); ++p) {
       const auto na = static_cast<std::size_t>(run.axes[mg->pairs[p][0]].n);

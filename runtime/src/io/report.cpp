@@ -314,6 +314,30 @@ img { max-width: 100%; } .muted { color: #666; }
       << "); the frame is the conditionally invariant density, of unit mass</p>\n";
   }
 
+  // The almost-invariant sets (methods/almost_invariant.hpp): a table and their picture.
+  if (run.summary.is_object() && run.summary.contains(summary_key::almost_invariant)) {
+    const nlohmann::json& a = run.summary[summary_key::almost_invariant];
+    const auto cell = [&](const nlohmann::json& set, const char* key) {
+      return set.contains(key) && set[key].is_number() ? number(set[key].get<double>())
+                                                       : std::string("–");
+    };
+    h << "<h2>Almost-invariant sets</h2>\n<p>K regions whose invariant mass stays in them over "
+         "a step of "
+      << number(a.value("step", 0.0))
+      << " with the highest probability (the ratio); the frame is the invariant density</p>\n"
+         "<table>\n<tr><th>set</th><th>mass</th><th>ratio</th><th>exit rate (per unit "
+         "time)</th></tr>\n";
+    for (const nlohmann::json& set : a.value("sets", nlohmann::json::array()))
+      h << "<tr><td>" << set.value("set", 0) << "</td><td>" << cell(set, "mass") << " ± "
+        << cell(set, "mass_error") << "</td><td>" << cell(set, "ratio") << " ± "
+        << cell(set, "ratio_error") << "</td><td>" << cell(set, "exit_rate") << "</td></tr>\n";
+    h << "</table>\n<p>sum of the ratios " << number(a.value("ratio_sum", 0.0)) << " ≤ "
+      << number(a.value("bound", 0.0))
+      << " (the sum of the reversibilised operator's leading eigenvalues); mass in no set "
+      << number(a.value("unassigned_mass", 0.0)) << "</p>\n";
+    if (has(files, "sets.png")) h << "<img src=\"sets.png\" alt=\"the almost-invariant sets\">\n";
+  }
+
   // What derive checked.
   if (pv.is_object() && pv.contains("checks") && pv["checks"].is_object()) {
     const nlohmann::json& c = pv["checks"];

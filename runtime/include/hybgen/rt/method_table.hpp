@@ -60,10 +60,12 @@ inline constexpr const char* transfer = "transfer";    ///< transfer: the operat
 inline constexpr const char* invariant = "invariant";  ///< invariant: density and spectrum.
 inline constexpr const char* particles = "particles";  ///< particles: the samples.
 inline constexpr const char* escape = "escape";        ///< escape: the escape rate and its density.
+/// almost_invariant: the sets, their masses and invariance ratios.
+inline constexpr const char* almost_invariant = "almost_invariant";
 }  // namespace summary_key
 
 /// A method, in the table's order.
-enum class Method { characteristics, transfer, invariant, particles, escape };
+enum class Method { characteristics, transfer, invariant, particles, escape, almost_invariant };
 
 /// One row of the methods table.
 struct MethodSpec {
@@ -101,6 +103,11 @@ inline constexpr std::array kMethods = {
                "conditionally invariant density of the open system", false, summary_key::escape,
                "the escape rate of an open system (-ln lambda1 / step) and its conditionally "
                "invariant density"},
+    MethodSpec{Method::almost_invariant, "almost_invariant", false, true, "almost_invariant",
+               "invariant density (its almost-invariant sets: sets.png, run.nc set_label)", false,
+               summary_key::almost_invariant,
+               "K regions of state x mode whose invariant mass stays in them over a step with the "
+               "highest probability, with their invariance ratios (setting sets)"},
 };
 
 static_assert(

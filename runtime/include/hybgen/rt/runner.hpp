@@ -524,6 +524,7 @@ RunRecord record_run(const RunPlan<state_dim_v<M>>& p, const MethodResult<state_
   rec.density = std::span<const double>(res.solution.u.data(), res.solution.u.size());
   rec.distributed = res.solution.distributed;
   rec.cell_averages = res.cell_averages;
+  rec.set_label = std::span<const std::int32_t>(res.set_label.data(), res.set_label.size());
   rec.owned = res.solution.owned;
   rec.backend = p.backend;
   if (!res.marginals.empty()) rec.marginals = &res.marginals;
@@ -654,6 +655,22 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
     std::printf("escape rate %.10g +/- %.2g per unit time (lambda1 = %.12f, step %g)\n",
                 e["rate"].get<double>(), e["rate_error"].get<double>(), e["lambda1"].get<double>(),
                 e["step"].get<double>());
+  } else if (s.contains(k::almost_invariant)) {
+    const auto& a = s[k::almost_invariant];
+    const auto num = [](const nlohmann::json& x, const char* key) {
+      return x.contains(key) && x[key].is_number() ? x[key].get<double>() : std::nan("");
+    };
+    std::printf("almost-invariant sets (step %g; run.nc set_label, sets.png):\n", num(a, "step"));
+    for (const auto& set : a["sets"])
+      std::printf(
+          "  set %d: mass %.6f +/- %.1e, stays with probability %.6f +/- %.1e per "
+          "step (exit rate %.4g per unit time)\n",
+          set["set"].get<int>(), num(set, "mass"), num(set, "mass_error"), num(set, "ratio"),
+          num(set, "ratio_error"), num(set, "exit_rate"));
+    std::printf(
+        "  sum of the ratios %.6f <= %.6f (the bound from the eigenvalues); mass in no "
+        "set %.2e\n",
+        num(a, "ratio_sum"), num(a, "bound"), num(a, "unassigned_mass"));
   } else if (const MassBudget& mb = rec.budget; mb.mass.empty()) {
     std::printf("mass budget: off\n");
   } else {

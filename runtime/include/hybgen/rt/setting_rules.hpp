@@ -114,6 +114,14 @@ inline std::string ranks_rule(const Settings& s) {
   return "";
 }
 
+/// The almost-invariant sets take the whole operator in one process (the reversibilised
+/// chain's components and eigenvectors: methods/almost_invariant.hpp).
+inline std::string one_process_rule(const Settings& s, int ranks) {
+  if (ranks <= 1 || method_named(s.word<"method">()).id != Method::almost_invariant) return "";
+  return "method almost_invariant runs in one process (the sets need the whole operator); run "
+         "it without --ranks, or on a coarser grid";
+}
+
 /// A method that inverts the resets needs every reset's inverse off its guard too.
 inline std::string inverse_rule(const Settings& s, const std::string& guard) {
   if (!method_named(s.word<"method">()).inverts_resets) return "";
@@ -223,6 +231,7 @@ inline std::vector<SettingConflict> setting_conflicts(const Settings& s, const R
   add("dt", frames_rule(s));
   add("step", steps_rule(s));
   add("ranks", ranks_rule(s));
+  add("ranks", one_process_rule(s, run_ranks(s, facts)));
   if (facts.guards_without_inverse)
     for (const auto& [g, name] : *facts.guards_without_inverse)
       add("method", inverse_rule(s, name), static_cast<long>(g));

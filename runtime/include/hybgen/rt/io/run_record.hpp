@@ -201,6 +201,12 @@ struct RunRecord {
   std::span<const double> density;       ///< [frame][mode][node] (see the invariant above).
   /// Whether `density` holds only this rank's pairs `owned` of each frame (several ranks).
   bool distributed = false;
+  /// method=almost_invariant: the set (1 … K; 0: none) of every (mode, node), [mode][node];
+  /// empty otherwise. run.nc's `set_label`, and the picture sets.png.
+  std::span<const std::int32_t> set_label;
+  /// What the frames hold, when not the method's own (methods' `frame_what`): the pictures'
+  /// titles and colour bars (the sets' picture draws the labels as its frame).
+  std::string what;
   /// Whether `density` holds means over each node's dual cell (characteristics with
   /// values=cells, budget/cell_averages.hpp), not values at the nodes.
   bool cell_averages = false;

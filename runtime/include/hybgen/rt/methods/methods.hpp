@@ -18,7 +18,10 @@
 ///  - particles: Monte-Carlo samples of u0 pushed forward and deposited (particles.hpp);
 ///  - escape: an open system's escape rate −ln λ₁/h and its conditionally invariant density,
 ///    the leading eigenpair of the transfer operator (invariant.hpp) on the grid and on the
-///    halved grid for the error (escape.hpp); one frame, `escape`.
+///    halved grid for the error (escape.hpp); one frame, `escape`;
+///  - almost_invariant: K almost-invariant sets of a closed system and their invariance
+///    ratios (almost_invariant.hpp), on the grid and on the halved grid for their errors; one
+///    frame, the invariant density, and the sets as `set_label`.
 ///
 /// Invariants of a successful result: solution.n_time == frame_names.size() (or, for the
 /// particles with density=marginals, an empty solution and marginals with one block per
@@ -45,6 +48,7 @@
 
 #include "hybgen/rt/io/progress.hpp"
 #include "hybgen/rt/method_table.hpp"
+#include "hybgen/rt/methods/almost_invariant.hpp"
 #include "hybgen/rt/methods/budget.hpp"
 #include "hybgen/rt/methods/budget/cell_averages.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
@@ -128,6 +132,9 @@ struct MethodResult {
   std::vector<ObservableSeries> sampled_observables;  ///< See observable_errors.
   /// Whether `solution` holds cell averages (characteristics, values=cells).
   bool cell_averages = false;
+  /// almost_invariant: the set (1 … K, 0: none) of every (mode, node), [mode][node]; empty
+  /// for the other methods.
+  std::vector<std::int32_t> set_label;
   nlohmann::json summary = nlohmann::json::object();  ///< Method fields for summary.json.
   std::vector<std::string> warnings;                  ///< Printed, not fatal.
   std::string failure;    ///< Non-empty: a numerical failure (exit 3), what/where/when.
@@ -1245,6 +1252,215 @@ MethodResult<state_dim_v<M>> solve_by_escape(const TensorGrid<state_dim_v<M>>& g
   return r;
 }
 
+namespace detail {
+
+/// For each set of `fine` (on `grid`), the set of `coarse` (on `half`) that holds the most of
+/// its invariant mass at the coarse nodes nearest its nodes, or −1: the same region on the
+/// two grids. Greedy by overlap (K is small).
+template <std::size_t N>
+std::vector<int> match_sets(const TensorGrid<N>& grid, const AlmostInvariantSets& fine,
+                            std::span<const double> mu, const TensorGrid<N>& half,
+                            const AlmostInvariantSets& coarse, std::size_t n_mode) {
+  const std::size_t K = fine.sets.size(), Kc = coarse.sets.size(), n = grid.size();
+  std::vector<double> overlap(K * Kc, 0.0);
+  for (std::size_t m = 0; m < n_mode; ++m)
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::int32_t a = fine.label[m * n + i];
+      if (a == 0) continue;
+      const std::array<double, N> y = grid.node(i);
+      std::size_t flat = 0;
+      for (std::size_t d = 0; d < N; ++d) {
+        const GridAxis& ax = half.axes[d];
+        const double h = ax.n > 1 ? (ax.max - ax.min) / (ax.n - 1) : 1.0;
+        const long j =
+            std::clamp(std::lround((y[d] - ax.min) / h), 0L, static_cast<long>(ax.n - 1));
+        flat = flat * static_cast<std::size_t>(ax.n) + static_cast<std::size_t>(j);
+      }
+      const std::int32_t b = coarse.label[m * half.size() + flat];
+      if (b > 0)
+        overlap[static_cast<std::size_t>(a - 1) * Kc + static_cast<std::size_t>(b - 1)] +=
+            mu[m * n + i];
+    }
+  std::vector<int> match(K, -1);
+  std::vector<char> taken(Kc, 0);
+  for (std::size_t round = 0; round < K; ++round) {
+    double best = 0.0;
+    std::size_t ba = K, bb = Kc;
+    for (std::size_t a = 0; a < K; ++a)
+      for (std::size_t b = 0; b < Kc; ++b)
+        if (match[a] < 0 && !taken[b] && overlap[a * Kc + b] > best)
+          best = overlap[a * Kc + b], ba = a, bb = b;
+    if (ba == K) break;
+    match[ba] = static_cast<int>(bb), taken[bb] = 1;
+  }
+  return match;
+}
+
+}  // namespace detail
+
+/// Almost-invariant sets of a closed system (almost_invariant.hpp): the transfer operator's
+/// invariant masses, K sets from the reversibilised chain, their masses and invariance ratios;
+/// the same on the halved grid, each set matched to the coarse set that holds most of its mass,
+/// for the errors (twice the difference, as the escape rate's: first order). One frame, the
+/// invariant density; the sets as `set_label`.
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_by_almost_invariant(const TensorGrid<state_dim_v<M>>& grid,
+                                                       std::span<const double>, double dt,
+                                                       const double* par, const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  const TransferOptions o = detail::transfer_options(s, dt);
+  const auto t0 = detail::MethodClock::now();
+  const int K = static_cast<int>(s.settings.integer<"sets">());
+  InvariantOptions io;
+  io.n_eigen = std::max(2, static_cast<int>(s.settings.integer<"eigenvalues">()));
+  struct Answer {
+    InvariantResult inv;
+    std::vector<double> mu;  // invariant node masses
+    AlmostInvariantSets sets;
+    nlohmann::json op_summary;  // the operator's part of summary.json
+  };
+  // The sets on grid g, or a failure in r.
+  const auto solve_on = [&](const TensorGrid<N>& g, const char* title) -> std::optional<Answer> {
+    const TransferOperator<N> op = detail::assemble<M>(g, par, o, s.quiet, title);
+    if (detail::assembly_failed(op, r, t0)) return std::nullopt;
+    Answer a;
+    a.op_summary = detail::operator_summary(o, op);
+    a.inv = invariant_density(op, io);
+    const double lam1 = a.inv.eigenvalues.front().real();
+    if (!(lam1 > 1.0 - kOpenSystem)) {
+      char b[600];
+      std::snprintf(b, sizeof b,
+                    "(almost_invariant) the transfer operator's leading eigenvalue is %.12g on "
+                    "%zu nodes: the system loses mass (through the box's faces or a trap), so it "
+                    "has no invariant density whose sets to split; method=escape gives its "
+                    "escape rate and conditionally invariant density",
+                    lam1, g.size());
+      r.failure = b;
+      return std::nullopt;
+    }
+    // μ = |v| of unit mass: where λ = 1 is repeated (invariant pieces that never exchange
+    // mass) the solver's eigenvector is any combination of the pieces' measures, signs mixed;
+    // for a Markov P and P v = v, P|v| ≥ |P v| = |v| with equal sums, so |v| is invariant too.
+    a.mu.resize(op.size());
+    double total = 0.0;
+    for (std::size_t i = 0; i < op.size(); ++i)
+      total += a.mu[i] = op.weight[i] * std::fabs(a.inv.density[i]);
+    for (std::size_t i = 0; i < op.size(); ++i) {
+      a.mu[i] /= total;
+      a.inv.density[i] = a.mu[i] / op.weight[i];
+    }
+    try {
+      a.sets = almost_invariant_sets(op.P, a.mu, K, op.n_mode, io.tol);
+    } catch (const std::invalid_argument& e) {
+      r.failure = std::string("(almost_invariant) ") + e.what() + " (on " +
+                  std::to_string(g.size()) + " nodes per mode)";
+      return std::nullopt;
+    }
+    return a;
+  };
+  std::optional<Answer> fine = solve_on(grid, "transfer operator: assembly");
+  if (!fine) return r;
+  const TensorGrid<N> half = halved_grid(grid);
+  std::optional<Answer> coarse = solve_on(half, "transfer operator: assembly (halved grid)");
+  if (!coarse) return r;
+  r.solve_s = detail::seconds_since(t0);
+  const std::size_t n_mode = static_cast<std::size_t>(M::n_mode);
+  r.solution.n_time = 1;
+  r.solution.n_mode = n_mode;
+  r.solution.n_point = grid.size();
+  r.solution.u = fine->inv.density;
+  r.frame_names = {std::string(method_spec(Method::almost_invariant).frame)};
+  r.observable_errors = ObservableErrorKind::coarse, r.order = 1;
+  detail::keep_coarse_frame(r, half, coarse->inv.density, n_mode);
+  r.set_label = fine->sets.label;
+  const std::vector<int> match =
+      detail::match_sets(grid, fine->sets, fine->mu, half, coarse->sets, n_mode);
+  const double step = o.step;
+  // Several pieces of the support that never exchange mass: the invariant density is any
+  // mixture of theirs, so the sets' masses are the solver's choice (their ratios are not).
+  const bool unique = fine->sets.invariant_pieces <= 1 && coarse->sets.invariant_pieces <= 1;
+  nlohmann::json sets = nlohmann::json::array();
+  double ratio_sum = 0.0;
+  bool all_matched = true;
+  for (std::size_t q = 0; q < fine->sets.sets.size(); ++q) {
+    const AlmostInvariantSet& a = fine->sets.sets[q];
+    ratio_sum += a.ratio;
+    nlohmann::json j;
+    j["set"] = q + 1;
+    j["mass"] = a.mass;
+    j["ratio"] = a.ratio;
+    // −ln ρ / h: the rate at which invariant mass leaves the set, per unit time.
+    j["exit_rate"] =
+        a.ratio > 0.0 ? -std::log(a.ratio) / step : std::numeric_limits<double>::infinity();
+    j["nodes"] = a.nodes;
+    nlohmann::json modes = nlohmann::json::object();
+    for (std::size_t m = 0; m < n_mode; ++m) modes[M::mode_names[m]] = a.mode_mass[m];
+    j["mode_mass"] = modes;
+    if (match[q] >= 0) {
+      const AlmostInvariantSet& c = coarse->sets.sets[static_cast<std::size_t>(match[q])];
+      if (unique)
+        j["mass_error"] = kAlmostInvariantErrorFactor * std::fabs(a.mass - c.mass) + io.tol;
+      else
+        j["mass_error"] = nullptr;
+      j["ratio_error"] = kAlmostInvariantErrorFactor * std::fabs(a.ratio - c.ratio) + io.tol;
+      j["coarse_set"] = match[q] + 1;
+    } else {
+      all_matched = false;
+      j["mass_error"] = nullptr;
+      j["ratio_error"] = nullptr;
+      j["coarse_set"] = nullptr;
+    }
+    sets.push_back(j);
+  }
+  nlohmann::json j = fine->op_summary;
+  j["file"] = r.frame_names.front() + ".npy";
+  j["step"] = step;
+  j["sets"] = sets;
+  j["ratio_sum"] = ratio_sum;
+  j["bound"] = fine->sets.bound;
+  j["eigenvalues"] = fine->sets.eigenvalues;
+  j["unassigned_mass"] = fine->sets.unassigned;
+  j["components"] = fine->sets.components;
+  j["invariant_pieces"] = fine->sets.invariant_pieces;
+  j["unique"] = unique;
+  j["lambda1"] = fine->inv.eigenvalues.front().real();
+  j["coarse_ratios"] = [&] {
+    nlohmann::json c = nlohmann::json::array();
+    for (const AlmostInvariantSet& a : coarse->sets.sets) c.push_back(a.ratio);
+    return c;
+  }();
+  std::vector<int> coarse_nodes;
+  for (const GridAxis& ax : half.axes) coarse_nodes.push_back(ax.n);
+  j["coarse_grid"] = coarse_nodes;
+  j["seba_iterations"] = fine->sets.seba_iterations;
+  j["converged"] = fine->sets.converged && coarse->sets.converged && fine->inv.converged;
+  j["note"] =
+      "ratio: the probability that invariant mass in the set is in it one step later, "
+      "mu(A & P^-1 A)/mu(A); exit_rate = -ln(ratio)/step; errors: twice the difference from "
+      "the set of the grid of coarse_grid nodes that holds most of its mass; bound: the sum of "
+      "the reversibilised chain's K leading eigenvalues, which the sum of the ratios of any K "
+      "disjoint sets cannot exceed (docs/methods.md, \"almost_invariant\")";
+  r.summary[summary_key::almost_invariant] = j;
+  if (!unique)
+    r.warnings.push_back(
+        "the support falls into " + std::to_string(fine->sets.invariant_pieces) +
+        " pieces that never exchange mass (each invariant): the invariant density is any "
+        "mixture of theirs, so the sets' masses are not determined (no mass_error); their "
+        "ratios are");
+  if (!all_matched)
+    r.warnings.push_back(
+        "a set has no counterpart on the halved grid (the sets change with the grid): its "
+        "errors are not estimated; refine the grid");
+  if (fine->sets.unassigned > 0.05)
+    r.warnings.push_back("invariant mass " + std::to_string(fine->sets.unassigned) +
+                         " is in no set (the eigenvectors do not separate it): fewer sets, or a "
+                         "finer grid");
+  if (!fine->sets.converged || !coarse->sets.converged)
+    r.warnings.push_back("the eigen-solver of the sets did not meet its tolerance");
+  return r;
+}
+
 /// The particle method (`dt` unused).
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>& grid,
@@ -1299,11 +1515,12 @@ using SolveFunction = MethodResult<state_dim_v<M>> (*)(const TensorGrid<state_di
 /// The solve function of each row of the methods table (method_table.hpp), in its order.
 template <HybridModel M>
 inline constexpr std::array<SolveFunction<M>, kMethods.size()> solvers = {
-    &solve_by_characteristics<M>,  // Method::characteristics
-    &solve_by_transfer<M>,         // Method::transfer
-    &solve_by_invariant<M>,        // Method::invariant
-    &solve_by_particles<M>,        // Method::particles
-    &solve_by_escape<M>,           // Method::escape
+    &solve_by_characteristics<M>,   // Method::characteristics
+    &solve_by_transfer<M>,          // Method::transfer
+    &solve_by_invariant<M>,         // Method::invariant
+    &solve_by_particles<M>,         // Method::particles
+    &solve_by_escape<M>,            // Method::escape
+    &solve_by_almost_invariant<M>,  // Method::almost_invariant
 };
 
 /// Dispatch on the setting `method` through the methods table; throws std::invalid_argument
