@@ -86,6 +86,43 @@ TEST(AlmostInvariantSets, TwoCyclesThatNeverMeetAreTwoSetsThatKeepAllTheirMass) 
     }
 }
 
+TEST(AlmostInvariantSets, ThreeSetsBySebaAreThreeCyclesInBothModes) {
+  // sets=3 (SEBA on three eigenvectors, all of eigenvalue 1): the three cycles of
+  // three_cycles.model, each with ratio 1, on 241 nodes over [0.5, 6.5] (spacing 0.025).
+  std::vector<int> label;
+  const json s = run("three_cycles", "--set sets=3", label);
+  ASSERT_FALSE(s.is_null());
+  const json& a = s["almost_invariant"];
+  ASSERT_EQ(a["sets"].size(), 3u) << a.dump();
+  EXPECT_EQ(a["invariant_pieces"], 3) << a.dump();
+  for (const json& set : a["sets"]) {
+    EXPECT_NEAR(set["ratio"].get<double>(), 1.0, 1e-9) << set.dump();
+    EXPECT_GT(set["mass"].get<double>(), 0.0) << set.dump();
+  }
+  ASSERT_EQ(label.size(), 2u * 241u);
+  std::vector<int> cycle(3);
+  for (int c = 0; c < 3; ++c) {
+    cycle[c] = label[static_cast<std::size_t>(std::lround((1.5 + 2 * c - 0.5) / 0.025))];
+    EXPECT_GT(cycle[c], 0) << "cycle " << c;
+  }
+  EXPECT_NE(cycle[0], cycle[1]);
+  EXPECT_NE(cycle[1], cycle[2]);
+  EXPECT_NE(cycle[0], cycle[2]);
+  for (std::size_t m = 0; m < 2; ++m)
+    for (int i = 0; i < 241; ++i) {
+      const double T = 0.5 + 0.025 * i;
+      const int l = label[m * 241 + static_cast<std::size_t>(i)];
+      for (int c = 0; c < 3; ++c)
+        if (T > 1.05 + 2 * c && T < 1.95 + 2 * c) {
+          EXPECT_EQ(l, cycle[c]) << "mode " << m << " T = " << T;
+        }
+      const double gap = std::fmod(T + 10.0, 2.0);  // in (0, 1): between the cycles
+      if (T < 0.95 || T > 6.05 || (gap > 0.05 && gap < 0.95)) {
+        EXPECT_EQ(l, 0) << "mode " << m << " T = " << T;
+      }
+    }
+}
+
 /// The fold map of fold_halves.model (its comment): continuous, piecewise linear, with
 /// g(1 − x) = 1 − g(x); on [0, 1/2] up from 0 to P at 1/6, down to 0 at 1/3, up to 1/2.
 double fold(double x, double P) {
