@@ -145,9 +145,44 @@ Rgb colour_at(double t) {
   return {c[0] / 255.0, c[1] / 255.0, c[2] / 255.0};
 }
 
+/// Colour of label v of a categorical scale: 0 pale, k the k-th curve colour (cycling).
+Rgb category_colour(double v) {
+  const long k = std::isfinite(v) ? std::lround(v) : 0;
+  if (k <= 0) return {0.97, 0.97, 0.97};
+  return kCurve[static_cast<std::size_t>(k - 1) % kCurve.size()];
+}
+
 /// A vertical colour bar in `r` for `scale`, labelled `label`.
 void draw_colour_bar(cairo_t* cr, const Rect& r, const ColourScale& scale,
                      const std::string& label) {
+  if (scale.categories > 0) {
+    // One box per label, 0 at the bottom ("none"), each named at its side.
+    const int n = scale.categories + 1;
+    const double h = r.h / n;
+    set_font(cr, 10);
+    double widest = 0;
+    for (int k = 0; k < n; ++k) {
+      const double y = r.y + r.h - (k + 1) * h;
+      const Rgb c = category_colour(k);
+      cairo_set_source_rgb(cr, c.r, c.g, c.b);
+      cairo_rectangle(cr, r.x, y, r.w, h);
+      cairo_fill(cr);
+      set_colour(cr, kInk);
+      cairo_set_line_width(cr, 1.0);
+      cairo_rectangle(cr, r.x, y, r.w, h);
+      cairo_stroke(cr);
+      const std::string l = k == 0 ? "none" : std::to_string(k);
+      widest = std::max(widest, text_width(cr, l));
+      text(cr, r.x + r.w + 6, y + h / 2 + 3.5, l);
+    }
+    set_font(cr, 11);
+    cairo_save(cr);
+    cairo_translate(cr, r.x + r.w + 16 + widest, r.y + r.h / 2);
+    cairo_rotate(cr, M_PI / 2);
+    text(cr, 0, 0, label, 0.5);
+    cairo_restore(cr);
+    return;
+  }
   cairo_pattern_t* g = cairo_pattern_create_linear(0, r.y + r.h, 0, r.y);
   for (int i = 0; i <= 32; ++i) {
     const Rgb c = colour_at(i / 32.0);
@@ -207,6 +242,8 @@ void draw_heat_panel(cairo_t* cr, const Rect& r, const HeatPanel& p, const Colou
         c = kOutside;
       else if (!std::isfinite(p.data[i]))
         c = {1.0, 0.0, 1.0};  // magenta: not a number
+      else if (scale.categories > 0)
+        c = category_colour(p.data[i]);
       else
         c = colour_at(scale.unit(p.data[i]));
       auto* q =

@@ -95,6 +95,9 @@ void draw_axes(cairo_t* cr, const Rect& r, double x0, double x1, double y0, doub
                const std::string& x_name, const std::string& y_name);
 /// Viridis at t in [0, 1].
 Rgb colour_at(double t);
+/// Colour of label v of a categorical scale (ColourScale::categories): 0 pale, k the k-th
+/// curve colour.
+Rgb category_colour(double v);
 /// A vertical colour bar in `r` for `scale`, labelled `label`.
 void draw_colour_bar(cairo_t* cr, const Rect& r, const ColourScale& scale,
                      const std::string& label);

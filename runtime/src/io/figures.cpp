@@ -271,7 +271,7 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
     const ColourScale& s = plan.scales[panels[i].scale];
     draw_heat_panel(cr, r, panels[i], s);
     const std::string label = !run.what.empty()
-                                  ? std::string("set (0: none)")
+                                  ? std::string("almost-invariant set")
                                   : std::string(s.log ? "log scale: " : "") +
                                         (run.axes.size() > 2 ? "marginal density" : "density u");
     draw_colour_bar(cr, {r.x + r.w + 12, r.y, kBar, r.h}, s, label);
@@ -522,9 +522,12 @@ void write_sets_figure(const RunRecord& run, FigureRequest& request,
   sets.density = labels;
   sets.times.clear();
   sets.frame_names = {"sets"};
-  sets.what = "almost-invariant sets (run.nc set_label; 0: in none)";
+  sets.what = "almost-invariant sets (run.nc set_label)";
   sets.marginals = nullptr;
-  const FramePlan plan = plan_frames(sets, "linear");
+  FramePlan plan = plan_frames(sets, "linear");
+  int K = 0;
+  for (const std::int32_t l : run.set_label) K = std::max(K, static_cast<int>(l));
+  for (ColourScale& scale : plan.scales) scale.categories = std::max(K, 1);
   const double W = plan.layout.width, H = plan.layout.height;
   const auto draw = [&](cairo_t* cr) { draw_frame(cr, sets, plan, 0); };
   if (request.png) {

@@ -40,6 +40,9 @@ struct ColourScale {
   bool log = false;  ///< Logarithmic.
   double lo = 0.0;   ///< Lowest value shown (log: hi / 1e4).
   double hi = 1.0;   ///< Highest value shown: the run's maximum.
+  /// More than 0: the values are labels 0 … categories (sets.png), drawn in distinct colours
+  /// (0 pale), not on the ramp.
+  int categories = 0;
   /// Where v falls on the bar, in [0, 1] (clamped; NaN: 0).
   double unit(double v) const;
 };
