@@ -341,7 +341,7 @@ std::string WrittenOutputs::describe(const std::vector<std::string>& frame_names
   }
   for (const std::string& f : figures)
     if (f.ends_with(".pdf") || f.ends_with(".gif") || f.rfind("budget", 0) == 0 ||
-        f.rfind("spectrum", 0) == 0)
+        f.rfind("spectrum", 0) == 0 || (f.rfind("sets.", 0) == 0 && !f.ends_with(".pdf")))
       out += ", " + f;
   if (!report.empty()) out += ", " + report;
   if (!pvd.empty()) out += ", " + pvd;
