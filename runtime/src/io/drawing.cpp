@@ -152,37 +152,34 @@ Rgb category_colour(double v) {
   return kCurve[static_cast<std::size_t>(k - 1) % kCurve.size()];
 }
 
-/// A vertical colour bar in `r` for `scale`, labelled `label`.
-void draw_colour_bar(cairo_t* cr, const Rect& r, const ColourScale& scale,
-                     const std::string& label) {
-  if (scale.categories > 0) {
-    // One box per label, 0 at the bottom ("none"), each named at its side.
-    const int n = scale.categories + 1;
-    const double h = r.h / n;
-    set_font(cr, 10);
-    double widest = 0;
-    for (int k = 0; k < n; ++k) {
-      const double y = r.y + r.h - (k + 1) * h;
-      const Rgb c = category_colour(k);
-      cairo_set_source_rgb(cr, c.r, c.g, c.b);
-      cairo_rectangle(cr, r.x, y, r.w, h);
-      cairo_fill(cr);
-      set_colour(cr, kInk);
-      cairo_set_line_width(cr, 1.0);
-      cairo_rectangle(cr, r.x, y, r.w, h);
-      cairo_stroke(cr);
-      const std::string l = k == 0 ? "none" : std::to_string(k);
-      widest = std::max(widest, text_width(cr, l));
-      text(cr, r.x + r.w + 6, y + h / 2 + 3.5, l);
-    }
-    set_font(cr, 11);
-    cairo_save(cr);
-    cairo_translate(cr, r.x + r.w + 16 + widest, r.y + r.h / 2);
-    cairo_rotate(cr, M_PI / 2);
-    text(cr, 0, 0, label, 0.5);
-    cairo_restore(cr);
-    return;
+namespace {
+
+/// A categorical bar in `r`: one box per label, 0 at the bottom ("none"), each named at its
+/// side. Returns the widest name.
+double draw_category_boxes(cairo_t* cr, const Rect& r, const ColourScale& scale) {
+  const int n = scale.categories + 1;
+  const double h = r.h / n;
+  set_font(cr, 10);
+  double widest = 0;
+  for (int k = 0; k < n; ++k) {
+    const double y = r.y + r.h - (k + 1) * h;
+    const Rgb c = category_colour(k);
+    cairo_set_source_rgb(cr, c.r, c.g, c.b);
+    cairo_rectangle(cr, r.x, y, r.w, h);
+    cairo_fill(cr);
+    set_colour(cr, kInk);
+    cairo_set_line_width(cr, 1.0);
+    cairo_rectangle(cr, r.x, y, r.w, h);
+    cairo_stroke(cr);
+    const std::string l = k == 0 ? "none" : std::to_string(k);
+    widest = std::max(widest, text_width(cr, l));
+    text(cr, r.x + r.w + 6, y + h / 2 + 3.5, l);
   }
+  return widest;
+}
+
+/// The viridis ramp in `r` with its ticks (linear or log10). Returns the widest tick label.
+double draw_ramp(cairo_t* cr, const Rect& r, const ColourScale& scale) {
   cairo_pattern_t* g = cairo_pattern_create_linear(0, r.y + r.h, 0, r.y);
   for (int i = 0; i <= 32; ++i) {
     const Rgb c = colour_at(i / 32.0);
@@ -209,6 +206,16 @@ void draw_colour_bar(cairo_t* cr, const Rect& r, const ColourScale& scale,
     widest = std::max(widest, text_width(cr, l));
     text(cr, r.x + r.w + 6, py + 3.5, l);
   }
+  return widest;
+}
+
+}  // namespace
+
+/// A vertical colour bar in `r` for `scale`, labelled `label`.
+void draw_colour_bar(cairo_t* cr, const Rect& r, const ColourScale& scale,
+                     const std::string& label) {
+  const double widest =
+      scale.categories > 0 ? draw_category_boxes(cr, r, scale) : draw_ramp(cr, r, scale);
   set_font(cr, 11);
   cairo_save(cr);
   cairo_translate(cr, r.x + r.w + 16 + widest, r.y + r.h / 2);
