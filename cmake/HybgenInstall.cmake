@@ -3,10 +3,11 @@
 #   P/bin/hybgen
 #   P/include/hybgen/rt/...        the runtime's headers (the generated runners include them)
 #   P/lib/libhybgen_runner.a       the runtime compiled for 1..6 states (runners link it)
+#   P/lib/libhybgen_numerics.a     the eigen-solvers and almost-invariant sets (runners link it)
 #   P/lib/libhybgen_io.a           the writers (run.nc, pictures, arrays)
 #   P/lib/libhybgen_mpi.a          the MPI backend, when built (runners with backend=mpi)
 #   P/lib/cmake/hybgen/            hybgenConfig.cmake: find_package(hybgen) gives hybgen::rt,
-#                                  hybgen::io and hybgen::runner
+#                                  hybgen::numerics, hybgen::io and hybgen::runner
 #   P/lib/python3.X/dist-packages/hybgen/
 #                                  the Python package (python/hybgen): hybgen.run and
 #                                  hybgen.sweep call P/bin/hybgen and open its outputs
@@ -20,8 +21,9 @@ install(TARGETS hybgen RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 install(DIRECTORY runtime/include/hybgen DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 set_target_properties(hybgen_rt PROPERTIES EXPORT_NAME rt)
 set_target_properties(hybgen_io PROPERTIES EXPORT_NAME io)
+set_target_properties(hybgen_numerics PROPERTIES EXPORT_NAME numerics)
 set_target_properties(hybgen_runner PROPERTIES EXPORT_NAME runner)
-install(TARGETS hybgen_rt hybgen_io hybgen_runner EXPORT hybgenTargets
+install(TARGETS hybgen_rt hybgen_numerics hybgen_io hybgen_runner EXPORT hybgenTargets
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR})
 if(HYBGEN_WITH_MPI)
   # A file beside the others, not an exported target: runners link it by path (build.cpp).

@@ -2,8 +2,8 @@
 # CI's hardening stage (docs/hardening.md), after the README's test command:
 #  1. the test suite under AddressSanitizer + UndefinedBehaviorSanitizer
 #     (CMake preset `asan`: hybgen, the tests and every generated runner the
-#     tests build), in build-asan/: every unit and validation test and a chosen
-#     five of the end-to-end tests (see below);
+#     tests build), in build-asan/: every unit test, the validation tests that run
+#     `hybgen run`, and a chosen five of the end-to-end tests (see below);
 #  2. a fuzz smoke run of about a minute (fuzz/run.sh smoke), in build-fuzz/.
 # Any sanitizer report fails a test (halt_on_error), any fuzzer finding fails
 # the smoke run. Set HYBGEN_SKIP_HARDENING=1 to skip both (local use).
@@ -17,20 +17,16 @@ start=$SECONDS
 echo "ci-hardening: ASan + UBSan build (preset asan)" >&2
 cmake --preset asan >/dev/null
 t0=$SECONDS
-# Only what this stage runs: hybgen (and the runtime its runners link), every test
-# executable of tests/gen, tests/rt and tests/validation, and the three end-to-end
-# executables that hold the five tests below. The other end-to-end executables are not
-# compiled sanitized (their tests run unsanitized in the first stage).
-targets=(hybgen e2e_test_cli e2e_test_failures e2e_test_lie_models)
-for f in tests/gen/test_*.cpp tests/rt/test_*.cpp tests/validation/test_*.cpp; do
-  dir=${f#tests/}; dir=${dir%%/*}
-  name=$(basename "$f" .cpp)
-  targets+=("${dir}_${name}")
-done
-cmake --build --preset asan -j"$(nproc)" --target "${targets[@]}"
+# Only what this stage runs (the target hybgen_sanitized_suite, tests/CMakeLists.txt): hybgen
+# and the runtime its runners link, the unit tests of tests/gen and tests/rt, the validation
+# tests that run `hybgen run`, and the three end-to-end executables that hold the five tests
+# below. The validation tests with hand-written kernel structs and the other end-to-end
+# executables are not compiled sanitized (their tests run unsanitized in the first stage).
+cmake --build --preset asan -j"$(nproc)" --target hybgen_sanitized_suite
 echo "ci-hardening: sanitized build in $((SECONDS - t0)) s" >&2
 echo "ci-hardening: test suite under ASan + UBSan" >&2
-# Every test of tests/gen, tests/rt and tests/validation, and five end-to-end tests (label
+# Every test built above (tests/gen, tests/rt, the front-door tests of tests/validation), and
+# five end-to-end tests (label
 # e2e) that run the runner's paths the others cannot: every shipped model's generated kernels
 # (UBSan on generated code), the paper's configuration, the output transaction under a kill,
 # a numerical failure reported by a runner, and a Lie-group model. The other end-to-end tests
@@ -41,7 +37,7 @@ echo "ci-hardening: test suite under ASan + UBSan" >&2
 # density-level differential campaign 2 random models instead of 16 (each compiles a sanitized
 # runner; tests/validation/test_differential.cpp, HYBGEN_DIFFERENTIAL_MODELS).
 t0=$SECONDS
-# (The end-to-end executables left unbuilt above each register a placeholder test,
+# (The executables left unbuilt above each register a placeholder test,
 # <target>_NOT_BUILT, without a label: -E leaves them out. So are the two bouncing-ball runs of
 # the time-stepped generator on 257² nodes, which measure its order: the same code runs
 # sanitized on the 1-D and 3-D models of TheTimeSteppedGeneratorOnCyclesWallsAndSwitches and in

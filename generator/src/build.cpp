@@ -32,6 +32,9 @@
 #ifndef HYBGEN_IO_LIBRARY
 #error "HYBGEN_IO_LIBRARY (the path of hybgen::io) must be defined by the build"
 #endif
+#ifndef HYBGEN_NUMERICS_LIBRARY
+#error "HYBGEN_NUMERICS_LIBRARY (the path of hybgen::numerics) must be defined by the build"
+#endif
 #ifndef HYBGEN_INSTALL_BINDIR
 #define HYBGEN_INSTALL_BINDIR "bin"
 #endif
@@ -131,10 +134,11 @@ namespace {
 
 /// Where the runtime's headers and libraries are (RuntimeLocation).
 struct RuntimeLocation {
-  std::string include;         ///< The directory holding hybgen/rt/.
-  std::string runner_library;  ///< libhybgen_runner.a (hybgen::runner).
-  std::string io_library;      ///< libhybgen_io.a (hybgen::io).
-  std::string mpi_library;     ///< libhybgen_mpi.a (hybgen::mpi), "" without the backend.
+  std::string include;           ///< The directory holding hybgen/rt/.
+  std::string runner_library;    ///< libhybgen_runner.a (hybgen::runner).
+  std::string numerics_library;  ///< libhybgen_numerics.a (hybgen::numerics).
+  std::string io_library;        ///< libhybgen_io.a (hybgen::io).
+  std::string mpi_library;       ///< libhybgen_mpi.a (hybgen::mpi), "" without the backend.
 };
 
 /// The MPI backend's library in the build tree, "" when hybgen was built without it.
@@ -162,14 +166,16 @@ const RuntimeLocation& runtime_location() {
       const RuntimeLocation installed{
           (prefix / HYBGEN_INSTALL_INCLUDEDIR).string(),
           (prefix / HYBGEN_INSTALL_LIBDIR / "libhybgen_runner.a").string(),
+          (prefix / HYBGEN_INSTALL_LIBDIR / "libhybgen_numerics.a").string(),
           (prefix / HYBGEN_INSTALL_LIBDIR / "libhybgen_io.a").string(),
           *kBuildTreeMpiLibrary != '\0' && fs::exists(mpi) ? mpi.string() : std::string()};
       if (fs::exists(fs::path(installed.include) / "hybgen/rt/runner.hpp") &&
-          fs::exists(installed.runner_library) && fs::exists(installed.io_library))
+          fs::exists(installed.runner_library) && fs::exists(installed.numerics_library) &&
+          fs::exists(installed.io_library))
         return installed;
     }
-    return RuntimeLocation{HYBGEN_RUNTIME_INCLUDE, HYBGEN_RUNTIME_LIBRARY, HYBGEN_IO_LIBRARY,
-                           kBuildTreeMpiLibrary};
+    return RuntimeLocation{HYBGEN_RUNTIME_INCLUDE, HYBGEN_RUNTIME_LIBRARY, HYBGEN_NUMERICS_LIBRARY,
+                           HYBGEN_IO_LIBRARY, kBuildTreeMpiLibrary};
   }();
   return where;
 }
@@ -191,11 +197,12 @@ std::string runtime_fingerprint(bool library, bool mpi, const fs::path& memo_dir
   }
   try {
     if (library) all += "library\n" + file_sha256(rt.runner_library, memo_dir) + '\n';
+    all += "numerics\n" + file_sha256(rt.numerics_library, memo_dir) + '\n';
     all += "writers\n" + file_sha256(rt.io_library, memo_dir) + '\n';
     if (mpi) all += "mpi\n" + file_sha256(rt.mpi_library, memo_dir) + '\n';
   } catch (const std::exception& e) {
     throw BuildError(std::string("the runtime library is missing (build the targets "
-                                 "hybgen_runner and hybgen_io): ") +
+                                 "hybgen_runner, hybgen_numerics and hybgen_io): ") +
                      e.what());
   }
   return sha256_hex(all);
@@ -350,6 +357,7 @@ BuildResult build_runner(const GeneratedFiles& files, const std::string& model_n
   const std::string libs =
       (options.mpi ? shell_quote(runtime_location().mpi_library) + " " : std::string()) +
       (library ? shell_quote(runtime_location().runner_library) + " " : std::string()) +
+      shell_quote(runtime_location().numerics_library) + " " +
       shell_quote(runtime_location().io_library) + " " + HYBGEN_RUNNER_LIBS +
       // NetCDF: the serial library, or in an MPI runner the parallel one (in HYBGEN_MPI_LIBS),
       // never both: the writers' calls and parallel_io.cpp's must reach the same library.

@@ -50,16 +50,6 @@
 /// holding the node, in its segment; a node on a cut (a wall inside the box) has two one-sided
 /// values and gets their mean, and is flagged (`on_jump`), since the density may jump there.
 
-// See transfer.hpp: GCC 12's flow-sensitive warnings misfire inside Eigen.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wnull-dereference"
-#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuse-after-free"
-#endif
-#include <Eigen/SparseCore>
-#pragma GCC diagnostic pop
-
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -70,6 +60,7 @@
 
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/core/names.hpp"
+#include "hybgen/rt/core/sparse.hpp"
 #include "hybgen/rt/methods/generator_geometry.hpp"
 #include "hybgen/rt/model.hpp"
 

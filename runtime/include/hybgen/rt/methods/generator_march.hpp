@@ -45,16 +45,6 @@
 /// Node values at the output times: fv_node_values (generator.hpp), nodes on a cut averaged;
 /// at t = 0, u0 at the nodes (transfer.hpp's initial_vector).
 
-// See transfer.hpp: GCC 12's flow-sensitive warnings misfire inside Eigen.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wnull-dereference"
-#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuse-after-free"
-#endif
-#include <Eigen/SparseCore>
-#pragma GCC diagnostic pop
-
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -70,6 +60,7 @@
 
 #include "hybgen/rt/core/grid.hpp"
 #include "hybgen/rt/core/solution.hpp"
+#include "hybgen/rt/core/sparse.hpp"
 #include "hybgen/rt/io/progress.hpp"
 #include "hybgen/rt/methods/generator.hpp"
 #include "hybgen/rt/methods/transfer.hpp"

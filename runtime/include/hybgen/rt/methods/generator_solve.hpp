@@ -32,18 +32,6 @@
 /// which falls like n^{−p}). The observed order log2(D((n+3)/4 → (n+1)/2) / D) says whether
 /// the estimate is in its asymptotic regime (`error_reliable`, two_grid.hpp's `order_near`).
 
-// See transfer.hpp: GCC 12's flow-sensitive warnings misfire inside Eigen/Spectra.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wnull-dereference"
-#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuse-after-free"
-#endif
-#include <Spectra/GenEigsRealShiftSolver.h>
-#include <Spectra/MatOp/SparseGenRealShiftSolve.h>
-#include <Eigen/SparseLU>
-#pragma GCC diagnostic pop
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -55,9 +43,11 @@
 #include <vector>
 
 #include "hybgen/rt/core/grid.hpp"
+#include "hybgen/rt/core/sparse.hpp"
 #include "hybgen/rt/methods/generator.hpp"
 #include "hybgen/rt/methods/two_grid.hpp"
 #include "hybgen/rt/model.hpp"
+#include "hybgen/rt/numerics/eigen_solvers.hpp"
 
 namespace hybgen::rt {
 
@@ -138,17 +128,17 @@ FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const doubl
   SpMat A(n + 1, n + 1);
   A.setFromTriplets(t.begin(), t.end());
   A.makeCompressed();
-  Eigen::SparseLU<SpMat, Eigen::COLAMDOrdering<int>> lu;
-  lu.compute(A);
-  if (lu.info() != Eigen::Success) {
-    s.failure = "the bordered generator is singular (" + lu.lastErrorMessage() +
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + 1);
+  rhs[n] = 1.0;
+  std::string lu_error;
+  const std::optional<Eigen::VectorXd> solved = sparse_lu_solve(A, rhs, &lu_error);
+  if (!solved) {
+    s.failure = "the bordered generator is singular (" + lu_error +
                 "): the null space has several dimensions (a region the flow never leaves, "
                 "or a rest point on a face?)";
     return s;
   }
-  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + 1);
-  rhs[n] = 1.0;
-  const Eigen::VectorXd sol = lu.solve(rhs);
+  const Eigen::VectorXd& sol = *solved;
   std::vector<double> u(sol.data(), sol.data() + n);
   s.sigma = sol[n];
   // Spectrum of L near the shift.
@@ -160,15 +150,12 @@ FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const doubl
   if (nev >= 1) {
     const Eigen::Index ncv = std::min<Eigen::Index>(n, std::max<Eigen::Index>(2 * nev + 1, 30));
     try {
-      Spectra::SparseGenRealShiftSolve<double> shift(L);
-      Spectra::GenEigsRealShiftSolver<Spectra::SparseGenRealShiftSolve<double>> eigs(
-          shift, nev, ncv, -kFvShift * s.rate);
-      eigs.init();
-      eigs.compute(Spectra::SortRule::LargestMagn, 1000, o.tol, Spectra::SortRule::LargestMagn);
-      s.iterations = static_cast<long>(eigs.num_iterations());
-      if (eigs.info() == Spectra::CompInfo::Successful) {
+      const EigenPairs eigs = eigenpairs_near(L, nev, ncv, -kFvShift * s.rate, 1000, o.tol);
+      s.iterations = eigs.iterations;
+      if (eigs.converged) {
         s.eigen_converged = true;
-        const Eigen::VectorXcd ev = eigs.eigenvalues();
+        const Eigen::Map<const Eigen::VectorXcd> ev(eigs.values.data(),
+                                                    static_cast<Eigen::Index>(eigs.values.size()));
         std::vector<Eigen::Index> order(static_cast<std::size_t>(ev.size()));
         for (Eigen::Index k = 0; k < ev.size(); ++k) order[static_cast<std::size_t>(k)] = k;
         std::stable_sort(order.begin(), order.end(), [&](Eigen::Index a, Eigen::Index b) {
@@ -198,7 +185,7 @@ FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const doubl
         // Mass leaves the box: the density is μ₁'s eigenvector (real: rotate its phase).
         s.leaks = s.sigma > tie && s.mu.front().real() < -tie;
         if (s.leaks) {
-          const Eigen::MatrixXcd V = eigs.eigenvectors();
+          const Eigen::MatrixXcd& V = eigs.vectors;
           const Eigen::Index k = order.front();
           Eigen::Index big = 0;
           for (Eigen::Index r = 1; r < n; ++r)

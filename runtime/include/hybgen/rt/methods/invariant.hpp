@@ -29,17 +29,6 @@
 /// cycle of the test at 51 … 401 nodes, where 4 in 20 or 6 in 30 do not. Memory: ncv
 /// vectors of the operator's size (60 × 8 MB at 1025²).
 
-// See transfer.hpp: GCC 12's flow-sensitive warnings misfire inside Eigen/Spectra.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wnull-dereference"
-#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuse-after-free"
-#endif
-#include <Spectra/GenEigsSolver.h>
-#include <Spectra/MatOp/SparseGenMatProd.h>
-#pragma GCC diagnostic pop
-
 #include <algorithm>
 #include <cmath>
 #include <complex>
@@ -50,7 +39,9 @@
 #include <vector>
 
 #include "hybgen/rt/core/backend.hpp"
+#include "hybgen/rt/core/sparse.hpp"
 #include "hybgen/rt/methods/transfer.hpp"
+#include "hybgen/rt/numerics/eigen_solvers.hpp"
 
 namespace hybgen::rt {
 
@@ -173,20 +164,15 @@ InvariantResult invariant_density(const TransferOperator<N>& op, const Invariant
     const Eigen::Index nev = std::min<Eigen::Index>(std::max(opt.n_eigen, opt.search), n - 2);
     const Eigen::Index ncv = std::min<Eigen::Index>(
         n, opt.ncv > 0 ? opt.ncv : std::max<Eigen::Index>(2 * nev + 1, 5 * nev));
-    Spectra::SparseGenMatProd<double, Eigen::RowMajor, int> prod(op.P);
-    Spectra::GenEigsSolver<Spectra::SparseGenMatProd<double, Eigen::RowMajor, int>> eigs(prod, nev,
-                                                                                         ncv);
     const Eigen::VectorXd start = Eigen::VectorXd::Ones(n);
-    eigs.init(start.data());
-    eigs.compute(Spectra::SortRule::LargestMagn, opt.max_restarts, opt.tol,
-                 Spectra::SortRule::LargestMagn);
-    res.iterations = static_cast<long>(eigs.num_iterations());
-    if (eigs.info() == Spectra::CompInfo::Successful) {
-      const Eigen::VectorXcd evx = eigs.eigenvalues();
-      const std::vector<std::complex<double>> ev(evx.data(), evx.data() + evx.size());
+    const EigenPairs eigs =
+        largest_eigenpairs(op.P, nev, ncv, start.data(), opt.max_restarts, opt.tol);
+    res.iterations = eigs.iterations;
+    if (eigs.converged) {
+      const std::vector<std::complex<double>>& ev = eigs.values;
       const int lead = perron_index(ev);
       if (lead >= 0) {
-        const Eigen::MatrixXcd vecs = eigs.eigenvectors();
+        const Eigen::MatrixXcd& vecs = eigs.vectors;
         // A real eigenvalue's eigenvector up to a complex phase: rotate its largest entry real.
         Eigen::Index big = 0;
         for (Eigen::Index r = 1; r < n; ++r)

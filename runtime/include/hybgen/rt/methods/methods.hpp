@@ -232,17 +232,25 @@ TransferOperator<state_dim_v<M>> assemble(const TensorGrid<state_dim_v<M>>& grid
   return assemble_transfer<M>(grid, par, o);
 }
 
+/// The one frame of a method that answers with one density ([mode][node], n_mode × n_point
+/// entries): `density` as frame `method.frame`.
+template <std::size_t N>
+void set_density_frame(MethodResult<N>& r, std::size_t n_mode, std::size_t n_point,
+                       std::vector<double> density, const MethodSpec& method) {
+  r.solution.n_time = 1;
+  r.solution.n_mode = n_mode;
+  r.solution.n_point = n_point;
+  r.solution.u = std::move(density);
+  r.frame_names = {std::string(method.frame)};
+}
+
 /// The one frame of a method that answers with the leading eigenvector of `op` (invariant,
 /// escape): `inv`'s density as frame `method.frame`, distributed as the operator is.
 template <std::size_t N>
 void set_eigenvector_frame(MethodResult<N>& r, const TransferOperator<N>& op,
                            const InvariantResult& inv, const MethodSpec& method) {
-  r.solution.n_time = 1;
-  r.solution.n_mode = op.n_mode;
-  r.solution.n_point = op.n_node;
-  r.solution.u = inv.density;
+  set_density_frame(r, op.n_mode, op.n_node, inv.density, method);
   if (op.distributed) r.solution.distributed = true, r.solution.owned = inv.owned;
-  r.frame_names = {std::string(method.frame)};
 }
 
 /// A coarser grid's one-frame answer (an eigenvector, [mode][node]) for the observables'
@@ -1366,11 +1374,8 @@ MethodResult<state_dim_v<M>> solve_by_almost_invariant(const TensorGrid<state_di
   if (!coarse) return r;
   r.solve_s = detail::seconds_since(t0);
   const std::size_t n_mode = static_cast<std::size_t>(M::n_mode);
-  r.solution.n_time = 1;
-  r.solution.n_mode = n_mode;
-  r.solution.n_point = grid.size();
-  r.solution.u = fine->inv.density;
-  r.frame_names = {std::string(method_spec(Method::almost_invariant).frame)};
+  detail::set_density_frame(r, n_mode, grid.size(), fine->inv.density,
+                            method_spec(Method::almost_invariant));
   r.observable_errors = ObservableErrorKind::coarse, r.order = 1;
   detail::keep_coarse_frame(r, half, coarse->inv.density, n_mode);
   r.set_label = fine->sets.label;
@@ -1452,10 +1457,6 @@ MethodResult<state_dim_v<M>> solve_by_almost_invariant(const TensorGrid<state_di
     r.warnings.push_back(
         "a set has no counterpart on the halved grid (the sets change with the grid): its "
         "errors are not estimated; refine the grid");
-  if (fine->sets.unassigned > 0.05)
-    r.warnings.push_back("invariant mass " + std::to_string(fine->sets.unassigned) +
-                         " is in no set (the eigenvectors do not separate it): fewer sets, or a "
-                         "finer grid");
   if (!fine->sets.converged || !coarse->sets.converged)
     r.warnings.push_back("the eigen-solver of the sets did not meet its tolerance");
   return r;

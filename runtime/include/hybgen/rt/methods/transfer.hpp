@@ -59,18 +59,6 @@
 /// Size: the hat deposit, the sampling of each cell by the forward flow, the
 /// CSR assembly and the per-column outflow and atom bookkeeping that keep the mass exact.
 
-// GCC 12's flow-sensitive warnings (null-dereference, use-after-free, maybe-uninitialized
-// with AVX-512) misfire inside Eigen's and Spectra's headers after inlining, despite
-// -isystem: silenced for those headers only.
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wnull-dereference"
-#if defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 12
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#pragma GCC diagnostic ignored "-Wuse-after-free"
-#endif
-#include <Eigen/SparseCore>
-#pragma GCC diagnostic pop
-
 #include <algorithm>
 #include <array>
 #include <atomic>
@@ -93,6 +81,7 @@
 #include "hybgen/rt/core/names.hpp"
 #include "hybgen/rt/core/ode.hpp"
 #include "hybgen/rt/core/solution.hpp"
+#include "hybgen/rt/core/sparse.hpp"
 #include "hybgen/rt/io/progress.hpp"
 #include "hybgen/rt/methods/forward.hpp"
 #include "hybgen/rt/model.hpp"
@@ -165,7 +154,6 @@ inline constexpr std::size_t kMaxSamplesPerCell = std::size_t{1} << 20;
 
 /// Compressed sparse row matrix with int32 column indices and row pointers: each mat-vec
 /// streams 8 + 4 bytes per nonzero and 4 per row (int64 indices would add a third).
-using CsrMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
 
 /// One step of the hybrid Frobenius–Perron evolution as a sparse matrix acting on node masses.
 template <std::size_t N>
