@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "hybgen/rt/numerics/eigen_solvers.hpp"
+#include "set_ranking.hpp"
 
 // See hybgen/rt/core/sparse.hpp: GCC 12's flow-sensitive warnings misfire inside Eigen and
 // Spectra, whose solvers this file instantiates.
@@ -74,34 +75,6 @@ Seba seba(const Eigen::MatrixXd& V_in) {
 
 }  // namespace detail
 
-namespace {
-
-/// Connected components of the graph of the symmetric sparse S: component index per row.
-std::vector<std::size_t> components(const Eigen::SparseMatrix<double>& S, std::size_t* count) {
-  const auto n = static_cast<std::size_t>(S.rows());
-  std::vector<std::size_t> comp(n, n);
-  std::vector<std::size_t> stack;
-  std::size_t c = 0;
-  for (std::size_t s = 0; s < n; ++s) {
-    if (comp[s] != n) continue;
-    comp[s] = c;
-    stack.push_back(s);
-    while (!stack.empty()) {
-      const std::size_t i = stack.back();
-      stack.pop_back();
-      for (Eigen::SparseMatrix<double>::InnerIterator e(S, static_cast<Eigen::Index>(i)); e; ++e) {
-        const auto j = static_cast<std::size_t>(e.row());
-        if (comp[j] == n && e.value() != 0.0) comp[j] = c, stack.push_back(j);
-      }
-    }
-    ++c;
-  }
-  *count = c;
-  return comp;
-}
-
-}  // namespace
-
 AlmostInvariantSets almost_invariant_sets(const CsrMatrix& P, std::span<const double> mu, int K,
                                           std::size_t n_mode, double tol) {
   const auto n = static_cast<std::size_t>(P.rows());
@@ -136,59 +109,32 @@ AlmostInvariantSets almost_invariant_sets(const CsrMatrix& P, std::span<const do
   Eigen::SparseMatrix<double> S(static_cast<Eigen::Index>(s), static_cast<Eigen::Index>(s));
   S.setFromTriplets(trip.begin(), trip.end());
   S.makeCompressed();
-  // Per component, its leading eigenpairs.
-  std::vector<std::size_t> comp = components(S, &out.components);
-  std::vector<std::vector<std::size_t>> members(out.components);
-  for (std::size_t i = 0; i < s; ++i) members[comp[i]].push_back(i);
-  struct Pair {
-    double lambda;
-    std::size_t component;
-    Eigen::VectorXd vector;  // on the component's members
-  };
-  std::vector<Pair> pairs;
-  for (std::size_t c = 0; c < out.components; ++c) {
-    const std::vector<std::size_t>& m = members[c];
-    const auto size = static_cast<Eigen::Index>(m.size());
-    std::vector<std::size_t> local(s, s);
-    for (std::size_t i = 0; i < m.size(); ++i) local[m[i]] = i;
-    std::vector<Eigen::Triplet<double>> t;
-    for (const std::size_t i : m)
-      for (Eigen::SparseMatrix<double>::InnerIterator e(S, static_cast<Eigen::Index>(i)); e; ++e)
-        t.emplace_back(static_cast<int>(local[static_cast<std::size_t>(e.row())]),
-                       static_cast<int>(local[i]), e.value());
-    Eigen::SparseMatrix<double> Sc(size, size);
-    Sc.setFromTriplets(t.begin(), t.end());
-    const Eigen::Index want = std::min<Eigen::Index>(static_cast<Eigen::Index>(k), size);
-    // Shift-invert about σ = 1 + kShift above kDenseComponent nodes: σ lies above every
-    // eigenvalue (S is similar to a (sub)stochastic chain), and the eigenvalues near 1 that
-    // almost-invariant sets make, which cluster within 1e-5 of each other on a diffusive
-    // operator (plain Lanczos stalls there), map to the well separated 1/(λ − σ).
-    const SymmetricEigenPairs e = largest_symmetric_eigenpairs(
-        Sc, want, 1.0 + kShift, tol, static_cast<Eigen::Index>(kDenseComponent));
-    if (!e.converged) {
-      out.converged = false;
-      continue;
-    }
-    for (Eigen::Index q = 0; q < want; ++q) pairs.push_back({e.values(q), c, e.vectors.col(q)});
-  }
-  for (const Pair& p : pairs)
-    if (p.lambda > 1.0 - kOpenSystem) ++out.invariant_pieces;
-  if (pairs.size() < k)
+  // Per component of S's graph, its leading eigenpairs. Shift-invert about σ = 1 + kShift above
+  // kDenseComponent nodes: σ lies above every eigenvalue (S is similar to a (sub)stochastic
+  // chain), and the eigenvalues near 1 that almost-invariant sets make, which cluster within
+  // 1e-5 of each other on a diffusive operator (plain Lanczos stalls there), map to the well
+  // separated 1/(λ − σ).
+  const ComponentEigenPairs pairs =
+      largest_eigenpairs_by_component(S, static_cast<Eigen::Index>(k), 1.0 + kShift, tol,
+                                      static_cast<Eigen::Index>(kDenseComponent));
+  out.components = pairs.members.size();
+  out.converged = pairs.converged;
+  for (const double lambda : pairs.values)
+    if (lambda > 1.0 - kOpenSystem) ++out.invariant_pieces;
+  if (pairs.values.size() < k)
     throw std::invalid_argument("almost-invariant sets: the eigen-solver found " +
-                                std::to_string(pairs.size()) + " eigenvalue(s), fewer than " +
-                                std::to_string(K));
-  std::stable_sort(pairs.begin(), pairs.end(),
-                   [](const Pair& a, const Pair& b) { return a.lambda > b.lambda; });
+                                std::to_string(pairs.values.size()) +
+                                " eigenvalue(s), fewer than " + std::to_string(K));
   // The eigenfunctions φ = ψ/√μ on the support, K columns.
   Eigen::MatrixXd phi =
       Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(s), static_cast<Eigen::Index>(k));
   for (std::size_t q = 0; q < k; ++q) {
-    const std::vector<std::size_t>& m = members[pairs[q].component];
+    const std::vector<std::size_t>& m = pairs.members[pairs.component[q]];
     for (std::size_t i = 0; i < m.size(); ++i)
       phi(static_cast<Eigen::Index>(m[i]), static_cast<Eigen::Index>(q)) =
-          pairs[q].vector(static_cast<Eigen::Index>(i)) / std::sqrt(mu[node[m[i]]]);
-    out.eigenvalues.push_back(pairs[q].lambda);
-    out.bound += pairs[q].lambda;
+          pairs.vectors[q](static_cast<Eigen::Index>(i)) / std::sqrt(mu[node[m[i]]]);
+    out.eigenvalues.push_back(pairs.values[q]);
+    out.bound += pairs.values[q];
   }
   const detail::Seba basis = detail::seba(phi);
   out.seba_iterations = basis.iterations;
@@ -208,13 +154,7 @@ AlmostInvariantSets almost_invariant_sets(const CsrMatrix& P, std::span<const do
       mass[q] += mu[node[i]];
       first[q] = std::min(first[q], i);
     }
-  std::vector<std::size_t> order(k);
-  std::iota(order.begin(), order.end(), std::size_t{0});
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-    return mass[a] != mass[b] ? mass[a] > mass[b] : first[a] < first[b];
-  });
-  std::vector<std::int32_t> rank(k);
-  for (std::size_t q = 0; q < k; ++q) rank[order[q]] = static_cast<std::int32_t>(q) + 1;
+  const std::vector<std::int32_t> rank = detail::rank_by_mass(mass, first);
   for (std::size_t i = 0; i < s; ++i)
     if (raw[i] > 0) out.label[node[i]] = rank[static_cast<std::size_t>(raw[i] - 1)];
   // Each set's mass, modes and ratio Σ_{c∈A} Σ_{j∈A} P_jc μ_c / μ(A).

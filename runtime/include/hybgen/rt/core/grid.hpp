@@ -4,6 +4,7 @@
 /// the .npy files), the 1-D quadrature rules the budgets build tensor cubatures from, and the
 /// check every method makes of its output times.
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -87,6 +88,19 @@ struct TensorGrid {
       flat /= n;
     }
     return y;
+  }
+  /// The flat index of the node nearest `y` (per axis; a point outside the box goes to the
+  /// nearest face's node).
+  std::size_t nearest(const std::array<double, N>& y) const {
+    std::size_t flat = 0;
+    for (std::size_t a = 0; a < N; ++a) {
+      const GridAxis& ax = axes[a];
+      const double h = ax.n > 1 ? (ax.max - ax.min) / (ax.n - 1) : 1.0;
+      const double k = std::clamp(std::round((y[a] - ax.min) / h), 0.0,
+                                  static_cast<double>(std::max(ax.n, 1) - 1));
+      flat = flat * static_cast<std::size_t>(std::max(ax.n, 1)) + static_cast<std::size_t>(k);
+    }
+    return flat;
   }
 };
 

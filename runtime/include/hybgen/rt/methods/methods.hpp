@@ -1275,16 +1275,7 @@ std::vector<int> match_sets(const TensorGrid<N>& grid, const AlmostInvariantSets
     for (std::size_t i = 0; i < n; ++i) {
       const std::int32_t a = fine.label[m * n + i];
       if (a == 0) continue;
-      const std::array<double, N> y = grid.node(i);
-      std::size_t flat = 0;
-      for (std::size_t d = 0; d < N; ++d) {
-        const GridAxis& ax = half.axes[d];
-        const double h = ax.n > 1 ? (ax.max - ax.min) / (ax.n - 1) : 1.0;
-        const long j =
-            std::clamp(std::lround((y[d] - ax.min) / h), 0L, static_cast<long>(ax.n - 1));
-        flat = flat * static_cast<std::size_t>(ax.n) + static_cast<std::size_t>(j);
-      }
-      const std::int32_t b = coarse.label[m * half.size() + flat];
+      const std::int32_t b = coarse.label[m * half.size() + half.nearest(grid.node(i))];
       if (b > 0)
         overlap[static_cast<std::size_t>(a - 1) * Kc + static_cast<std::size_t>(b - 1)] +=
             mu[m * n + i];

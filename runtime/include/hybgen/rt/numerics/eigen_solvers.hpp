@@ -8,6 +8,7 @@
 /// (docs/hardening.md).
 
 #include <complex>
+#include <cstddef>
 #include <optional>
 #include <string>
 #include <vector>
@@ -56,6 +57,27 @@ struct SymmetricEigenPairs {
 SymmetricEigenPairs largest_symmetric_eigenpairs(const CscMatrix& S, Eigen::Index want,
                                                  double sigma, double tol,
                                                  Eigen::Index dense_below);
+
+/// The leading eigenpairs of a symmetric S solved over the connected components of its graph.
+struct ComponentEigenPairs {
+  /// Per component, its min(`want`, size) largest eigenvalues; all of them by decreasing
+  /// value (ties: the earlier component first).
+  std::vector<double> values;
+  std::vector<std::size_t> component;  ///< The component of each value.
+  /// Each value's eigenvector on its component's `members` (unit 2-norm; 0 elsewhere).
+  std::vector<Eigen::VectorXd> vectors;
+  std::vector<std::vector<std::size_t>> members;  ///< Per component, its rows of S, increasing.
+  bool converged = true;  ///< Whether every component's solver met its tolerance.
+};
+
+/// ComponentEigenPairs of S: each connected component of S's graph (its nonzero entries)
+/// solved on its own by largest_symmetric_eigenpairs (σ, tol, dense_below); a component whose
+/// solver does not converge contributes nothing and clears `converged`. Where S is block
+/// diagonal an eigenvalue is repeated across the blocks (pieces that never exchange mass), and
+/// a Krylov solver started from one vector would find one vector of its eigenspace only.
+ComponentEigenPairs largest_eigenpairs_by_component(const CscMatrix& S, Eigen::Index want,
+                                                    double sigma, double tol,
+                                                    Eigen::Index dense_below);
 
 /// The solution of A x = b by a sparse LU (COLAMD ordering); std::nullopt when the
 /// factorisation fails, with the factorisation's message in `error`.
