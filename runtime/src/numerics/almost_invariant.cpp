@@ -83,11 +83,8 @@ AlmostInvariantSets almost_invariant_sets(const CsrMatrix& P, std::span<const do
   AlmostInvariantSets out;
   out.label.assign(n, 0);
   // The support: nodes with invariant mass; index in it per node (n: none).
-  double top = 0.0;
-  for (const double m : mu) top = std::max(top, m);
-  std::vector<std::size_t> at(n, n), node;
-  for (std::size_t i = 0; i < n; ++i)
-    if (mu[i] > kMassFloor * top) at[i] = node.size(), node.push_back(i);
+  std::vector<std::size_t> at;
+  const std::vector<std::size_t> node = detail::support_of(mu, at);
   const std::size_t s = node.size();
   const auto k = static_cast<std::size_t>(K);
   if (s < k + 1)

@@ -17,22 +17,6 @@ HYBGEN_EIGEN_WARNINGS_PUSH
 
 namespace hybgen::rt {
 
-namespace {
-
-/// The nodes whose mass is above kMassFloor of the largest; `at` gets each node's index among
-/// them (n: none).
-std::vector<std::size_t> support_of(std::span<const double> m, std::vector<std::size_t>& at) {
-  double top = 0.0;
-  for (const double x : m) top = std::max(top, x);
-  at.assign(m.size(), m.size());
-  std::vector<std::size_t> node;
-  for (std::size_t i = 0; i < m.size(); ++i)
-    if (m[i] > kMassFloor * top) at[i] = node.size(), node.push_back(i);
-  return node;
-}
-
-}  // namespace
-
 CoherentSets coherent_sets(const CsrMatrix& F, std::span<const double> p, int K, std::size_t n_mode,
                            double tol) {
   const auto n = static_cast<std::size_t>(F.rows());
@@ -46,7 +30,8 @@ CoherentSets coherent_sets(const CsrMatrix& F, std::span<const double> p, int K,
     for (CsrMatrix::InnerIterator e(F, static_cast<Eigen::Index>(j)); e; ++e)
       q[j] += e.value() * std::max(p[static_cast<std::size_t>(e.col())], 0.0);
   std::vector<std::size_t> at0, at1;
-  const std::vector<std::size_t> node0 = support_of(p, at0), node1 = support_of(q, at1);
+  const std::vector<std::size_t> node0 = detail::support_of(p, at0),
+                                 node1 = detail::support_of(q, at1);
   const std::size_t s0 = node0.size(), s1 = node1.size();
   for (const auto& [size, when] : {std::pair{s0, "initial"}, std::pair{s1, "final"}})
     if (size < k + 1)

@@ -27,7 +27,8 @@ HYBGEN_EIGEN_WARNINGS_POP
 namespace hybgen::rt {
 
 /// Compressed sparse rows, as a transfer operator's matrix is stored (row j holds what node j
-/// receives: M' = P M on node masses).
+/// receives: M' = P M on node masses), with int32 column indices and row pointers: each
+/// mat-vec streams 8 + 4 bytes per nonzero and 4 per row (int64 indices would add a third).
 using CsrMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
 
 /// Compressed sparse columns (Eigen's default), as the generator's matrices are stored.

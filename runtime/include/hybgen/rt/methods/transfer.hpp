@@ -152,9 +152,6 @@ inline constexpr double kStepBudgetTol = 1e-12;
 /// Most sample points per cell (samples_per_axis^N) `assemble_transfer` accepts.
 inline constexpr std::size_t kMaxSamplesPerCell = std::size_t{1} << 20;
 
-/// Compressed sparse row matrix with int32 column indices and row pointers: each mat-vec
-/// streams 8 + 4 bytes per nonzero and 4 per row (int64 indices would add a third).
-
 /// One step of the hybrid Frobenius–Perron evolution as a sparse matrix acting on node masses.
 template <std::size_t N>
 struct TransferOperator {
