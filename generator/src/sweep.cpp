@@ -291,6 +291,15 @@ nlohmann::ordered_json sweep_row(const nlohmann::json& s) {
       for (const char* key : {"mass", "mass_error", "ratio", "ratio_error"})
         put_number(row, p + "_" + key, set, key);
     }
+  // Each coherent pair's masses and ratios with their errors (pair1_forward, …).
+  if (s.contains(k::coherent) && s[k::coherent].contains("sets"))
+    for (const auto& set : s[k::coherent]["sets"]) {
+      const std::string p = "pair" + std::to_string(set.value("set", 0));
+      for (const char* key :
+           {"initial_mass", "initial_mass_error", "final_mass", "final_mass_error", "forward",
+            "forward_error", "backward", "backward_error"})
+        put_number(row, p + "_" + key, set, key);
+    }
   // Each trap's absorbed mass at the final time and its error (absorbed_NAME, …_error).
   if (s.contains(k::absorbed) && s[k::absorbed].is_object())
     for (const auto& [name, a] : s[k::absorbed].items()) {

@@ -124,6 +124,28 @@ TEST(Sweep, RowTakesTheFinalTimeAndTheMethodsFields) {
   EXPECT_EQ(re["escape_rate"], 2.5);
   EXPECT_EQ(re["escape_rate_error"], 0.125);
   EXPECT_FALSE(re.contains("spectral_gap"));
+
+  // method=coherent: each pair's masses and ratios with their errors (pairK_…), beside the
+  // budget at t_end; a missing error (no coarse counterpart) leaves its cell empty.
+  const nlohmann::json coh = nlohmann::json::parse(R"({
+    "method": "coherent", "times": [0, 2], "initial_mass": 1.5, "mass": [1.5, 1.5],
+    "coherent": {"sets": [
+      {"set": 1, "initial_mass": 1.0, "initial_mass_error": 0.5, "final_mass": 0.75,
+       "final_mass_error": 0.25, "forward": 0.875, "forward_error": 0.0625, "backward": 0.625,
+       "backward_error": null},
+      {"set": 2, "initial_mass": 0.5, "forward": 0.5, "backward": 0.25}]}})");
+  const auto rc = sweep_row(coh);
+  EXPECT_EQ(rc["t"], 2);
+  EXPECT_EQ(rc["pair1_initial_mass"], 1.0);
+  EXPECT_EQ(rc["pair1_initial_mass_error"], 0.5);
+  EXPECT_EQ(rc["pair1_final_mass"], 0.75);
+  EXPECT_EQ(rc["pair1_forward"], 0.875);
+  EXPECT_EQ(rc["pair1_forward_error"], 0.0625);
+  EXPECT_EQ(rc["pair1_backward"], 0.625);
+  EXPECT_FALSE(rc.contains("pair1_backward_error"));
+  EXPECT_EQ(rc["pair2_forward"], 0.5);
+  EXPECT_EQ(rc["pair2_backward"], 0.25);
+  EXPECT_FALSE(rc.contains("set1_mass"));
 }
 
 TEST(Sweep, CsvHasEveryColumnAndExactNumbers) {

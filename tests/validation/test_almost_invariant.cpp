@@ -20,6 +20,7 @@
 
 #include "hybgen/rt/exit_codes.hpp"
 #include "support/e2e.hpp"
+#include "support/fold_map.hpp"
 #include "support/netcdf_series.hpp"
 
 namespace {
@@ -123,14 +124,7 @@ TEST(AlmostInvariantSets, ThreeSetsBySebaAreThreeCyclesInBothModes) {
     }
 }
 
-/// The fold map of fold_halves.model (its comment): continuous, piecewise linear, with
-/// g(1 − x) = 1 − g(x); on [0, 1/2] up from 0 to P at 1/6, down to 0 at 1/3, up to 1/2.
-double fold(double x, double P) {
-  if (x > 0.5) return 1.0 - fold(1.0 - x, P);
-  if (x < 1.0 / 6.0) return 6.0 * P * x;
-  if (x < 1.0 / 3.0) return P - 6.0 * P * (x - 1.0 / 6.0);
-  return 3.0 * (x - 1.0 / 3.0);
-}
+using hybgen::testing::fold;
 
 TEST(AlmostInvariantSets, AFoldMapsHalvesAndTheProbabilityOfStayingInThem) {
   // The sets: run.nc's labels on 240 × 5 nodes (x slowest; no node on a kink of g, where its

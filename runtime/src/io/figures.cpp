@@ -270,10 +270,12 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
     const Rect r = panel_rect(l, i);
     const ColourScale& s = plan.scales[panels[i].scale];
     draw_heat_panel(cr, r, panels[i], s);
-    const std::string label = !run.what.empty()
-                                  ? std::string("almost-invariant set")
-                                  : std::string(s.log ? "log scale: " : "") +
-                                        (run.axes.size() > 2 ? "marginal density" : "density u");
+    const std::string label =
+        !run.what.empty()
+            ? std::string(run.method == method_spec(Method::coherent).name ? "coherent pair"
+                                                                           : "almost-invariant set")
+            : std::string(s.log ? "log scale: " : "") +
+                  (run.axes.size() > 2 ? "marginal density" : "density u");
     draw_colour_bar(cr, {r.x + r.w + 12, r.y, kBar, r.h}, s, label);
   }
   // The guards' legend (names), under the title.
@@ -512,35 +514,58 @@ FigureGeometry frame_geometry(const RunRecord& run) {
 
 namespace {
 
-/// sets.png (and .pdf, .svg as asked): the almost-invariant sets' labels drawn as a frame, a
-/// panel per mode (a marginal's panels in 3-D and more show the labels' sums: the picture is
-/// for 1-D and 2-D).
+/// sets.png (and .pdf, .svg as asked): the sets' labels drawn as a frame, a panel per mode (a
+/// marginal's panels in 3-D and more show the labels' sums: the picture is for 1-D and 2-D).
+/// Labels at two times (method=coherent, [frame][mode][node]): the two frames side by side,
+/// the pairs' initial sets on the left and their final sets on the right, in the same colours.
 void write_sets_figure(const RunRecord& run, FigureRequest& request,
                        const std::filesystem::path& out) {
   const std::vector<double> labels(run.set_label.begin(), run.set_label.end());
+  const std::size_t per_frame = run.n_mode() * run.n_node();
+  const bool two_times =
+      !run.times.empty() && labels.size() == run.n_frame() * per_frame && run.n_frame() == 2;
   RunRecord sets = run;
   sets.density = labels;
-  sets.times.clear();
-  sets.frame_names = {"sets"};
-  sets.what = "almost-invariant sets (run.nc set_label)";
   sets.marginals = nullptr;
+  if (!two_times) {
+    sets.times.clear();
+    sets.frame_names = {"sets"};
+  }
+  const auto what = [&](std::size_t k) {
+    return two_times ? "coherent pairs at t = " + fixed3(run.times[k]) +
+                           (k == 0 ? ": initial sets" : ": final sets") + " (run.nc set_label)"
+                     : std::string("almost-invariant sets (run.nc set_label)");
+  };
   FramePlan plan = plan_frames(sets, "linear");
   int K = 0;
   for (const std::int32_t l : run.set_label) K = std::max(K, static_cast<int>(l));
   for (ColourScale& scale : plan.scales) scale.categories = std::max(K, 1);
-  const double W = plan.layout.width, H = plan.layout.height;
-  const auto draw = [&](cairo_t* cr) { draw_frame(cr, sets, plan, 0); };
+  const std::size_t frames = two_times ? 2 : 1;
+  const double W = plan.layout.width, H = plan.layout.height,
+               total_w = W * static_cast<double>(frames);
+  const auto draw = [&](cairo_t* cr) {
+    for (std::size_t k = 0; k < frames; ++k) {
+      sets.what = what(k);
+      cairo_save(cr);
+      const double x = W * static_cast<double>(k);
+      cairo_rectangle(cr, x, 0, W, H);
+      cairo_clip(cr);
+      cairo_translate(cr, x, 0);
+      draw_frame(cr, sets, plan, k);
+      cairo_restore(cr);
+    }
+  };
   if (request.png) {
     Raster raster;
-    to_png((out / "sets.png").string(), W, H, draw, raster);
+    to_png((out / "sets.png").string(), total_w, H, draw, raster);
     request.out.push_back("sets.png");
   }
   if (request.svg) {
-    to_svg((out / "sets.svg").string(), W, H, draw);
+    to_svg((out / "sets.svg").string(), total_w, H, draw);
     request.out.push_back("sets.svg");
   }
   if (request.pdf) {
-    to_pdf((out / "sets.pdf").string(), W, H, 1, [&](cairo_t* cr, std::size_t) { draw(cr); });
+    to_pdf((out / "sets.pdf").string(), total_w, H, 1, [&](cairo_t* cr, std::size_t) { draw(cr); });
     request.out.push_back("sets.pdf");
   }
 }

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <ctime>
 #include <set>
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -459,40 +460,75 @@ void write_netcdf(const std::string& path, const RunRecord& run, int deflate) {
             "tolerance/transfer_step");
   }
 
-  // The almost-invariant sets (almost_invariant): each node's set, and per set its mass and
-  // invariance ratio with their errors (methods/almost_invariant.hpp).
+  // The sets (almost_invariant, coherent): each node's set, at the one frame or at each of the
+  // two (methods/almost_invariant.hpp, methods/coherent.hpp), and per set its numbers with
+  // their errors, as the method's block of summary.json has them.
   int label_var = -1;
   std::vector<std::pair<int, std::vector<double>>> set_vars;
-  if (!run.set_label.empty() && !run.distributed && run.set_label.size() == n_mode * n_node) {
+  const bool per_frame_labels = series && run.set_label.size() == run.n_frame() * n_mode * n_node;
+  if (!run.set_label.empty() && !run.distributed &&
+      (run.set_label.size() == n_mode * n_node || per_frame_labels)) {
+    const bool coherent = run.summary.is_object() && run.summary.contains(summary_key::coherent);
     std::vector<int> dims;
+    if (per_frame_labels) dims.push_back(time_dim);
     if (n_mode > 1) dims.push_back(mode_dim);
     dims.insert(dims.end(), axis_dims.begin(), axis_dims.end());
     label_var = nc.var(names("set_label"), NC_INT, dims);
-    nc.text(label_var, "long_name", "almost-invariant set of each node (0: none)");
-    nc.text(label_var, "description",
-            "the set (1 ... K) whose SEBA vector of the reversibilised transfer operator's K "
-            "leading eigenvectors is largest at the node; 0 where none exceeds the vectors' "
-            "leakage, or the invariant density vanishes");
+    if (coherent) {
+      nc.text(label_var, "long_name", "coherent pair of each node at each time (0: none)");
+      nc.text(label_var, "description",
+              "at the first time the pair whose initial set A holds the node, at the last the "
+              "pair whose final set B holds it: the pair (1 ... K) whose SEBA vector of the "
+              "normalised transport's K leading singular vectors is largest at the node; 0 "
+              "where the density vanishes");
+    } else {
+      nc.text(label_var, "long_name", "almost-invariant set of each node (0: none)");
+      nc.text(label_var, "description",
+              "the set (1 ... K) whose SEBA vector of the reversibilised transfer operator's K "
+              "leading eigenvectors is largest at the node; 0 where none exceeds the vectors' "
+              "leakage, or the invariant density vanishes");
+    }
+    struct SetNumber {
+      const char* key;
+      const char* long_name;
+      const char* units;
+    };
+    static constexpr SetNumber almost_invariant_numbers[] = {
+        {"mass", "invariant mass of the set", "1"},
+        {"mass_error", "estimated error of set_mass", "1"},
+        {"ratio",
+         "invariance ratio: the probability that invariant mass in the set is in it one transfer "
+         "step later",
+         "1"},
+        {"ratio_error", "estimated error of set_ratio", "1"},
+        {"exit_rate", "-ln(set_ratio)/step: rate at which mass leaves the set", "per unit time"}};
+    static constexpr SetNumber coherent_numbers[] = {
+        {"initial_mass", "mass of the pair's initial set at the first time", "1"},
+        {"initial_mass_error", "estimated error of set_initial_mass", "1"},
+        {"final_mass", "mass of the pair's final set at the last time", "1"},
+        {"final_mass_error", "estimated error of set_final_mass", "1"},
+        {"carried", "mass of the initial set that is in the final set at the last time", "1"},
+        {"carried_error", "estimated error of set_carried", "1"},
+        {"forward", "probability that mass in the initial set ends in the final set", "1"},
+        {"forward_error", "estimated error of set_forward", "1"},
+        {"backward", "probability that mass in the final set came from the initial set", "1"},
+        {"backward_error", "estimated error of set_backward", "1"}};
+    const std::span<const SetNumber> numbers =
+        coherent ? std::span<const SetNumber>(coherent_numbers)
+                 : std::span<const SetNumber>(almost_invariant_numbers);
+    const char* block = coherent ? summary_key::coherent : summary_key::almost_invariant;
     const nlohmann::json* sets = nullptr;
-    if (run.summary.is_object() && run.summary.contains(summary_key::almost_invariant))
-      sets = &run.summary[summary_key::almost_invariant]["sets"];
+    if (run.summary.is_object() && run.summary.contains(block)) sets = &run.summary[block]["sets"];
     if (sets != nullptr && sets->is_array() && !sets->empty()) {
       const int set_dim = nc.dim(names("set"), sets->size());
-      for (const auto& [key, long_name] :
-           {std::pair{"mass", "invariant mass of the set"},
-            std::pair{"mass_error", "estimated error of set_mass"},
-            std::pair{"ratio",
-                      "invariance ratio: the probability that invariant mass in the set is in it "
-                      "one transfer step later"},
-            std::pair{"ratio_error", "estimated error of set_ratio"},
-            std::pair{"exit_rate", "-ln(set_ratio)/step: rate at which mass leaves the set"}}) {
-        const int v = nc.var(names(std::string("set_") + key), NC_DOUBLE, {set_dim});
-        nc.text(v, "long_name", long_name);
-        nc.text(v, "units", std::string(key) == "exit_rate" ? "per unit time" : "1");
+      for (const SetNumber& x : numbers) {
+        const int v = nc.var(names(std::string("set_") + x.key), NC_DOUBLE, {set_dim});
+        nc.text(v, "long_name", x.long_name);
+        nc.text(v, "units", x.units);
         std::vector<double> values;
         for (const auto& a : *sets)
-          values.push_back(a.contains(key) && a[key].is_number() ? a[key].get<double>()
-                                                                 : std::nan(""));
+          values.push_back(a.contains(x.key) && a[x.key].is_number() ? a[x.key].get<double>()
+                                                                     : std::nan(""));
         set_vars.emplace_back(v, std::move(values));
       }
     }

@@ -338,6 +338,35 @@ img { max-width: 100%; } .muted { color: #666; }
     if (has(files, "sets.png")) h << "<img src=\"sets.png\" alt=\"the almost-invariant sets\">\n";
   }
 
+  // The coherent pairs (methods/coherent.hpp): a table and their picture at both times.
+  if (run.summary.is_object() && run.summary.contains(summary_key::coherent)) {
+    const nlohmann::json& a = run.summary[summary_key::coherent];
+    const auto cell = [&](const nlohmann::json& set, const char* key) {
+      return set.contains(key) && set[key].is_number() ? number(set[key].get<double>())
+                                                       : std::string("–");
+    };
+    const auto pm = [&](const nlohmann::json& set, const char* key, const std::string& error) {
+      return cell(set, key) + " ± " + cell(set, error.c_str());
+    };
+    h << "<h2>Coherent pairs</h2>\n<p>K pairs of regions, A at t = 0 and B at t = "
+      << number(a.value("t_end", 0.0))
+      << ", such that the initial density's mass in A is carried into B (forward: the "
+         "probability that mass in A ends in B; backward: that mass in B came from "
+         "A)</p>\n<table>\n<tr><th>pair</th><th>mass of A</th><th>mass of B</th><th>forward"
+         "</th><th>backward</th></tr>\n";
+    for (const nlohmann::json& set : a.value("sets", nlohmann::json::array()))
+      h << "<tr><td>" << set.value("set", 0) << "</td><td>"
+        << pm(set, "initial_mass", "initial_mass_error") << "</td><td>"
+        << pm(set, "final_mass", "final_mass_error") << "</td><td>"
+        << pm(set, "forward", "forward_error") << "</td><td>"
+        << pm(set, "backward", "backward_error") << "</td></tr>\n";
+    h << "</table>\n<p>sum of √(forward·backward) " << number(a.value("coherence_sum", 0.0))
+      << " ≤ " << number(a.value("bound", 0.0))
+      << " (the sum of the normalised transport's leading singular values)</p>\n";
+    if (has(files, "sets.png"))
+      h << "<img src=\"sets.png\" alt=\"the coherent pairs at t = 0 and at t_end\">\n";
+  }
+
   // What derive checked.
   if (pv.is_object() && pv.contains("checks") && pv["checks"].is_object()) {
     const nlohmann::json& c = pv["checks"];

@@ -62,10 +62,21 @@ inline constexpr const char* particles = "particles";  ///< particles: the sampl
 inline constexpr const char* escape = "escape";        ///< escape: the escape rate and its density.
 /// almost_invariant: the sets, their masses and invariance ratios.
 inline constexpr const char* almost_invariant = "almost_invariant";
+/// coherent: the coherent pairs, their masses at both times and their forward and backward
+/// ratios.
+inline constexpr const char* coherent = "coherent";
 }  // namespace summary_key
 
 /// A method, in the table's order.
-enum class Method { characteristics, transfer, invariant, particles, escape, almost_invariant };
+enum class Method {
+  characteristics,
+  transfer,
+  invariant,
+  particles,
+  escape,
+  almost_invariant,
+  coherent
+};
 
 /// One row of the methods table.
 struct MethodSpec {
@@ -80,6 +91,11 @@ struct MethodSpec {
   std::string_view frame;  ///< The one frame's name (its file stem), when `one_frame`.
   /// What the one frame is, when `one_frame`: the pictures' titles and run.nc's long_name.
   std::string_view frame_what;
+  /// Whether it writes the two frames t = 0 and t_end only, whatever dt (a transport over the
+  /// whole interval).
+  bool ends_only;
+  /// Whether it needs the whole transfer operator in one process (the sets' eigenvectors).
+  bool whole_operator;
   /// Whether it can keep the 2-D marginals instead of the grid (the setting density).
   bool deposits_marginals;
   /// The member of summary.json that holds its own fields (summary_key).
@@ -89,25 +105,34 @@ struct MethodSpec {
 
 /// The methods table, in the order `--help` lists them.
 inline constexpr std::array kMethods = {
-    MethodSpec{Method::characteristics, "characteristics", true, false, "", "", false,
+    MethodSpec{Method::characteristics, "characteristics", true, false, "", "", false, false, false,
                summary_key::budget,
                "exact backward characteristics per node; the mass budget by adaptive cubature"},
-    MethodSpec{Method::transfer, "transfer", false, false, "", "", false, summary_key::transfer,
+    MethodSpec{Method::transfer, "transfer", false, false, "", "", false, false, false,
+               summary_key::transfer,
                "a one-step transfer operator on node masses, marched by mat-vecs"},
     MethodSpec{Method::invariant, "invariant", false, true, "invariant",
-               "invariant density of the transfer operator", false, summary_key::invariant,
+               "invariant density of the transfer operator", false, false, false,
+               summary_key::invariant,
                "the leading eigenvector of the transfer operator, and its next eigenvalues"},
-    MethodSpec{Method::particles, "particles", false, false, "", "", true, summary_key::particles,
+    MethodSpec{Method::particles, "particles", false, false, "", "", false, false, true,
+               summary_key::particles,
                "Monte-Carlo samples of the initial density pushed forward and deposited"},
     MethodSpec{Method::escape, "escape", false, true, "escape",
-               "conditionally invariant density of the open system", false, summary_key::escape,
+               "conditionally invariant density of the open system", false, false, false,
+               summary_key::escape,
                "the escape rate of an open system (-ln lambda1 / step) and its conditionally "
                "invariant density"},
     MethodSpec{Method::almost_invariant, "almost_invariant", false, true, "almost_invariant",
                "invariant density (its almost-invariant sets: sets.png, run.nc set_label)", false,
-               summary_key::almost_invariant,
+               true, false, summary_key::almost_invariant,
                "K regions of state x mode whose invariant mass stays in them over a step with the "
                "highest probability, with their invariance ratios (setting sets)"},
+    MethodSpec{Method::coherent, "coherent", false, false, "", "", true, true, false,
+               summary_key::coherent,
+               "K pairs of regions, at t = 0 and at t_end, such that the initial density's mass "
+               "in the first is carried into the second, with the highest probability both ways "
+               "(setting sets)"},
 };
 
 static_assert(

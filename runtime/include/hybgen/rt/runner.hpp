@@ -212,7 +212,9 @@ RunPlan<state_dim_v<M>> validate_run(const RunConfig& config, const Backend& bac
                           : broken.front().message);
   for (std::size_t a = 0; a < N; ++a) p.grid.axes[a] = p.config.axes[a];
   p.dt = set.real<"dt">();
-  p.times = output_times(set.real<"t_end">(), p.dt);  // at most kMaxFrames (the rules)
+  // At most kMaxFrames (the rules); a transport over the interval: its two ends.
+  p.times = p.method->ends_only ? std::vector<double>{0.0, set.real<"t_end">()}
+                                : output_times(set.real<"t_end">(), p.dt);
   p.solve.settings = set;
   p.solve.quiet = p.config.quiet;
   p.solve.backend = &backend;
@@ -227,6 +229,9 @@ void announce_run(const RunPlan<state_dim_v<M>>& p) {
   if (p.method->one_frame)
     std::fprintf(stderr, "hybgen: %s: %s density on %zu nodes x %d mode(s)...\n", model,
                  std::string(p.method->frame).c_str(), p.grid.size(), M::n_mode);
+  else if (p.method->ends_only)
+    std::fprintf(stderr, "hybgen: %s: %s from t = 0 to %g on %zu nodes x %d mode(s)...\n", model,
+                 std::string(p.method->name).c_str(), p.times.back(), p.grid.size(), M::n_mode);
   else
     std::fprintf(stderr, "hybgen: %s: %s on %zu nodes x %d mode(s), %zu output times...\n", model,
                  std::string(p.method->name).c_str(), p.grid.size(), M::n_mode, p.times.size());
@@ -671,6 +676,23 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
         "  sum of the ratios %.6f <= %.6f (the bound from the eigenvalues); mass in no "
         "set %.2e\n",
         num(a, "ratio_sum"), num(a, "bound"), num(a, "unassigned_mass"));
+  } else if (s.contains(k::coherent)) {
+    const auto& a = s[k::coherent];
+    const auto num = [](const nlohmann::json& x, const char* key) {
+      return x.contains(key) && x[key].is_number() ? x[key].get<double>() : std::nan("");
+    };
+    std::printf("coherent pairs from t = 0 to %g (run.nc set_label, sets.png):\n", num(a, "t_end"));
+    for (const auto& set : a["sets"])
+      std::printf(
+          "  pair %d: mass %.6f +/- %.1e at t = 0, %.6f +/- %.1e at t_end; ends in its final "
+          "set with probability %.6f +/- %.1e, came from its initial set with %.6f +/- %.1e\n",
+          set["set"].get<int>(), num(set, "initial_mass"), num(set, "initial_mass_error"),
+          num(set, "final_mass"), num(set, "final_mass_error"), num(set, "forward"),
+          num(set, "forward_error"), num(set, "backward"), num(set, "backward_error"));
+    std::printf(
+        "  sum of sqrt(forward*backward) %.6f <= %.6f (the bound from the singular "
+        "values)\n",
+        num(a, "coherence_sum"), num(a, "bound"));
   } else if (const MassBudget& mb = rec.budget; mb.mass.empty()) {
     std::printf("mass budget: off\n");
   } else {

@@ -114,12 +114,14 @@ inline std::string ranks_rule(const Settings& s) {
   return "";
 }
 
-/// The almost-invariant sets take the whole operator in one process (the reversibilised
-/// chain's components and eigenvectors: methods/almost_invariant.hpp).
+/// The sets' methods take the whole operator in one process (MethodSpec::whole_operator: the
+/// eigenvectors of methods/almost_invariant.hpp and methods/coherent.hpp).
 inline std::string one_process_rule(const Settings& s, int ranks) {
-  if (ranks <= 1 || method_named(s.word<"method">()).id != Method::almost_invariant) return "";
-  return "method almost_invariant runs in one process (the sets need the whole operator); run "
-         "it without --ranks, or on a coarser grid";
+  const MethodSpec& m = method_named(s.word<"method">());
+  if (ranks <= 1 || !m.whole_operator) return "";
+  return "method " + std::string(m.name) +
+         " runs in one process (the sets need the whole operator); run it without --ranks, or "
+         "on a coarser grid";
 }
 
 /// A method that inverts the resets needs every reset's inverse off its guard too.
@@ -208,7 +210,8 @@ inline std::string memory_rule(const Settings& s, const RunFacts& f) {
   if (s.word<"density">() == "marginals") return "";
   const double series =
       f.frames > 0 ? static_cast<double>(f.frames) : frame_count(s.real<"t_end">(), s.real<"dt">());
-  const double frames = method_named(s.word<"method">()).one_frame ? 1.0 : series;
+  const MethodSpec& m = method_named(s.word<"method">());
+  const double frames = m.one_frame ? 1.0 : m.ends_only ? 2.0 : series;
   double nodes = 1.0;
   for (const long n : f.grid) nodes *= static_cast<double>(n);
   const double need = nodes * static_cast<double>(frames) * f.modes * 8.0;

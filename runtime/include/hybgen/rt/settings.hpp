@@ -96,7 +96,7 @@ inline constexpr std::array kSettings = {
                 "time step of the transfer operator (0: dt); scheme=fv of transfer: a cap of its "
                 "time step (0: the stability bound alone)"},
     SettingSpec{"scheme", SettingType::word, 0.0, "auto", 0, 0, false, "auto|hat|fv",
-                "transfer invariant escape almost_invariant",
+                "transfer invariant escape almost_invariant coherent",
                 "auto (fv for method=invariant where it applies, else hat), hat (forward "
                 "samples on hat functions), or fv (a cut-cell finite-volume "
                 "generator, order 5; guards that are coordinate planes; one process): its null "
@@ -105,13 +105,14 @@ inline constexpr std::array kSettings = {
                 "scheme=fv: order of the upwind reconstruction (5, the default, or 3; 1 and 2 for "
                 "tests of the order; 4 is refused)"},
     SettingSpec{"samples", SettingType::integer, 0, "", 0, 64, false, "",
-                "transfer invariant escape almost_invariant",
+                "transfer invariant escape almost_invariant coherent",
                 "sample points per axis and cell (0: 4 up to 2-D, 3 in 3-D, 2 above)"},
     SettingSpec{"eigenvalues", SettingType::integer, 6, "", 1, 64, false, "", "invariant escape",
                 "eigenvalues of the transfer operator to report"},
-    SettingSpec{"sets", SettingType::integer, 2, "", 2, 16, false, "", "almost_invariant",
+    SettingSpec{"sets", SettingType::integer, 2, "", 2, 16, false, "", "almost_invariant coherent",
                 "number of almost-invariant sets (from as many leading eigenvectors of the "
-                "reversibilised transfer operator, by SEBA)"},
+                "reversibilised transfer operator, by SEBA), or of coherent pairs (from as many "
+                "leading singular vectors of the normalised transport over [0, t_end])"},
     SettingSpec{"particles", SettingType::integer, 1000000, "", 1, 1e10, false, "", "particles",
                 "number of samples"},
     SettingSpec{"seed", SettingType::integer, 1, "", 0, kMaxExactInteger, false, "", "particles",

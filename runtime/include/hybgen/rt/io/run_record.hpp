@@ -202,7 +202,8 @@ struct RunRecord {
   /// Whether `density` holds only this rank's pairs `owned` of each frame (several ranks).
   bool distributed = false;
   /// method=almost_invariant: the set (1 … K; 0: none) of every (mode, node), [mode][node];
-  /// empty otherwise. run.nc's `set_label`, and the picture sets.png.
+  /// method=coherent: the pair's set at each frame, [frame][mode][node]; empty otherwise.
+  /// run.nc's `set_label`, and the picture sets.png.
   std::span<const std::int32_t> set_label;
   /// What the frames hold, when not the method's own (methods' `frame_what`): the pictures'
   /// titles and colour bars (the sets' picture draws the labels as its frame).

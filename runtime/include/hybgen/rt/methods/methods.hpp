@@ -21,7 +21,10 @@
 ///    halved grid for the error (escape.hpp); one frame, `escape`;
 ///  - almost_invariant: K almost-invariant sets of a closed system and their invariance
 ///    ratios (almost_invariant.hpp), on the grid and on the halved grid for their errors; one
-///    frame, the invariant density, and the sets as `set_label`.
+///    frame, the invariant density, and the sets as `set_label`;
+///  - coherent: K coherent pairs between t = 0 and t_end (coherent.hpp) from the transport over
+///    the interval, on the grid and on the halved grid for their errors; two frames (the
+///    initial density and the transported one), the pairs' sets at both as `set_label`.
 ///
 /// Invariants of a successful result: solution.n_time == frame_names.size() (or, for the
 /// particles with density=marginals, an empty solution and marginals with one block per
@@ -52,6 +55,7 @@
 #include "hybgen/rt/methods/budget.hpp"
 #include "hybgen/rt/methods/budget/cell_averages.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
+#include "hybgen/rt/methods/coherent.hpp"
 #include "hybgen/rt/methods/escape.hpp"
 #include "hybgen/rt/methods/mass_budget.hpp"
 #include "hybgen/rt/methods/observables.hpp"
@@ -132,8 +136,9 @@ struct MethodResult {
   std::vector<ObservableSeries> sampled_observables;  ///< See observable_errors.
   /// Whether `solution` holds cell averages (characteristics, values=cells).
   bool cell_averages = false;
-  /// almost_invariant: the set (1 … K, 0: none) of every (mode, node), [mode][node]; empty
-  /// for the other methods.
+  /// almost_invariant: the set (1 … K, 0: none) of every (mode, node), [mode][node];
+  /// coherent: the same at each of its two frames, [frame][mode][node]; empty for the other
+  /// methods.
   std::vector<std::int32_t> set_label;
   nlohmann::json summary = nlohmann::json::object();  ///< Method fields for summary.json.
   std::vector<std::string> warnings;                  ///< Printed, not fatal.
@@ -1262,20 +1267,22 @@ MethodResult<state_dim_v<M>> solve_by_escape(const TensorGrid<state_dim_v<M>>& g
 
 namespace detail {
 
-/// For each set of `fine` (on `grid`), the set of `coarse` (on `half`) that holds the most of
-/// its invariant mass at the coarse nodes nearest its nodes, or −1: the same region on the
-/// two grids. Greedy by overlap (K is small).
+/// For each set of the labels `fine` (on `grid`, sets 1 … K, [mode][node]), the set of the
+/// labels `coarse` (on `half`, sets 1 … Kc) that holds the most of its mass `mu` at the coarse
+/// nodes nearest its nodes, or −1: the same region on the two grids. Greedy by overlap (K is
+/// small).
 template <std::size_t N>
-std::vector<int> match_sets(const TensorGrid<N>& grid, const AlmostInvariantSets& fine,
-                            std::span<const double> mu, const TensorGrid<N>& half,
-                            const AlmostInvariantSets& coarse, std::size_t n_mode) {
-  const std::size_t K = fine.sets.size(), Kc = coarse.sets.size(), n = grid.size();
+std::vector<int> match_sets(const TensorGrid<N>& grid, std::span<const std::int32_t> fine,
+                            std::size_t K, std::span<const double> mu, const TensorGrid<N>& half,
+                            std::span<const std::int32_t> coarse, std::size_t Kc,
+                            std::size_t n_mode) {
+  const std::size_t n = grid.size();
   std::vector<double> overlap(K * Kc, 0.0);
   for (std::size_t m = 0; m < n_mode; ++m)
     for (std::size_t i = 0; i < n; ++i) {
-      const std::int32_t a = fine.label[m * n + i];
+      const std::int32_t a = fine[m * n + i];
       if (a == 0) continue;
-      const std::int32_t b = coarse.label[m * half.size() + half.nearest(grid.node(i))];
+      const std::int32_t b = coarse[m * half.size() + half.nearest(grid.node(i))];
       if (b > 0)
         overlap[static_cast<std::size_t>(a - 1) * Kc + static_cast<std::size_t>(b - 1)] +=
             mu[m * n + i];
@@ -1371,7 +1378,8 @@ MethodResult<state_dim_v<M>> solve_by_almost_invariant(const TensorGrid<state_di
   detail::keep_coarse_frame(r, half, coarse->inv.density, n_mode);
   r.set_label = fine->sets.label;
   const std::vector<int> match =
-      detail::match_sets(grid, fine->sets, fine->mu, half, coarse->sets, n_mode);
+      detail::match_sets(grid, fine->sets.label, fine->sets.sets.size(), fine->mu, half,
+                         coarse->sets.label, coarse->sets.sets.size(), n_mode);
   const double step = o.step;
   // Several pieces of the support that never exchange mass: the invariant density is any
   // mixture of theirs, so the sets' masses are the solver's choice (their ratios are not).
@@ -1453,6 +1461,173 @@ MethodResult<state_dim_v<M>> solve_by_almost_invariant(const TensorGrid<state_di
   return r;
 }
 
+/// Finite-time coherent pairs (coherent.hpp) between t = 0 and t_end = times.back() (the
+/// runner passes the two ends: MethodSpec::ends_only). The transport F over the interval is the
+/// transfer operator of ONE step of length t_end (transfer.hpp: each sample pushed by the hybrid
+/// flow over the whole interval; composing shorter steps would add the deposit's smoothing at
+/// each), applied to the initial node masses p = w·u0; the pairs come from F and p. The same on
+/// the halved grid gives their errors: twice the difference from the coarse pair whose initial
+/// set holds most of the pair's initial mass (first order, as the almost-invariant sets'). Two
+/// frames, the initial density and the transported one, with their errors from the halved and
+/// quartered grids (add_transfer_errors); the labels at both times as `set_label`,
+/// [frame][mode][node].
+template <HybridModel M>
+MethodResult<state_dim_v<M>> solve_by_coherent(const TensorGrid<state_dim_v<M>>& grid,
+                                               std::span<const double> times, double dt,
+                                               const double* par, const MethodSettings& s) {
+  constexpr std::size_t N = state_dim_v<M>;
+  MethodResult<N> r;
+  if (times.size() != 2 || !(times.back() > 0.0))
+    throw std::invalid_argument("coherent: the times are 0 and t_end > 0");
+  const double t_end = times.back();
+  detail::set_time_frames(r, times);
+  TransferOptions o = detail::transfer_options(s, dt);
+  o.step = t_end;
+  const int K = static_cast<int>(s.settings.integer<"sets">());
+  const double tol = InvariantOptions{}.tol;
+  const std::size_t n_mode = static_cast<std::size_t>(M::n_mode);
+  const auto t0 = detail::MethodClock::now();
+  struct Answer {
+    TransferRun<N> run;
+    std::vector<double> p;  // initial node masses
+    CoherentSets sets;
+    bool has_pairs = false;     // whether `sets` holds the pairs (else `why` says why not)
+    nlohmann::json op_summary;  // the operator's part of summary.json
+  };
+  // The transport on grid g and (with `pairs`) its pairs; nothing where the transport failed.
+  // Why either failed: `why`.
+  const auto solve_on = [&](const TensorGrid<N>& g, const char* title, std::string& why,
+                            bool pairs = true) -> std::optional<Answer> {
+    const TransferOperator<N> op = detail::assemble<M>(g, par, o, s.quiet, title);
+    if (!op.ok()) {
+      why = "(assembling the transfer operator over [0, t_end]) " + op.failure_message;
+      return std::nullopt;
+    }
+    Answer a;
+    a.op_summary = detail::operator_summary(o, op);
+    const std::vector<double> u0 = initial_vector<M>(g, par);
+    a.run = march(op, u0, times, nullptr);
+    if (!a.run.ok()) {
+      why = "(transporting the initial density) " + a.run.failure;
+      return std::nullopt;
+    }
+    if (!pairs) return a;
+    a.p.resize(op.size());
+    for (std::size_t i = 0; i < op.size(); ++i) a.p[i] = op.weight[i] * u0[i];
+    try {
+      a.sets = coherent_sets(op.P, a.p, K, op.n_mode, tol);
+      a.has_pairs = true;
+    } catch (const std::invalid_argument& e) {
+      why = std::string("(coherent) ") + e.what() + " (on " + std::to_string(g.size()) +
+            " nodes per mode)";
+    }
+    return a;
+  };
+  std::string why;
+  std::optional<Answer> fine = solve_on(grid, "transport over [0, t_end]: assembly", why);
+  if (!fine || !fine->has_pairs) {
+    r.failure = why;
+    r.solve_s = detail::seconds_since(t0);
+    return r;
+  }
+  const TensorGrid<N> half = halved_grid(grid);
+  std::string coarse_why;
+  std::optional<Answer> coarse =
+      solve_on(half, "transport over [0, t_end]: assembly (halved grid)", coarse_why);
+  r.solution = std::move(fine->run.solution);
+  r.budget = std::move(fine->run.budget);
+  r.set_label = fine->sets.initial_label;
+  r.set_label.insert(r.set_label.end(), fine->sets.final_label.begin(),
+                     fine->sets.final_label.end());
+  nlohmann::json j = fine->op_summary;
+  j["t_end"] = t_end;
+  j["budget_defect"] = fine->run.budget_defect;
+  // The frames' errors from the halved grid's transport (computed above) and the quartered one's.
+  detail::add_transfer_errors(j, r, grid, times, 1, s, [&](const TensorGrid<N>& g, const char*) {
+    if (g.size() == half.size() && coarse) return std::move(coarse->run.solution);
+    if (g.size() == half.size()) return Solution<N>{};
+    std::string ignored;
+    std::optional<Answer> q =
+        solve_on(g, "transport over [0, t_end]: assembly (quartered grid)", ignored, false);
+    return q ? std::move(q->run.solution) : Solution<N>{};
+  });
+  r.solve_s = detail::seconds_since(t0);
+  if (coarse && !coarse->has_pairs) coarse.reset();  // its transport has served the errors
+  const std::vector<int> match =
+      coarse
+          ? detail::match_sets(grid, fine->sets.initial_label, fine->sets.sets.size(), fine->p,
+                               half, coarse->sets.initial_label, coarse->sets.sets.size(), n_mode)
+          : std::vector<int>(fine->sets.sets.size(), -1);
+  const auto mode_masses = [&](const std::vector<double>& m) {
+    nlohmann::json modes = nlohmann::json::object();
+    for (std::size_t k = 0; k < n_mode && k < m.size(); ++k) modes[M::mode_names[k]] = m[k];
+    return modes;
+  };
+  nlohmann::json sets = nlohmann::json::array();
+  bool all_matched = true;
+  for (std::size_t q = 0; q < fine->sets.sets.size(); ++q) {
+    const CoherentPair& a = fine->sets.sets[q];
+    nlohmann::json e;
+    e["set"] = q + 1;
+    e["initial_mass"] = a.initial_mass;
+    e["final_mass"] = a.final_mass;
+    e["carried"] = a.carried;
+    e["forward"] = a.forward;
+    e["backward"] = a.backward;
+    e["initial_nodes"] = a.initial_nodes;
+    e["final_nodes"] = a.final_nodes;
+    e["initial_mode_mass"] = mode_masses(a.initial_mode_mass);
+    e["final_mode_mass"] = mode_masses(a.final_mode_mass);
+    const CoherentPair* c =
+        match[q] >= 0 ? &coarse->sets.sets[static_cast<std::size_t>(match[q])] : nullptr;
+    all_matched = all_matched && c != nullptr;
+    const auto error = [&](double fine_value, double coarse_value) {
+      return c ? nlohmann::json(kAlmostInvariantErrorFactor * std::fabs(fine_value - coarse_value) +
+                                tol)
+               : nlohmann::json();
+    };
+    e["initial_mass_error"] = error(a.initial_mass, c ? c->initial_mass : 0.0);
+    e["final_mass_error"] = error(a.final_mass, c ? c->final_mass : 0.0);
+    e["carried_error"] = error(a.carried, c ? c->carried : 0.0);
+    e["forward_error"] = error(a.forward, c ? c->forward : 0.0);
+    e["backward_error"] = error(a.backward, c ? c->backward : 0.0);
+    e["coarse_set"] = c ? nlohmann::json(match[q] + 1) : nlohmann::json();
+    sets.push_back(e);
+  }
+  j["sets"] = sets;
+  j["singular_values"] = fine->sets.singular_values;
+  j["bound"] = fine->sets.bound;
+  j["coherence_sum"] = fine->sets.coherence_sum;
+  j["coarse_coherence_sum"] =
+      coarse ? nlohmann::json(coarse->sets.coherence_sum) : nlohmann::json();
+  j["components"] = fine->sets.components;
+  j["seba_iterations"] = fine->sets.seba_iterations;
+  j["converged"] = fine->sets.converged && (!coarse || coarse->sets.converged);
+  std::vector<int> coarse_nodes;
+  for (const GridAxis& ax : half.axes) coarse_nodes.push_back(ax.n);
+  j["coarse_grid"] = coarse_nodes;
+  j["note"] =
+      "pair k: set A at t = 0 (run.nc set_label at the first time) and B at t_end (at the last); "
+      "carried: the initial density's mass in A that is in B at t_end; forward = carried / "
+      "initial_mass, the probability that mass in A ends in B; backward = carried / final_mass, "
+      "the probability that mass in B came from A; errors: twice the difference from the pair "
+      "of the grid of coarse_grid nodes whose initial set holds most of the pair's initial "
+      "mass; bound: the sum of the normalised transport's K leading singular values, which "
+      "coherence_sum = sum of sqrt(forward*backward) cannot exceed (docs/methods.md, "
+      "\"coherent\")";
+  r.summary[summary_key::coherent] = j;
+  if (!coarse)
+    r.warnings.push_back("the pairs on the halved grid failed " + coarse_why +
+                         ": the pairs' errors are not estimated; refine the grid");
+  else if (!all_matched)
+    r.warnings.push_back(
+        "a pair has no counterpart on the halved grid (the pairs change with the grid): its "
+        "errors are not estimated; refine the grid");
+  if (!fine->sets.converged || (coarse && !coarse->sets.converged))
+    r.warnings.push_back("the eigen-solver of the pairs did not meet its tolerance");
+  return r;
+}
+
 /// The particle method (`dt` unused).
 template <HybridModel M>
 MethodResult<state_dim_v<M>> solve_by_particles(const TensorGrid<state_dim_v<M>>& grid,
@@ -1513,6 +1688,7 @@ inline constexpr std::array<SolveFunction<M>, kMethods.size()> solvers = {
     &solve_by_particles<M>,         // Method::particles
     &solve_by_escape<M>,            // Method::escape
     &solve_by_almost_invariant<M>,  // Method::almost_invariant
+    &solve_by_coherent<M>,          // Method::coherent
 };
 
 /// Dispatch on the setting `method` through the methods table; throws std::invalid_argument
