@@ -105,6 +105,17 @@ try:
     check(False, "run with method=nope did not fail")
 except hybgen.HybgenError as error:
     check(error.code == 2 and "nope" in str(error), f"method=nope: exit {error.code}: {error}")
+# method=coherent: x' = -a x never carries mass across x = 0, so the two pairs are the halves,
+# each carried into itself (but for the node at 0, whose cell straddles both), and set_label
+# has a time dimension (its two frames, t = 0 and t_end).
+ds = hybgen.run("decay.model", t_end=1, grid=121, method="coherent")
+check(ds["set_label"].dims == ("time", "x") and list(ds["time"].values) == [0.0, 1.0],
+      f"coherent: set_label {ds['set_label'].dims}, times {ds['time'].values}")
+left, right = (ds["set_label"].sel(x=v, method="nearest").values for v in (-0.5, 0.5))
+check(left[0] == left[1] and right[0] == right[1] and left[0] != right[0] and min(left) > 0,
+      f"coherent: labels {left} left, {right} right")
+check((ds["set_forward"] > 0.95).all() and (ds["set_forward_error"] < 0.05).all(),
+      f"coherent: forward {ds['set_forward'].values} +/- {ds['set_forward_error'].values}")
 table = hybgen.sweep("decay.model", a=[0.5, 1.0])
 check(len(table) == 2 and list(table["a"]) == [0.5, 1.0] and (table["status"] == "ok").all(),
       f"sweep:\n{table}")
