@@ -152,6 +152,9 @@ struct FramePlan {
   std::size_t columns = 1;
   FrameLayout layout;
   double line_max = 0;  ///< 1-D: the largest value over the run.
+  /// What a frame of labels names (its colour bars' label: write_sets_figure); empty for
+  /// densities.
+  std::string labels;
 };
 
 FramePlan plan_frames(const RunRecord& run, const std::string& scale_mode) {
@@ -270,12 +273,10 @@ void draw_frame(cairo_t* cr, const RunRecord& run, const FramePlan& plan, std::s
     const Rect r = panel_rect(l, i);
     const ColourScale& s = plan.scales[panels[i].scale];
     draw_heat_panel(cr, r, panels[i], s);
-    const std::string label =
-        !run.what.empty()
-            ? std::string(run.method == method_spec(Method::coherent).name ? "coherent pair"
-                                                                           : "almost-invariant set")
-            : std::string(s.log ? "log scale: " : "") +
-                  (run.axes.size() > 2 ? "marginal density" : "density u");
+    const std::string label = !plan.labels.empty()
+                                  ? plan.labels
+                                  : std::string(s.log ? "log scale: " : "") +
+                                        (run.axes.size() > 2 ? "marginal density" : "density u");
     draw_colour_bar(cr, {r.x + r.w + 12, r.y, kBar, r.h}, s, label);
   }
   // The guards' legend (names), under the title.
@@ -537,6 +538,7 @@ void write_sets_figure(const RunRecord& run, FigureRequest& request,
                      : std::string("almost-invariant sets (run.nc set_label)");
   };
   FramePlan plan = plan_frames(sets, "linear");
+  plan.labels = two_times ? "coherent pair" : "almost-invariant set";
   int K = 0;
   for (const std::int32_t l : run.set_label) K = std::max(K, static_cast<int>(l));
   for (ColourScale& scale : plan.scales) scale.categories = std::max(K, 1);

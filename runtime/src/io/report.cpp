@@ -314,13 +314,15 @@ img { max-width: 100%; } .muted { color: #666; }
       << "); the frame is the conditionally invariant density, of unit mass</p>\n";
   }
 
+  // A set's or pair's number in the tables below ("–": none, a null error).
+  const auto cell = [&](const nlohmann::json& set, const char* key) {
+    return set.contains(key) && set[key].is_number() ? number(set[key].get<double>())
+                                                     : std::string("–");
+  };
+
   // The almost-invariant sets (methods/almost_invariant.hpp): a table and their picture.
   if (run.summary.is_object() && run.summary.contains(summary_key::almost_invariant)) {
     const nlohmann::json& a = run.summary[summary_key::almost_invariant];
-    const auto cell = [&](const nlohmann::json& set, const char* key) {
-      return set.contains(key) && set[key].is_number() ? number(set[key].get<double>())
-                                                       : std::string("–");
-    };
     h << "<h2>Almost-invariant sets</h2>\n<p>K regions whose invariant mass stays in them over "
          "a step of "
       << number(a.value("step", 0.0))
@@ -341,10 +343,6 @@ img { max-width: 100%; } .muted { color: #666; }
   // The coherent pairs (methods/coherent.hpp): a table and their picture at both times.
   if (run.summary.is_object() && run.summary.contains(summary_key::coherent)) {
     const nlohmann::json& a = run.summary[summary_key::coherent];
-    const auto cell = [&](const nlohmann::json& set, const char* key) {
-      return set.contains(key) && set[key].is_number() ? number(set[key].get<double>())
-                                                       : std::string("–");
-    };
     const auto pm = [&](const nlohmann::json& set, const char* key, const std::string& error) {
       return cell(set, key) + " ± " + cell(set, error.c_str());
     };
