@@ -613,6 +613,10 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
   std::printf("%s: %s on %zu nodes, %zu frame(s): %ssolve %.3f s, budget %.3f s, output %.3f s\n",
               c.model.c_str(), rec.method.c_str(), rec.n_node(), rec.n_frame(), before.c_str(),
               sec("solve"), sec("budget"), sec("output"));
+  // A number of the method's block, or NaN (printed "nan") where it has none.
+  const auto num = [](const nlohmann::json& x, const char* key) {
+    return x.contains(key) && x[key].is_number() ? x[key].get<double>() : std::nan("");
+  };
   if (s.contains(k::invariant)) {
     const auto& inv = s[k::invariant];
     std::printf("leading eigenvalues of the transfer operator (step %g):\n",
@@ -662,9 +666,6 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
                 e["step"].get<double>());
   } else if (s.contains(k::almost_invariant)) {
     const auto& a = s[k::almost_invariant];
-    const auto num = [](const nlohmann::json& x, const char* key) {
-      return x.contains(key) && x[key].is_number() ? x[key].get<double>() : std::nan("");
-    };
     std::printf("almost-invariant sets (step %g; run.nc set_label, sets.png):\n", num(a, "step"));
     for (const auto& set : a["sets"])
       std::printf(
@@ -678,9 +679,6 @@ inline void print_run_report(const RunConfig& c, const RunRecord& rec, const nlo
         num(a, "ratio_sum"), num(a, "bound"), num(a, "unassigned_mass"));
   } else if (s.contains(k::coherent)) {
     const auto& a = s[k::coherent];
-    const auto num = [](const nlohmann::json& x, const char* key) {
-      return x.contains(key) && x[key].is_number() ? x[key].get<double>() : std::nan("");
-    };
     std::printf("coherent pairs from t = 0 to %g (run.nc set_label, sets.png):\n", num(a, "t_end"));
     for (const auto& set : a["sets"])
       std::printf(

@@ -277,6 +277,15 @@ inline nlohmann::json eigenvalues_json(const InvariantResult& inv) {
   return eig;
 }
 
+/// Per-mode values (one per mode of M, in its order) as summary.json's object by mode name.
+template <HybridModel M>
+nlohmann::json by_mode(const std::vector<double>& values) {
+  nlohmann::json modes = nlohmann::json::object();
+  for (std::size_t m = 0; m < static_cast<std::size_t>(M::n_mode) && m < values.size(); ++m)
+    modes[M::mode_names[m]] = values[m];
+  return modes;
+}
+
 /// A number, or null when it is not finite (no estimate).
 inline nlohmann::json number_or_null(double x) {
   return std::isfinite(x) ? nlohmann::json(x) : nlohmann::json();
@@ -1398,9 +1407,7 @@ MethodResult<state_dim_v<M>> solve_by_almost_invariant(const TensorGrid<state_di
     j["exit_rate"] =
         a.ratio > 0.0 ? -std::log(a.ratio) / step : std::numeric_limits<double>::infinity();
     j["nodes"] = a.nodes;
-    nlohmann::json modes = nlohmann::json::object();
-    for (std::size_t m = 0; m < n_mode; ++m) modes[M::mode_names[m]] = a.mode_mass[m];
-    j["mode_mass"] = modes;
+    j["mode_mass"] = detail::by_mode<M>(a.mode_mass);
     if (match[q] >= 0) {
       const AlmostInvariantSet& c = coarse->sets.sets[static_cast<std::size_t>(match[q])];
       if (unique)
@@ -1558,11 +1565,6 @@ MethodResult<state_dim_v<M>> solve_by_coherent(const TensorGrid<state_dim_v<M>>&
           ? detail::match_sets(grid, fine->sets.initial_label, fine->sets.sets.size(), fine->p,
                                half, coarse->sets.initial_label, coarse->sets.sets.size(), n_mode)
           : std::vector<int>(fine->sets.sets.size(), -1);
-  const auto mode_masses = [&](const std::vector<double>& m) {
-    nlohmann::json modes = nlohmann::json::object();
-    for (std::size_t k = 0; k < n_mode && k < m.size(); ++k) modes[M::mode_names[k]] = m[k];
-    return modes;
-  };
   nlohmann::json sets = nlohmann::json::array();
   bool all_matched = true;
   for (std::size_t q = 0; q < fine->sets.sets.size(); ++q) {
@@ -1576,8 +1578,8 @@ MethodResult<state_dim_v<M>> solve_by_coherent(const TensorGrid<state_dim_v<M>>&
     e["backward"] = a.backward;
     e["initial_nodes"] = a.initial_nodes;
     e["final_nodes"] = a.final_nodes;
-    e["initial_mode_mass"] = mode_masses(a.initial_mode_mass);
-    e["final_mode_mass"] = mode_masses(a.final_mode_mass);
+    e["initial_mode_mass"] = detail::by_mode<M>(a.initial_mode_mass);
+    e["final_mode_mass"] = detail::by_mode<M>(a.final_mode_mass);
     const CoherentPair* c =
         match[q] >= 0 ? &coarse->sets.sets[static_cast<std::size_t>(match[q])] : nullptr;
     all_matched = all_matched && c != nullptr;
