@@ -3,8 +3,9 @@
 # libclang-rt-14-dev; scripts/setup.sh installs them).
 #
 #   fuzz/run.sh build               configure + build build-fuzz/ (HYBGEN_FUZZ=ON)
-#   fuzz/run.sh smoke               build, then ~60 s in total (CI): each harness
-#                                   for SMOKE_SECONDS (default 25) from the seeds
+#   fuzz/run.sh smoke               build, then ~30 s (CI): both harnesses side
+#                                   by side for SMOKE_SECONDS (default 25) from
+#                                   the seeds
 #   fuzz/run.sh campaign SECONDS [HARNESS]
 #                                   build, then fuzz HARNESS (default
 #                                   fuzz_frontend) for SECONDS with JOBS parallel
@@ -68,11 +69,24 @@ case "${1:-}" in
     secs=${SMOKE_SECONDS:-25}
     tmp=$(mktemp -d)
     trap 'rm -rf "$tmp"' EXIT
+    # The two harnesses side by side, one core each (each is one process).
+    declare -A pid
     for h in fuzz_frontend fuzz_overrides; do
       echo "fuzz smoke: $h for ${secs} s" >&2
-      fuzz "$h" "$secs" "$tmp/$h" 2>"$tmp/$h.log" || { tail -n 60 "$tmp/$h.log" >&2; exit 1; }
-      grep -E "stat::number_of_executed_units|Done [0-9]+ runs" "$tmp/$h.log" >&2 || true
+      fuzz "$h" "$secs" "$tmp/$h" 2>"$tmp/$h.log" &
+      pid[$h]=$!
     done
+    failed=0
+    for h in fuzz_frontend fuzz_overrides; do
+      if wait "${pid[$h]}"; then
+        grep -E "stat::number_of_executed_units|Done [0-9]+ runs" "$tmp/$h.log" | sed "s/^/$h: /" >&2 || true
+      else
+        echo "fuzz smoke: $h failed:" >&2
+        tail -n 60 "$tmp/$h.log" >&2
+        failed=1
+      fi
+    done
+    ((failed == 0)) || exit 1
     ;;
   campaign)
     secs=${2:?usage: fuzz/run.sh campaign SECONDS [HARNESS]}

@@ -4,7 +4,8 @@
 #     (CMake preset `asan`: hybgen, the tests and every generated runner the
 #     tests build), in build-asan/: every unit test, the validation tests that run
 #     `hybgen run`, and a chosen five of the end-to-end tests (see below);
-#  2. a fuzz smoke run of about a minute (fuzz/run.sh smoke), in build-fuzz/.
+#  2. a fuzz smoke run, both harnesses side by side for 25 s (fuzz/run.sh smoke), in
+#     build-fuzz/.
 # Any sanitizer report fails a test (halt_on_error), any fuzzer finding fails
 # the smoke run. Set HYBGEN_SKIP_HARDENING=1 to skip both (local use).
 set -euo pipefail

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "ball_methods.hpp"
 #include "bouncing_ball_model.hpp"
 #include "hybgen/rt/methods/methods.hpp"
 #include "support/ball_closed_form.hpp"

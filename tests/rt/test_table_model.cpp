@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "ball_methods.hpp"
 #include "bouncing_ball_model.hpp"
 #include "hybgen/rt/methods/methods.hpp"
 #include "hybgen/rt/table_model.hpp"
