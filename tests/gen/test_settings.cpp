@@ -226,6 +226,31 @@ TEST(Settings, SchemeFvIsForTransferAndInvariant) {
   }
 }
 
+// A method that needs the whole operator in one process (MethodSpec::whole_operator: the
+// almost-invariant sets, the coherent pairs) is refused over several ranks before any work
+// (setting_rules.hpp, one_process_rule); every other method runs there. From the methods
+// table, so that a new method is checked by its row.
+TEST(Settings, SeveralRanksAreRefusedExactlyForTheWholeOperatorMethods) {
+  rt::RunFacts one, two;
+  one.ranks = 1, two.ranks = 2;
+  int whole = 0;
+  for (const rt::MethodSpec& method : rt::kMethods) {
+    rt::Settings s;
+    rt::SettingValue v;
+    v.word = std::string(method.name);
+    s.assign("method", v);
+    const auto refused = [&s](const rt::RunFacts& facts) {
+      for (const rt::SettingConflict& c : rt::setting_conflicts(s, facts))
+        if (c.setting == "ranks" && c.message.find("one process") != std::string::npos) return true;
+      return false;
+    };
+    EXPECT_FALSE(refused(one)) << method.name;
+    EXPECT_EQ(refused(two), method.whole_operator) << method.name;
+    whole += method.whole_operator ? 1 : 0;
+  }
+  EXPECT_EQ(whole, 2);  // almost_invariant and coherent
+}
+
 // fv_order=4 gives a cycle growing modes (|λ| = 1 + 1.7e-7 on quadratic_cycle.model at 401
 // nodes): refused before anything runs (setting_rules.hpp, fv_order_rule); 1–3 and 5 pass.
 TEST(Settings, FvOrderFourIsRefused) {

@@ -11,7 +11,6 @@
 #include <vector>
 
 #include "hybgen/rt/methods/almost_invariant.hpp"
-#include "hybgen/rt/setting_rules.hpp"
 
 namespace {
 
@@ -162,22 +161,6 @@ TEST(AlmostInvariant, TooFewNodesForTheSetsIsAClearError) {
   EXPECT_THROW(
       (void)rt::almost_invariant_sets(two_blocks(0.1), std::vector<double>(6, 1.0 / 6), 1, 1),
       std::invalid_argument);
-}
-
-TEST(AlmostInvariant, SeveralRanksAreRefusedBeforeAnyWork) {
-  // The sets need the whole operator in one process (setting_rules.hpp, one_process_rule).
-  rt::Settings s;
-  rt::SettingValue v;
-  v.word = "almost_invariant";
-  s.assign("method", v);
-  rt::RunFacts one, two;
-  one.ranks = 1, two.ranks = 2;
-  for (const rt::SettingConflict& c : rt::setting_conflicts(s, one)) EXPECT_NE(c.setting, "ranks");
-  bool refused = false;
-  for (const rt::SettingConflict& c : rt::setting_conflicts(s, two))
-    refused =
-        refused || (c.setting == "ranks" && c.message.find("one process") != std::string::npos);
-  EXPECT_TRUE(refused);
 }
 
 }  // namespace

@@ -9,11 +9,9 @@
 
 #include <cmath>
 #include <cstdint>
-#include <string>
 #include <vector>
 
 #include "hybgen/rt/methods/coherent.hpp"
-#include "hybgen/rt/setting_rules.hpp"
 
 namespace {
 
@@ -167,25 +165,6 @@ TEST(Coherent, TooFewSetsOrTooSmallASupportIsRefused) {
   point[0] = 0.5, point[1] = 0.5;
   EXPECT_THROW((void)rt::coherent_sets(sparse(Dense::Identity(6, 6)), point, 2, 1),
                std::invalid_argument);
-}
-
-TEST(Coherent, SeveralRanksAreRefusedBeforeAnyWork) {
-  // method=coherent needs the whole operator in one process (MethodSpec::whole_operator,
-  // setting_rules.hpp).
-  rt::Settings s;
-  rt::SettingValue v;
-  v.word = "coherent";
-  s.assign("method", v);
-  rt::RunFacts one, two;
-  one.ranks = 1, two.ranks = 2;
-  const auto refused = [](const rt::Settings& settings, const rt::RunFacts& facts,
-                          const std::string& setting, const std::string& words) {
-    for (const rt::SettingConflict& c : rt::setting_conflicts(settings, facts))
-      if (c.setting == setting && c.message.find(words) != std::string::npos) return true;
-    return false;
-  };
-  EXPECT_FALSE(refused(s, one, "ranks", "one process"));
-  EXPECT_TRUE(refused(s, two, "ranks", "one process"));
 }
 
 }  // namespace
