@@ -1,6 +1,6 @@
 #pragma once
 /// \file line_closed_forms.hpp
-/// Closed forms of two one-dimensional validation models (tests/validation/models/), derived
+/// Closed forms of three one-dimensional validation models (tests/validation/models/), derived
 /// by hand and shared by the tests that hold hybgen's budget terms against them:
 ///  * leap_out.model: x' = 1 on [0, 1.5], x ↦ x + 2 at x = 1 (out of the box), u0 =
 ///    exp(−(x − ½)²/0.02). With I(a, b) = ∫_a^b u0, for t ≤ 1: the reset outflow R(t) =
@@ -11,6 +11,9 @@
 ///    down crosses x = 1/4. A point x0 is absorbed at t = 7/4 − x0: by time t the mass of u0
 ///    on [7/4 − t, ∞) is gone. u0 = ((1 − s²)₊)², s = (x − 0.4)/0.2, whose mass on [c, ∞) is
 ///    0.2 (G(1) − G(s_c)), G(s) = s − 2s³/3 + s⁵/5 (s_c clamped to [−1, 1]).
+///  * absorb_growth.model: x' = a x on [0, 1], absorbed at x = 1 (the box's face): x0 reaches
+///    1 at t = ln(1/x0)/a, so the mass 1 − F(e^(−a t)) is gone by t (u0 = 6x(1 − x), F(y) =
+///    3y² − 2y³).
 
 #include <algorithm>
 #include <cmath>
@@ -58,6 +61,15 @@ inline double shuttle_bump_mass_above(double c) {
 /// shuttle_trap: the mass absorbed by the trap by t.
 inline double shuttle_absorbed(double t) {
   return shuttle_bump_mass_above(1.75 - t);
+}
+
+/// absorb_growth.model's a.
+inline constexpr double kGrowthRate = 0.7;
+
+/// absorb_growth: the mass absorbed by the trap by t.
+inline double growth_absorbed(double t) {
+  const double y = std::exp(-kGrowthRate * t);
+  return 1.0 - (3.0 * y * y - 2.0 * y * y * y);
 }
 
 }  // namespace hybgen::testing

@@ -81,12 +81,8 @@ void expect_absorbed(const json& s, const std::string& guard, double (*exact)(do
   std::printf("[ absorbing ] %s: largest error of the absorbed mass %.2e\n", what.c_str(), worst);
 }
 
-constexpr double kA = 0.7;  // absorb_growth.model's a
-
-double growth_absorbed(double t) {
-  const double y = std::exp(-kA * t);
-  return 1.0 - (3.0 * y * y - 2.0 * y * y * y);
-}
+using hybgen::testing::growth_absorbed;
+constexpr double kA = hybgen::testing::kGrowthRate;  // absorb_growth.model's a
 
 constexpr double kSigma = 0.15;  // ball_first_impact.model's initial width
 

@@ -99,10 +99,13 @@ TEST(Impacts, TheShuttleCountsItsTurnAndItsTrap) {
   const json c = run("shuttle_characteristics", "shuttle_trap", "characteristics",
                      "--set budget=full --set outputs=netcdf");
   ASSERT_FALSE(c.empty());
-  // The cubature's bars are those of the absorbed masses (test_absorbing.cpp): they cover, but
-  // can be 10³× the error (docs/hardening.md, "Calibrated bars").
-  expect_impacts(c, "turn", turn_impacts, "characteristics", {1.0, 1e4, 1e-9});
-  expect_impacts(c, "trap", hybgen::testing::shuttle_absorbed, "characteristics", {1.0, 1e4, 1e-9});
+  // The cubature's bars: 15–28× the errors here, the cubature's own estimate at the tolerance
+  // asked. On the grid's nodes as the check lattice (before budget/check_points.hpp's
+  // fine_lattice) the floor made them 400–800× at t = 0.5 and 0.75, where the jump sits on a
+  // node (docs/hardening.md, "Calibrated bars"; judged over frames: test_calibration.cpp).
+  expect_impacts(c, "turn", turn_impacts, "characteristics", {1.0, 100.0, 1e-9});
+  expect_impacts(c, "trap", hybgen::testing::shuttle_absorbed, "characteristics",
+                 {1.0, 100.0, 1e-9});
   // An absorbing guard's impacts are its absorbed mass, and run.nc holds the series.
   EXPECT_EQ(c["impacts"]["trap"]["values"], c["absorbed"]["trap"]["values"]);
   const fs::path nc = hybgen::testing::own_dir(kWork) / "shuttle_characteristics" / "run.nc";
@@ -145,6 +148,8 @@ TEST(Impacts, AnElasticBallCountsEveryBounce) {
   const json c =
       run("ball_characteristics", "ball_impacts", "characteristics", "--set budget=full");
   ASSERT_FALSE(c.empty());
+  // Single frames can be 10³× (an error small by chance: 8e-8 at t = 1.625); judged as a
+  // sample over 48 frames in test_calibration.cpp.
   expect_impacts(c, "ground", elastic_ball_impacts, "ball, characteristics", {1.0, 1e4, 1e-9});
   const json p = run("ball_particles", "ball_impacts", "particles", "--set particles=200000");
   ASSERT_FALSE(p.empty());

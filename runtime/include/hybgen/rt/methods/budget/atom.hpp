@@ -259,10 +259,10 @@ inline constexpr std::size_t zeno_roots_per_axis(std::size_t n) {
 
 /// The forward flows' cubature (`adaptive_atom`, `adaptive_impacts`): `values` integrated
 /// over the part of the box where the grid's nodes see u0 > 0 (widened by a cell, clipped to
-/// the box), all slots targeted at rel_tol·scale, with the grid's nodes there as check
-/// points. `lattice` gets the check lattice's midpoint sums of every slot (empty without
-/// check points). Returns no cubature when no node carries mass (every integral is 0), else
-/// the finished one; `ok` is false on a failed forward flow (values.failure).
+/// the box), all slots targeted at rel_tol·scale, with a lattice through the grid's nodes
+/// there as check points (`fine_lattice`). `lattice` gets the check lattice's trapezoid sums of
+/// every slot (empty without check points). Returns no cubature when no node carries mass (every
+/// integral is 0), else the finished one; `ok` is false on a failed forward flow (values.failure).
 template <HybridModel M>
 struct ForwardCubature {
   std::unique_ptr<CheckPoints<state_dim_v<M>>> checks;  ///< Outlives `cub`, which reads it.
@@ -322,25 +322,26 @@ ForwardCubature<M> forward_cubature(const TensorGrid<state_dim_v<M>>& box, const
     }
     roots.push_back(c);
   }
-  // Check points: the grid's nodes in the cubature's box, with their integrand from the
-  // same forward flows, so that a Zeno basin the grid resolves is not missed between Gauss
+  // Check points: a lattice through the grid's nodes in the cubature's box, as fine as a
+  // quarter of the cubature's points allow (`fine_lattice`), with their integrand from the
+  // same forward flows, so that a Zeno basin the lattice resolves is not missed between Gauss
   // nodes (tests/validation/test_two_balls.cpp at budget=fast: 0.103 against 0.129 with an
   // estimate of 4.5e-3 without them, 0.1015 with 1.0e-2 with them — the basin's edge is
-  // finer than that test's 9 nodes per axis). A failed flow there leaves the cubature
-  // without check points; its own nodes report the failures that matter.
+  // finer than that test's 9 nodes per axis), nor a step's jump (`collect_step`). A failed
+  // flow there leaves the cubature without check points; its own nodes report the failures
+  // that matter.
   res.checks = std::make_unique<CheckPoints<N>>();
   CheckPoints<N>* checks = res.checks.get();
   {
-    check_lattice(box, max_atom_checks(aopt), slo, shi, *checks);
+    std::vector<double> weight;
+    fine_lattice(box, max_atom_checks(aopt), slo, shi, *checks, weight);
     const std::size_t V = values.values_per_point();
     std::vector<double> v(checks->x.size() * V, 0.0);
     if (values(std::span<const Cell<N>>{}, std::span<const std::array<double, N>>(checks->x), 1,
                v)) {
-      double w = 1.0;
-      for (std::size_t a = 0; a < N; ++a) w *= checks->spacing[a];
       lattice.assign(V, 0.0);
       for (std::size_t j = 0; j < checks->x.size(); ++j)
-        for (std::size_t q = 0; q < V; ++q) lattice[q] += w * v[j * V + q];
+        for (std::size_t q = 0; q < V; ++q) lattice[q] += weight[j] * v[j * V + q];
       keep_samples<M>(*checks, std::move(v), V, par);
     } else {
       *checks = {};
@@ -354,7 +355,7 @@ ForwardCubature<M> forward_cubature(const TensorGrid<state_dim_v<M>>& box, const
 }
 
 /// Slots first..first + K − 1 of a forward cubature into `a`, each estimate at least twice
-/// its distance from the check lattice's own sum of the same values (midpoint weights). The
+/// its distance from the check lattice's own sum of the same values (trapezoid weights). The
 /// slot integrates a step — u0 where the flow has done something by t_k — whose jump can lie
 /// in a cell between the cell's last nodes and its edge, seen by neither the Gauss nodes nor
 /// the check points; the budget's closure does not see it either where the guard is a face of
@@ -363,7 +364,12 @@ ForwardCubature<M> forward_cubature(const TensorGrid<state_dim_v<M>>& box, const
 /// lattice saw. Measured on x' = 0.7x absorbed at x = 1 (the face) on 201 nodes
 /// (tests/validation/test_absorbing.cpp): at t = 2, 0.84375 against 0.84756 with an estimate
 /// of 1.2e-11 before; the jump at e^(−1.4) = 0.2466 lay in the cell [0.125, 0.25] above its
-/// last node 0.241.
+/// last node 0.241. Where the cubature is right, the floor is the lattice's own error, about
+/// the jump times its cells' width: the lattice is as fine as the cap allows (`fine_lattice`,
+/// up to 64 points per grid spacing), not the grid's nodes, so that the floor is not 10²–10³×
+/// the error (the shuttle's impacts at t = 0.5, tests/validation/test_impacts.cpp: a bar of
+/// 2.8e-3 on the nodes for an error of 3.4e-6, 5.3e-5 on the finer lattice). The same lattice
+/// as check points now finds the face's jump above: 5.6e-4 off at t = 2 with a bar of 4.0e-3.
 template <class Cubature>
 void collect_step(const Cubature& cub, bool ok, std::size_t first, std::size_t K,
                   const std::vector<double>& lattice, AdaptiveOutflow& a) {
@@ -404,9 +410,9 @@ ZenoValues<M> forward_values(const TensorGrid<state_dim_v<M>>& box, std::span<co
 /// absorbed mass to (*absorbed)[g] when given (sized n_guard; empty for a guard that does not
 /// absorb), and each guard's earliest Zeno time (+∞: none) to `*zeno_time` when given. All
 /// times at once, target rel_tol·scale for every value, over the part of the box where the
-/// grid's nodes see u0 > 0 (widened by a cell), with the grid's nodes there as check points
-/// (`detail::forward_cubature`). Models without guards have neither (0, exactly, without a
-/// flow). On a failed forward flow `failure` is set.
+/// grid's nodes see u0 > 0 (widened by a cell), with a lattice through the grid's nodes there
+/// as check points (`detail::forward_cubature`). Models without guards have neither (0, exactly,
+/// without a flow). On a failed forward flow `failure` is set.
 template <HybridModel M>
 AdaptiveOutflow adaptive_atom(const TensorGrid<state_dim_v<M>>& box, std::span<const double> times,
                               const double* par, const CharacteristicsOptions& opt,

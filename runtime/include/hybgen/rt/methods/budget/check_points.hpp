@@ -1,11 +1,12 @@
 #pragma once
 /// \file check_points.hpp
 /// Check points of the mass budget's cubatures: points where the integrand is already known
-/// (the grid's nodes, with the values the run solved there, or the atom's forward flows from
-/// them), against which the adaptive cubature (budget/cubature.hpp) tests every leaf's
-/// interpolant, so that a feature the grid resolves cannot hide between a cell's Gauss
-/// nodes. Here: the lattice of nodes in a box under a cap on their number, and the choice of
-/// the nodes that are samples of the cells around them (finite, off the support's boundary).
+/// (the grid's nodes, with the values the run solved there, or the forward flows' from a
+/// finer lattice through them), against which the adaptive cubature (budget/cubature.hpp)
+/// tests every leaf's interpolant, so that a feature the lattice resolves cannot hide between
+/// a cell's Gauss nodes. Here: the lattice of nodes in a box under a cap on their number, the
+/// finer lattice, and the choice of the points that are samples of the cells around them
+/// (finite, off the support's boundary).
 
 #include <algorithm>
 #include <array>
@@ -36,6 +37,29 @@ struct CheckPoints {
   std::vector<std::size_t> root;
 };
 
+/// The index range [first[a], last[a]] of the grid's nodes in [lo, hi] per axis, a node
+/// counting as in within `slack` × its axis's spacing; false when an axis has none.
+template <std::size_t N>
+bool node_range(const TensorGrid<N>& grid, const std::array<double, N>& lo,
+                const std::array<double, N>& hi, double slack, std::array<std::size_t, N>& first,
+                std::array<std::size_t, N>& last) {
+  for (std::size_t a = 0; a < N; ++a) {
+    const GridAxis& ax = grid.axes[a];
+    const auto n = static_cast<std::size_t>(std::max(ax.n, 1));
+    const double tol = ax.n > 1 ? slack * (ax.max - ax.min) / (ax.n - 1) : 0.0;
+    first[a] = n;
+    last[a] = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double x = axis_node(ax, static_cast<int>(i));
+      if (x < lo[a] - tol || x > hi[a] + tol) continue;
+      first[a] = std::min(first[a], i);
+      last[a] = std::max(last[a], i);
+    }
+    if (first[a] > last[a]) return false;
+  }
+  return true;
+}
+
 /// The grid's nodes in the box [lo, hi], every s-th per axis (node indices divisible by s)
 /// with the smallest s that keeps them to `cap`: their flat indices, in C order;
 /// `checks.x` and `checks.spacing` (s times the grid's) are set.
@@ -44,19 +68,7 @@ std::vector<std::size_t> check_lattice(const TensorGrid<N>& grid, std::size_t ca
                                        const std::array<double, N>& lo,
                                        const std::array<double, N>& hi, CheckPoints<N>& checks) {
   std::array<std::size_t, N> first{}, last{};  // node index range in [lo, hi] per axis
-  for (std::size_t a = 0; a < N; ++a) {
-    const GridAxis& ax = grid.axes[a];
-    const auto n = static_cast<std::size_t>(std::max(ax.n, 1));
-    first[a] = n;
-    last[a] = 0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const double x = axis_node(ax, static_cast<int>(i));
-      if (x < lo[a] || x > hi[a]) continue;
-      first[a] = std::min(first[a], i);
-      last[a] = std::max(last[a], i);
-    }
-    if (first[a] > last[a]) return {};
-  }
+  if (!node_range(grid, lo, hi, 0.0, first, last)) return {};
   std::size_t stride = 1;
   for (;; ++stride) {
     std::size_t count = 1;
@@ -84,6 +96,65 @@ std::vector<std::size_t> check_lattice(const TensorGrid<N>& grid, std::size_t ca
         ax.n > 1 ? static_cast<double>(stride) * (ax.max - ax.min) / (ax.n - 1) : ax.max - ax.min;
   }
   return flat;
+}
+
+/// Largest number of lattice points per grid spacing of `fine_lattice`.
+inline constexpr std::size_t kMaxLatticeRefinement = 64;
+
+/// A lattice of points in the box [lo, hi] whose integrand the caller computes (the forward
+/// flows', budget/atom.hpp), not the grid's solved nodes: spacing h/r through the grid's
+/// nodes (h the grid's spacing per axis), r ≤ kMaxLatticeRefinement the largest that keeps
+/// the points to `cap`; where the nodes alone exceed it, `check_lattice`'s every s-th node.
+/// Sets `checks.x` and `checks.spacing`, and `weights` to each point's weight in the
+/// lattice's trapezoid sum over [lo, hi]: the spacings' product, halved per axis where the
+/// point lies on lo or hi (a box's face, where the integrand need not vanish: a full weight
+/// there counts half a cell outside the box). The lattice sum of a step function (an impact
+/// count) is off by about the step's jump times r/h-th of the cells its jump crosses, so the
+/// finer lattice is the sharper check (budget/atom.hpp, `collect_step`).
+template <std::size_t N>
+void fine_lattice(const TensorGrid<N>& grid, std::size_t cap, const std::array<double, N>& lo,
+                  const std::array<double, N>& hi, CheckPoints<N>& checks,
+                  std::vector<double>& weights) {
+  checks = {};
+  weights.clear();
+  std::array<std::size_t, N> first{}, last{};
+  if (!node_range(grid, lo, hi, 1e-9, first, last)) return;
+  auto count = [&](std::size_t r) {
+    std::size_t c = 1;
+    for (std::size_t a = 0; a < N; ++a) c *= (last[a] - first[a]) * r + 1;
+    return c;
+  };
+  if (count(1) > cap) {
+    check_lattice(grid, cap, lo, hi, checks);
+  } else {
+    std::size_t r = 1;
+    while (r < kMaxLatticeRefinement && count(r + 1) <= cap) ++r;
+    std::array<std::size_t, N> n{};
+    for (std::size_t a = 0; a < N; ++a) {
+      const GridAxis& ax = grid.axes[a];
+      n[a] = (last[a] - first[a]) * r + 1;
+      checks.spacing[a] =
+          ax.n > 1 ? (ax.max - ax.min) / (ax.n - 1) / static_cast<double>(r) : ax.max - ax.min;
+    }
+    checks.x.resize(count(r));
+    for (std::size_t j = 0; j < checks.x.size(); ++j) {
+      std::size_t rem = j;
+      for (std::size_t a = N; a-- > 0;) {
+        const std::size_t i = rem % n[a];
+        rem /= n[a];
+        // A node, then i mod r steps of h/r past it: the grid's nodes are points exactly.
+        checks.x[j][a] = axis_node(grid.axes[a], static_cast<int>(first[a] + i / r)) +
+                         static_cast<double>(i % r) * checks.spacing[a];
+      }
+    }
+  }
+  weights.assign(checks.x.size(), 1.0);
+  for (std::size_t j = 0; j < checks.x.size(); ++j)
+    for (std::size_t a = 0; a < N; ++a) {
+      const double tol = 1e-9 * checks.spacing[a], y = checks.x[j][a];
+      const bool end = std::fabs(y - lo[a]) <= tol || std::fabs(y - hi[a]) <= tol;
+      weights[j] *= (end ? 0.5 : 1.0) * checks.spacing[a];
+    }
 }
 
 /// Whether x lies on the boundary of M's support, to the resolution `h`: one of the probes
