@@ -19,6 +19,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <tuple>
 #include <vector>
 
 #include "bouncing_ball/bouncing_ball.hpp"
@@ -149,15 +150,23 @@ void BM_TransferPaper(benchmark::State& state) {
 }
 BENCHMARK(BM_TransferPaper)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
 
+/// The `galerkin` scheme (transfer.hpp: the hat expansion moved exactly and projected back),
+/// its default 8×8 samples per cell.
+void BM_TransferPaperGalerkin(benchmark::State& state) {
+  paper_run(state, rt::TransferScheme::galerkin);
+}
+BENCHMARK(BM_TransferPaperGalerkin)->Unit(benchmark::kMillisecond)->UseRealTime()->MinTime(1.0);
+
 // ---------------------------------------------------------------------------------------
 // (b) Work–precision.
 
-std::map<std::pair<double, int>, double>& errors() {
-  static std::map<std::pair<double, int>, double> e;
+std::map<std::tuple<double, int, int>, double>& errors() {
+  static std::map<std::tuple<double, int, int>, double> e;
   return e;
 }
 
-void grid_run(benchmark::State& state, double h) {
+void grid_run(benchmark::State& state, double h,
+              rt::TransferScheme scheme = rt::TransferScheme::hat) {
   const int n = static_cast<int>(state.range(0));
   const auto grid = ball_grid(n);
   const auto times = output_times(10.0, 0.5);
@@ -166,7 +175,9 @@ void grid_run(benchmark::State& state, double h) {
   double assembly = 0.0, step_s = 0.0;
   long nnz = 0;
   for (auto _ : state) {
-    const auto op = rt::assemble_transfer<CompactBall>(grid, par.data(), options(h));
+    rt::TransferOptions o = options(h);
+    o.scheme = scheme;
+    const auto op = rt::assemble_transfer<CompactBall>(grid, par.data(), o);
     if (!op.ok()) {
       state.SkipWithError("a trace failed");
       return;
@@ -189,13 +200,14 @@ void grid_run(benchmark::State& state, double h) {
     den += w[i] * std::fabs(ue);
   }
   const double err = num / den;
-  errors()[{h, n}] = err;
+  const int key = static_cast<int>(scheme);
+  errors()[{h, n, key}] = err;
   state.counters["nodes"] = static_cast<double>(grid.size());
   state.counters["nnz"] = static_cast<double>(nnz);
   state.counters["assembly_s"] = assembly;
   state.counters["step_s"] = step_s;
   state.counters["rel_L1_t10"] = err;
-  if (const auto it = errors().find({h, (n - 1) / 2 + 1}); it != errors().end())
+  if (const auto it = errors().find({h, (n - 1) / 2 + 1, key}); it != errors().end())
     state.counters["order"] = std::log2(it->second / err);
 }
 
@@ -209,6 +221,19 @@ BENCHMARK(BM_TransferGrid)
     ->Arg(257)
     ->Arg(513)
     ->Arg(1025)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(1);
+
+/// h = 0.05 by `galerkin`: second order, and no growth of the error with the steps.
+void BM_TransferGridGalerkin(benchmark::State& state) {
+  grid_run(state, 0.05, rt::TransferScheme::galerkin);
+}
+BENCHMARK(BM_TransferGridGalerkin)
+    ->Arg(65)
+    ->Arg(129)
+    ->Arg(257)
+    ->Arg(513)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(1);

@@ -226,6 +226,37 @@ TEST(Settings, SchemeFvIsForTransferAndInvariant) {
   }
 }
 
+// scheme=galerkin is method transfer's, in one process (setting_rules.hpp,
+// galerkin_scheme_rule): every other method that reads `scheme` refuses it before anything
+// runs, naming the method, and so does a run over two ranks. From the methods table.
+TEST(Settings, SchemeGalerkinIsForTransferInOneProcess) {
+  rt::RunFacts one, two;
+  one.ranks = 1, two.ranks = 2;
+  constexpr std::size_t kScheme = rt::setting_index("scheme");
+  for (const rt::MethodSpec& method : rt::kMethods) {
+    rt::Settings s;
+    rt::SettingValue m, g;
+    m.word = std::string(method.name);
+    g.word = "galerkin";
+    s.assign("method", m);
+    s.assign("scheme", g);
+    const auto why = [&s](const rt::RunFacts& facts) {
+      for (const rt::SettingConflict& c : rt::setting_conflicts(s, facts))
+        if (c.setting == "scheme") return c.message;
+      return std::string();
+    };
+    const bool reads = rt::method_reads(method, rt::kSettings[kScheme]);
+    const bool transfer = method.id == rt::Method::transfer;
+    EXPECT_EQ(why(one).empty(), transfer || !reads) << method.name << ": " << why(one);
+    if (reads && !transfer) {
+      EXPECT_NE(why(one).find("method " + std::string(method.name)), std::string::npos) << why(one);
+    }
+    if (transfer) {
+      EXPECT_NE(why(two).find("one process"), std::string::npos) << why(two);
+    }
+  }
+}
+
 // A method that needs the whole operator in one process (MethodSpec::whole_operator: the
 // almost-invariant sets, the coherent pairs) is refused over several ranks before any work
 // (setting_rules.hpp, one_process_rule); every other method runs there. From the methods

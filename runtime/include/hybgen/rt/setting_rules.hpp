@@ -170,6 +170,24 @@ inline std::string fv_scheme_rule(const Settings& s) {
          "scheme=hat";
 }
 
+/// scheme=galerkin steps the density's hat expansion by a projection with a mass matrix
+/// (methods/transfer.hpp): method transfer's, in one process. Its operator is not a matrix of
+/// probabilities, so the methods that read an operator's spectrum or columns do not take it.
+inline std::string galerkin_scheme_rule(const Settings& s, int ranks) {
+  constexpr std::size_t kScheme = setting_index("scheme");
+  if (s.word<"scheme">() != "galerkin") return "";
+  const MethodSpec& m = method_named(s.word<"method">());
+  if (m.id != Method::transfer && method_reads(m, kSettings[kScheme]))
+    return "scheme=galerkin is a transient scheme of method transfer: its step solves with a "
+           "mass matrix, so its operator is no matrix of probabilities whose spectrum or "
+           "columns method " +
+           s.word<"method">() + " reads; use scheme=hat (or fv for invariant)";
+  if (ranks > 1)
+    return "scheme=galerkin runs in one process: run without MPI, or use scheme=hat over "
+           "several ranks";
+  return "";
+}
+
 /// fv_order=4: the even-order upwind reconstruction is anti-dissipative on cycles (a
 /// periodic flow's eigenvalues measured at |λ| = 1 + 1.7e-7, growing modes), so it is
 /// refused; 1, 2 and 3 stay for tests of the order, 5 is the default.
@@ -240,6 +258,7 @@ inline std::vector<SettingConflict> setting_conflicts(const Settings& s, const R
       add("method", inverse_rule(s, name), static_cast<long>(g));
   add("density", marginals_rule(s));
   add("scheme", fv_scheme_rule(s));
+  add("scheme", galerkin_scheme_rule(s, run_ranks(s, facts)));
   add("fv_order", fv_order_rule(s));
   add("grid", memory_rule(s, facts));
   add("outputs", vti_rule(s, run_ranks(s, facts)));

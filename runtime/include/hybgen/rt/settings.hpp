@@ -95,18 +95,21 @@ inline constexpr std::array kSettings = {
                 "transfer invariant escape almost_invariant",
                 "time step of the transfer operator (0: dt); scheme=fv of transfer: a cap of its "
                 "time step (0: the stability bound alone)"},
-    SettingSpec{"scheme", SettingType::word, 0.0, "auto", 0, 0, false, "auto|hat|fv",
+    SettingSpec{"scheme", SettingType::word, 0.0, "auto", 0, 0, false, "auto|hat|fv|galerkin",
                 "transfer invariant escape almost_invariant coherent",
                 "auto (fv for method=invariant where it applies, else hat), hat (forward "
-                "samples on hat functions), or fv (a cut-cell finite-volume "
+                "samples on hat functions), fv (a cut-cell finite-volume "
                 "generator, order 5; guards that are coordinate planes; one process): its null "
-                "vector for invariant, stepped in time for transfer"},
+                "vector for invariant, stepped in time for transfer, or galerkin (transfer: the "
+                "density's hat expansion moved exactly and projected back, second order, no "
+                "growth of the error with the number of steps; one process)"},
     SettingSpec{"fv_order", SettingType::integer, 5, "", 1, 5, false, "", "transfer invariant",
                 "scheme=fv: order of the upwind reconstruction (5, the default, or 3; 1 and 2 for "
                 "tests of the order; 4 is refused)"},
     SettingSpec{"samples", SettingType::integer, 0, "", 0, 64, false, "",
                 "transfer invariant escape almost_invariant coherent",
-                "sample points per axis and cell (0: 4 up to 2-D, 3 in 3-D, 2 above)"},
+                "sample points per axis and cell (0: 4 up to 2-D, 3 in 3-D, 2 above; twice as "
+                "many up to 3-D with scheme=galerkin)"},
     SettingSpec{"eigenvalues", SettingType::integer, 6, "", 1, 64, false, "", "invariant escape",
                 "eigenvalues of the transfer operator to report"},
     SettingSpec{"sets", SettingType::integer, 2, "", 2, 16, false, "", "almost_invariant coherent",

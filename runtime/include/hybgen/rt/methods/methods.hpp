@@ -61,6 +61,7 @@
 #include "hybgen/rt/methods/observables.hpp"
 #include "hybgen/rt/methods/particles.hpp"
 #include "hybgen/rt/model.hpp"
+#include "hybgen/rt/setting_rules.hpp"
 #include "hybgen/rt/settings.hpp"
 
 #include "hybgen/rt/methods/generator_march.hpp"
@@ -189,11 +190,17 @@ inline CharacteristicsOptions trace_options(const MethodSettings& s) {
   return opt;
 }
 
+/// The transfer operator's options from the settings; throws std::invalid_argument where
+/// the settings' own rule refuses the scheme (setting_rules.hpp, galerkin_scheme_rule: the
+/// front door says so before anything runs; this is for the library's callers).
 inline TransferOptions transfer_options(const MethodSettings& s, double dt) {
   TransferOptions o;
   const double step = s.settings.real<"step">();
   o.step = step > 0 ? step : dt;
   o.scheme = parse_scheme(s.settings.word<"scheme">());
+  if (const std::string why = galerkin_scheme_rule(s.settings, s.backend ? s.backend->ranks() : 1);
+      !why.empty())
+    throw std::invalid_argument(why);
   o.samples_per_axis = static_cast<int>(s.settings.integer<"samples">());
   set_ode_settings(s, o.forward);
   o.backend = s.backend;
@@ -901,9 +908,26 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   t["note"] =
       "outflow and atom are counted per column of the operator (where the forward flow of each "
       "cell's samples ends); mass + outflow + atom = initial mass to budget_defect";
+  // hat is first order at best; galerkin, the L2 projection of the moved density, second
+  // (docs/methods.md, "transfer").
+  const int order = o.scheme == TransferScheme::galerkin ? 2 : 1;
+  if (o.scheme == TransferScheme::galerkin) {
+    double low = 0.0, top = 0.0;
+    for (const double u : r.solution.u) low = std::min(low, u), top = std::max(top, u);
+    t["min_value"] = low;
+    if (low < -kFvNegativeTolerance * top) {
+      char b[300];
+      std::snprintf(b, sizeof b,
+                    "scheme=galerkin undershoots: the smallest density is %.3g against a largest "
+                    "of %.3g (the L2 projection overshoots next to a jump); scheme=hat stays "
+                    "non-negative",
+                    low, top);
+      r.warnings.push_back(b);
+    }
+  }
   std::vector<MassBudget> coarse_budgets;  // the halved grid's, then the quartered one's
   detail::add_transfer_errors(
-      t, r, grid, times, 1, s, [&](const TensorGrid<N>& g, const char* title) {
+      t, r, grid, times, order, s, [&](const TensorGrid<N>& g, const char* title) {
         const TransferOperator<N> cop = detail::assemble<M>(g, par, o, s.quiet, title);
         if (!cop.ok()) return Solution<N>{};
         TransferRun<N> crun = march(cop, initial_vector<M>(g, par), times, nullptr);

@@ -58,6 +58,23 @@
 /// in that cell as density and the atom lags (tests/rt/test_transfer.cpp: ZenoMassBecomesAnAtom).
 /// Size: the hat deposit, the sampling of each cell by the forward flow, the
 /// CSR assembly and the per-column outflow and atom bookkeeping that keep the mass exact.
+///
+/// `galerkin` (a transient scheme for method=transfer): the density is its hat expansion
+/// u = Σ_k u_k φ_k, moved EXACTLY by the flow and projected back on the hats (a conservative
+/// Lagrange–Galerkin step). The unknowns are the values u_k; a step is
+///     x = P u,  M u' = x,   P_ik = ∫ ψ_i(T x) φ_k(x) dx,   M_ik = ∫ ψ_i φ_k,
+/// ψ_i the hats of the nodes that may hold the mass renormalised to a partition of unity (the
+/// hat deposit above). Column k of P and M comes from (2·samples)^N points over the support of
+/// φ_k, each carrying φ_k times its sub-cell's volume: its sub-cell moved to where the flow
+/// ends for P, where it starts for M (so that the identity map gives P = M). Then
+/// Σ_i P_ik + outflow_k + atom_k = Σ_i M_ik = c_k, the mass of a unit value at node k, and the
+/// mass Σ_k c_k u_k = Σ_i x_i is carried exactly (MassSolve makes the solve exact in it).
+/// u' is the L2 projection of the moved density: the projection's error is not piled up step
+/// after step as hat's smoothing is (u' differs from the moved u by a part orthogonal to the
+/// hats, of which the next step keeps O(h)), so the error does not grow like 1/step. The
+/// projection is not monotone: next to a jump the values overshoot (the paper's ball at 257²:
+/// min −0.14 against max 1.2) — the price of second order (docs/methods.md, "transfer").
+/// Measured with a prototype on the paper's ball (docs/study/lagrange-galerkin/).
 
 #include <algorithm>
 #include <array>
@@ -85,6 +102,7 @@
 #include "hybgen/rt/io/progress.hpp"
 #include "hybgen/rt/methods/forward.hpp"
 #include "hybgen/rt/model.hpp"
+#include "hybgen/rt/numerics/mass_solve.hpp"
 #include "hybgen/rt/settings.hpp"
 
 #ifdef _OPENMP
@@ -96,31 +114,37 @@ namespace hybgen::rt {
 /// Which transfer operator to assemble (see the file comment): one kind since Ulam's `cell`
 /// was withdrawn (settings.hpp, kWithdrawnCell).
 enum class TransferScheme {
-  hat,  ///< Forward samples deposited on the hat functions of their end points.
+  hat,       ///< Forward samples deposited on the hat functions of their end points.
+  galerkin,  ///< The density's hat expansion moved exactly and projected back (see above).
 };
 
-/// The scheme's name in settings and outputs ("hat").
-inline const char* scheme_name(TransferScheme) {
-  return "hat";
+/// The scheme's name in settings and outputs ("hat", "galerkin").
+inline const char* scheme_name(TransferScheme s) {
+  return s == TransferScheme::galerkin ? "galerkin" : "hat";
 }
 
 /// The scheme named `name` (`auto`: hat, the transfer operator's default); throws
 /// std::invalid_argument for any other name.
 inline TransferScheme parse_scheme(const std::string& name) {
   if (name == "hat" || name == "auto") return TransferScheme::hat;
+  if (name == "galerkin") return TransferScheme::galerkin;
   if (name == "cell") throw std::invalid_argument(std::string("scheme=") + kWithdrawnCell);
   if (name == "fv")
     throw std::invalid_argument(
         "scheme=fv is the finite-volume generator (methods/generator.hpp), not a sampled "
         "transfer operator: method=transfer and invariant take it, escape does not; use "
         "scheme=hat");
-  throw std::invalid_argument("unknown transfer scheme '" + name + "' (hat)");
+  throw std::invalid_argument("unknown transfer scheme '" + name + "' (hat, galerkin)");
 }
 
 /// Default sample points per axis and cell in N dimensions: 4 up to 2-D, 3 in 3-D, 2 above
-/// (K = 16, 27, 2^N forward flows per node).
-constexpr int default_samples_per_axis(std::size_t n) {
-  return n <= 2 ? 4 : (n == 3 ? 3 : 2);
+/// (K = 16, 27, 2^N forward flows per node). `galerkin` twice as many up to 3-D: each point
+/// weighs its sub-cell by φ_k at its middle, a midpoint rule for the product of φ_k with the
+/// moved hats whose relative error (δ/Δx)² does not fall with the grid (the paper's ball at
+/// 257², t = 10: 1.41e-2 with 4, 1.16e-2 with 8; docs/methods.md, "transfer").
+constexpr int default_samples_per_axis(std::size_t n, TransferScheme scheme = TransferScheme::hat) {
+  const int hat = n <= 2 ? 4 : (n == 3 ? 3 : 2);
+  return scheme == TransferScheme::galerkin && n <= 3 ? 2 * hat : hat;
 }
 
 /// Options of `assemble_transfer`.
@@ -162,17 +186,27 @@ struct TransferOperator {
   TransferScheme scheme = TransferScheme::hat;  ///< Scheme.
   int samples_per_axis = 0;                     ///< Sample points per axis and cell used.
   /// M^{n+1} = P M^n on node masses M_r = weight_r·u_r; P_jr = fraction of cell r's mass that
-  /// lands on node j. Empty when `distributed` holds the matrix.
+  /// lands on node j. Empty when `distributed` holds the matrix. `galerkin`: x = P u, the
+  /// moments of the moved density from the node values.
   CsrMatrix P;
+  /// `galerkin`: the mass matrix M (x = M u; see the file comment) and its solve; empty
+  /// otherwise.
+  CsrMatrix mass;
+  std::shared_ptr<const MassSolve> mass_solve;  ///< `galerkin`: u = M⁻¹ x; null otherwise.
+  /// `galerkin`: per column k, c_k = Σ_i M_ik, the mass of a unit value at node k, which its
+  /// entries, outflow and atom sum to; empty otherwise (fractions: they sum to 1).
+  std::vector<double> column_mass;
   /// The matrix over several ranks (a backend with several); null: `P` is the matrix.
   std::shared_ptr<DistributedMatrix> distributed;
   const Backend* backend = nullptr;  ///< The ranks of `distributed` (null: this process).
   /// The state indices this rank assembled, owns as rows and holds as vector entries;
   /// outflow, atom and weight are valid there ([0, size()) in one process).
   Block owned{};
-  std::vector<double> weight;   ///< Trapezoid weight (= dual-cell volume) of every index r.
-  std::vector<double> outflow;  ///< Fraction of cell r leaving the box or the support.
-  std::vector<double> atom;     ///< Fraction of cell r that reaches a Zeno point within h.
+  std::vector<double> weight;  ///< Trapezoid weight (= dual-cell volume) of every index r.
+  /// Fraction of cell r leaving the box or the support (`galerkin`: the mass per unit value).
+  std::vector<double> outflow;
+  /// Fraction of cell r that reaches a Zeno point within h (`galerkin`: per unit value).
+  std::vector<double> atom;
   /// Per guard g, whether it absorbs (model.hpp, `absorbs`); n_guard entries.
   std::vector<char> absorbing;
   /// absorbed[r·n_guard + g]: the fraction of cell r that guard g absorbs within h (a part of
@@ -185,7 +219,8 @@ struct TransferOperator {
   /// Per guard g, whether a sample came to rest at a Zeno point on g within h (its impacts
   /// are then infinite once mass reaches the atom); all ranks agree.
   std::vector<char> zeno_guard;
-  /// max_r |Σ_j P_jr + outflow_r + atom_r − 1| (≤ kColumnTol, or the assembly failed).
+  /// max_r |Σ_j P_jr + outflow_r + atom_r − 1| (≤ kColumnTol, or the assembly failed);
+  /// `galerkin`: relative to column_mass_r.
   double column_defect = 0.0;
   /// First failure (smallest index r), if any; status.tau is the FORWARD time of the failure.
   TraceFailure<N> failure{};
@@ -411,8 +446,9 @@ bool deposit(const TensorGrid<N>& grid, const std::array<double, N>& dx,
   return true;
 }
 
-/// Conservation, column by column: Σ_j P_jr + outflow_r + atom_r = 1 and P_jr ≥ 0. It holds
-/// by construction (fractions of the samples in the support, deposit weights summing to 1).
+/// Conservation, column by column: Σ_j P_jr + outflow_r + atom_r = 1 (`galerkin`:
+/// column_mass_r, to kColumnTol relative) and P_jr ≥ 0. It holds by construction (fractions
+/// of the samples in the support, deposit weights summing to 1).
 /// `each(f)` calls f(row, column, value) for every entry this rank assembled (all of its
 /// owned columns' entries). Sets op.column_defect (the largest over all ranks), and
 /// op.failure_message (naming the node, from the rank that owns it) when the defect exceeds
@@ -430,8 +466,12 @@ void check_columns(TransferOperator<state_dim_v<M>>& op, const Backend& b, ForEa
   });
   double defect = 0.0;
   std::size_t worst = own.begin;
+  // What column r sums to: 1, or the mass of a unit value at its node (`galerkin`).
+  const auto want = [&op](std::size_t r) {
+    return op.column_mass.empty() ? 1.0 : op.column_mass[r];
+  };
   for (std::size_t r = own.begin; r < own.end; ++r) {
-    const double d = std::fabs(col[r - own.begin] - 1.0);
+    const double d = std::fabs(col[r - own.begin] - want(r)) / (want(r) > 0.0 ? want(r) : 1.0);
     if (!(d <= defect)) {
       defect = std::isfinite(d) ? d : std::numeric_limits<double>::infinity();
       worst = r;
@@ -453,8 +493,8 @@ void check_columns(TransferOperator<state_dim_v<M>>& op, const Backend& b, ForEa
     os << "the transfer operator does not conserve mass: the column of node ";
     write_state<M>(os, op.grid.node(worst % op.n_node));
     os << " in mode '" << mode_name<M>(static_cast<int>(worst / op.n_node))
-       << "' sums, with its outflow and atom, to " << col[worst - own.begin]
-       << " instead of 1 (tolerance " << kColumnTol << "), or has a negative entry";
+       << "' sums, with its outflow and atom, to " << col[worst - own.begin] << " instead of "
+       << want(worst) << " (tolerance " << kColumnTol << " relative), or has a negative entry";
     message = os.str();
   }
   op.failure_message = b.broadcast(message, static_cast<int>(owner));
@@ -475,6 +515,58 @@ void check_columns(TransferOperator<state_dim_v<M>>& op) {
 
 /// Entries per chunk of an assembling thread's list (1 MiB of OperatorEntry).
 inline constexpr std::size_t kEntryChunk = std::size_t{1} << 16;
+
+/// The R × R matrix of the per-thread entry lists `trip` (chunks of (row, column, value),
+/// one entry per row and column), freeing each chunk as it goes.
+inline CsrMatrix csr_by_rows(std::vector<std::vector<std::vector<OperatorEntry>>>& trip,
+                             std::size_t R) {
+  using Triplet = OperatorEntry;
+  CsrMatrix A;
+  // CSR by target rows: count, prefix sum, scatter (serial: O(nnz) moves), then sort each
+  // row's columns (parallel; rows are short).
+  std::vector<int> outer(R + 1, 0);
+  std::size_t nnz = 0;
+  for (const auto& chunks : trip)
+    for (const auto& c : chunks) {
+      nnz += c.size();
+      for (const Triplet& e : c) ++outer[static_cast<std::size_t>(e.row) + 1];
+    }
+  if (nnz > static_cast<std::size_t>(std::numeric_limits<int>::max()))
+    throw std::length_error("transfer: more than 2^31 nonzeros (int32 CSR indices)");
+  for (std::size_t r = 0; r < R; ++r) outer[r + 1] += outer[r];
+  A.resize(static_cast<Eigen::Index>(R), static_cast<Eigen::Index>(R));
+  A.resizeNonZeros(static_cast<Eigen::Index>(nnz));
+  int* po = A.outerIndexPtr();
+  int* pi = A.innerIndexPtr();
+  double* pv = A.valuePtr();
+  std::copy(outer.begin(), outer.end(), po);
+  std::vector<int> fill(outer.begin(), outer.end() - 1);
+  for (auto& chunks : trip)
+    for (auto& c : chunks) {
+      for (const Triplet& e : c) {
+        const auto dst = static_cast<std::size_t>(fill[static_cast<std::size_t>(e.row)]++);
+        pi[dst] = e.col;
+        pv[dst] = e.value;
+      }
+      std::vector<Triplet>().swap(c);  // free as we go: the triplets are ~1.3× the matrix
+    }
+#pragma omp parallel
+  {
+    std::vector<std::pair<int, double>> row;
+#pragma omp for schedule(static)
+    for (std::int64_t r = 0; r < static_cast<std::int64_t>(R); ++r) {
+      const int b = po[r], e = po[r + 1];
+      row.clear();
+      for (int k = b; k < e; ++k) row.emplace_back(pi[k], pv[k]);
+      std::sort(row.begin(), row.end());
+      for (int k = b; k < e; ++k) {
+        pi[k] = row[static_cast<std::size_t>(k - b)].first;
+        pv[k] = row[static_cast<std::size_t>(k - b)].second;
+      }
+    }
+  }
+  return A;
+}
 
 /// The operator (see the file comment). Source cells (columns) in parallel,
 /// dynamic schedule, per-thread (target, source, fraction) triplets, then CSR by rows.
@@ -499,11 +591,18 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   op.impacts.assign(static_cast<std::size_t>(R) * G, 0.0);
   op.zeno_guard.assign(G, 0);
   const std::array<double, 1> step_time{opt.step};
-  const int Ka = opt.samples_per_axis > 0 ? opt.samples_per_axis : default_samples_per_axis(N);
+  const int Ka =
+      opt.samples_per_axis > 0 ? opt.samples_per_axis : default_samples_per_axis(N, opt.scheme);
   op.samples_per_axis = Ka;
+  // `galerkin` samples the support of node k's hat, two cells per axis (one at a box face):
+  // K is then the most points a column takes.
+  const bool galerkin = opt.scheme == TransferScheme::galerkin;
+  if (galerkin && backend.ranks() > 1)
+    throw std::invalid_argument("transfer: scheme=galerkin runs in one process");
+  const std::size_t per_axis = static_cast<std::size_t>(Ka) * (galerkin ? 2 : 1);
   std::size_t K = 1;
   for (std::size_t a = 0; a < N; ++a) {
-    K *= static_cast<std::size_t>(Ka);
+    K *= per_axis;
     if (K > kMaxSamplesPerCell)
       throw std::invalid_argument("transfer: samples_per_axis^N = " + std::to_string(Ka) + "^" +
                                   std::to_string(N) + " exceeds " +
@@ -521,8 +620,11 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
 #endif
   // Per thread, its entries in chunks of kEntryChunk, each reserved once: no vector grows by
   // copying itself (a doubling vector briefly holds 1.5 to 2 times its entries), and each
-  // chunk is freed as soon as it has been moved into the matrix.
-  std::vector<std::vector<std::vector<Triplet>>> trip(static_cast<std::size_t>(threads));
+  // chunk is freed as soon as it has been moved into the matrix. `mtrip`: the mass matrix's
+  // (`galerkin`).
+  std::vector<std::vector<std::vector<Triplet>>> trip(static_cast<std::size_t>(threads)),
+      mtrip(static_cast<std::size_t>(threads));
+  if (galerkin) op.column_mass.assign(static_cast<std::size_t>(R), 0.0);
   std::atomic<std::int64_t> first_fail{R};
 #pragma omp parallel num_threads(threads)
   {
@@ -530,23 +632,26 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
 #ifdef _OPENMP
     tid = omp_get_thread_num();
 #endif
-    std::vector<std::vector<Triplet>>& chunks = trip[static_cast<std::size_t>(tid)];
-    auto emit = [&chunks](const Triplet& e) {
+    auto emit_to = [](std::vector<std::vector<Triplet>>& chunks, const Triplet& e) {
       if (chunks.empty() || chunks.back().size() == kEntryChunk) {
         chunks.emplace_back();
         chunks.back().reserve(kEntryChunk);
       }
       chunks.back().push_back(e);
     };
+    std::vector<std::vector<Triplet>>& chunks = trip[static_cast<std::size_t>(tid)];
+    std::vector<std::vector<Triplet>>& mchunks = mtrip[static_cast<std::size_t>(tid)];
     ForwardFlow<M> flow(par, first_step_h(opt.forward, opt.step));
     std::vector<std::pair<std::size_t, double>> dest;  // (state index, weight of one sample)
     dest.reserve(K * (std::size_t{1} << N));
-    std::vector<ForwardResult<N>> end(K);  // where each sample's flow ended
-    std::vector<char> valid(K);            // … in the support, status ok
-    std::vector<char> flowed(K);           // whether the sample was in the support
-    std::vector<std::size_t> n_absorbed(any_absorbing ? G : 0);  // per guard, in one cell
-    std::vector<std::size_t> n_fired(G);                         // per guard, in one cell
-    std::vector<char> zeno_guard(G, 0);                          // this thread's
+    std::vector<std::pair<std::size_t, double>> mdest;      // the mass matrix's (`galerkin`)
+    std::vector<ForwardResult<N>> end(K);                   // where each sample's flow ended
+    std::vector<char> valid(K);                             // … in the support, status ok
+    std::vector<char> flowed(K);                            // whether the sample was in the support
+    std::vector<double> weight(K);                          // what each sample carries (see below)
+    std::vector<double> n_absorbed(any_absorbing ? G : 0);  // per guard, in one cell
+    std::vector<double> n_fired(G);                         // per guard, in one cell
+    std::vector<char> zeno_guard(G, 0);                     // this thread's
 #pragma omp for schedule(dynamic, 64)
     for (auto r = static_cast<std::int64_t>(op.owned.begin);
          r < static_cast<std::int64_t>(op.owned.end); ++r) {
@@ -554,26 +659,35 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       if (r > first_fail.load(std::memory_order_relaxed)) continue;
       const auto m = static_cast<int>(r / nn);
       const auto i = static_cast<std::size_t>(r % nn);
-      // The dual cell of node i: [y − Δ/2, y + Δ/2] ∩ box.
+      // The dual cell of node i, [y − Δ/2, y + Δ/2] ∩ box, in Ka sub-cells per axis; with
+      // `galerkin` the support of its hat, [y − Δ, y + Δ] ∩ box, in Ka per cell.
       const State y = grid.node(i);
       State lo{}, hi{}, delta{};
+      std::array<std::size_t, N> count{};  // sub-cells per axis
+      std::size_t Kr = 1;                  // … in all
       for (std::size_t a = 0; a < N; ++a) {
-        lo[a] = std::max(grid.axes[a].min, y[a] - 0.5 * dx[a]);
-        hi[a] = std::min(grid.axes[a].max, y[a] + 0.5 * dx[a]);
-        delta[a] = (hi[a] - lo[a]) / static_cast<double>(Ka);  // a sample's sub-cell
+        const double reach = galerkin ? dx[a] : 0.5 * dx[a];
+        lo[a] = std::max(grid.axes[a].min, y[a] - reach);
+        hi[a] = std::min(grid.axes[a].max, y[a] + reach);
+        count[a] = galerkin ? static_cast<std::size_t>(Ka) *
+                                  static_cast<std::size_t>(std::lround((hi[a] - lo[a]) / dx[a]))
+                            : static_cast<std::size_t>(Ka);
+        delta[a] = (hi[a] - lo[a]) / static_cast<double>(count[a]);  // a sample's sub-cell
+        Kr *= count[a];
       }
       dest.clear();
-      std::fill(n_absorbed.begin(), n_absorbed.end(), 0);
-      std::fill(n_fired.begin(), n_fired.end(), 0);
-      std::size_t n_out = 0, n_atom = 0, n_void = 0;
+      std::fill(n_absorbed.begin(), n_absorbed.end(), 0.0);
+      std::fill(n_fired.begin(), n_fired.end(), 0.0);
+      double n_out = 0.0, n_atom = 0.0;
+      std::size_t n_void = 0;
       bool failed = false;
       auto sample = [&](std::size_t q) {
         State x0{};
         std::size_t rem = q;
         for (std::size_t a = N; a-- > 0;) {
-          const auto j = static_cast<double>(rem % static_cast<std::size_t>(Ka));
-          rem /= static_cast<std::size_t>(Ka);
-          x0[a] = lo[a] + (j + 0.5) * (hi[a] - lo[a]) / static_cast<double>(Ka);
+          const auto j = static_cast<double>(rem % count[a]);
+          rem /= count[a];
+          x0[a] = lo[a] + (j + 0.5) * (hi[a] - lo[a]) / static_cast<double>(count[a]);
         }
         return x0;
       };
@@ -581,28 +695,54 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       // lies in the region (a node that took mass by the deposit's support-only fallback),
       // on cell ∩ support, so that such mass moves on instead of being booked as outflow.
       bool use_region = false;
-      for (std::size_t q = 0; q < K && !use_region; ++q) {
+      for (std::size_t q = 0; q < Kr && !use_region; ++q) {
         const State x0 = sample(q);
         use_region = M::in_support(x0.data(), par) && in_mode_region<M>(m, x0.data(), par);
       }
+      // What a sample carries: with `hat` 1 (the fractions are taken over the samples in the
+      // support below), with `galerkin` φ_i at its point times its sub-cell's volume, and its
+      // sub-cell where it starts is deposited on the hats as the mass matrix's column.
+      mdest.clear();
+      double column_mass = 0.0;
+      const std::size_t mo_here = static_cast<std::size_t>(m) * static_cast<std::size_t>(nn);
       // Pass 1: the forward flow of every sample (kept: pass 2 reads its neighbours).
-      for (std::size_t q = 0; q < K && !failed; ++q) {
+      for (std::size_t q = 0; q < Kr && !failed; ++q) {
         const State x0 = sample(q);
         valid[q] = 0;
         flowed[q] = 0;
+        weight[q] = 1.0;
         if (!M::in_support(x0.data(), par) ||
             (use_region && !in_mode_region<M>(m, x0.data(), par))) {
           ++n_void;  // no state there
           continue;
         }
+        if (galerkin) {
+          double v = 1.0;
+          for (std::size_t a = 0; a < N; ++a)
+            v *= std::max(0.0, 1.0 - std::fabs(x0[a] - y[a]) / dx[a]) * delta[a];
+          const std::size_t before = mdest.size();
+          if (!(v > 0.0) || !(deposit<N>(grid, dx, delta, in_region.data() + mo_here, x0, mdest) ||
+                              deposit<N>(grid, dx, delta, in_support.data(), x0, mdest))) {
+            ++n_void;  // no node of its mode holds it: no state of this column there
+            continue;
+          }
+          for (std::size_t k = before; k < mdest.size(); ++k) {
+            mdest[k].first += mo_here;
+            mdest[k].second *= v;
+          }
+          weight[q] = v;
+          column_mass += v;
+        }
+        const double wq = weight[q];
         end[q] = flow.run(
             m, x0, std::span<const double>(step_time), [](std::size_t, int, const State&) {},
             [&](double, int g, const State&, const State&) {
-              ++n_fired[static_cast<std::size_t>(g)];
+              n_fired[static_cast<std::size_t>(g)] += wq;
             });
         flowed[q] = 1;
         const ForwardResult<N>& res = end[q];
-        if (res.status == ForwardStatus::absorbed) ++n_fired[static_cast<std::size_t>(res.guard)];
+        if (res.status == ForwardStatus::absorbed)
+          n_fired[static_cast<std::size_t>(res.guard)] += wq;
         if (res.status == ForwardStatus::zeno && res.guard >= 0 && res.t_stop > 0.0)
           zeno_guard[static_cast<std::size_t>(res.guard)] = 1;
         valid[q] = res.status == ForwardStatus::ok && M::in_support(res.x.data(), par) ? 1 : 0;
@@ -632,17 +772,17 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       // ended elsewhere: another mode, outside, or farther than 4 cells); it matches the
       // second moments of the image of an affine map exactly (in 1-D the images then tile
       // without gaps or overlaps; for a smooth map up to O(δ²)).
-      for (std::size_t q = 0; q < K && !failed; ++q) {
+      for (std::size_t q = 0; q < Kr && !failed; ++q) {
         if (!flowed[q]) continue;  // a void sample (counted in pass 1; end[q] is stale)
         const ForwardResult<N>& res = end[q];
         if (res.status == ForwardStatus::zeno) {
-          ++n_atom;
+          n_atom += weight[q];
           continue;
         }
         if (res.status != ForwardStatus::ok) {
-          ++n_out;
+          n_out += weight[q];
           if (res.status == ForwardStatus::absorbed)
-            ++n_absorbed[static_cast<std::size_t>(res.guard)];
+            n_absorbed[static_cast<std::size_t>(res.guard)] += weight[q];
           continue;
         }
         State width = delta;
@@ -650,7 +790,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
           std::array<std::array<double, N>, N> D{};
           std::size_t stride = 1;
           for (std::size_t a = N; a-- > 0;) {
-            const std::size_t digit = (q / stride) % static_cast<std::size_t>(Ka);
+            const std::size_t digit = (q / stride) % count[a];
             auto near = [&](std::size_t nb) {
               if (!valid[nb] || end[nb].mode != res.mode) return false;
               for (std::size_t b = 0; b < N; ++b)
@@ -658,7 +798,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
                   return false;
               return true;
             };
-            const bool up = digit + 1 < static_cast<std::size_t>(Ka) && near(q + stride);
+            const bool up = digit + 1 < count[a] && near(q + stride);
             const bool down = digit > 0 && near(q - stride);
             for (std::size_t b = 0; b < N; ++b) {
               if (up && down)
@@ -670,7 +810,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
               else
                 D[a][b] = a == b ? delta[a] : 0.0;
             }
-            stride *= static_cast<std::size_t>(Ka);
+            stride *= count[a];
           }
           for (std::size_t b = 0; b < N; ++b) {
             double w2 = 0.0;
@@ -684,30 +824,43 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
         const std::size_t mo = static_cast<std::size_t>(res.mode) * static_cast<std::size_t>(nn);
         if (valid[q] && (deposit<N>(grid, dx, width, in_region.data() + mo, res.x, dest) ||
                          deposit<N>(grid, dx, width, in_support.data(), res.x, dest))) {
-          for (std::size_t k = before; k < dest.size(); ++k) dest[k].first += mo;
+          for (std::size_t k = before; k < dest.size(); ++k) {
+            dest[k].first += mo;
+            dest[k].second *= weight[q];
+          }
         } else {
-          ++n_out;
+          n_out += weight[q];
         }
       }
       if (failed) continue;
-      // Fractions over the samples in the support (all K but near a support boundary that
-      // is not a box face); a cell with none keeps no mass: all of it counts as outflow.
-      const std::size_t k_in = K - n_void;
-      const double inv = k_in > 0 ? 1.0 / static_cast<double>(k_in) : 0.0;
-      op.outflow[static_cast<std::size_t>(r)] = k_in > 0 ? static_cast<double>(n_out) * inv : 1.0;
-      op.atom[static_cast<std::size_t>(r)] = static_cast<double>(n_atom) * inv;
+      // `hat`: fractions over the samples in the support (all K but near a support boundary
+      // that is not a box face); a cell with none keeps no mass: all of it counts as outflow.
+      // `galerkin`: the samples' weights as they are; the column sums to column_mass.
+      const std::size_t k_in = Kr - n_void;
+      const double inv = galerkin ? 1.0 : (k_in > 0 ? 1.0 / static_cast<double>(k_in) : 0.0);
+      const auto ru = static_cast<std::size_t>(r);
+      op.outflow[ru] = galerkin || k_in > 0 ? n_out * inv : 1.0;
+      op.atom[ru] = n_atom * inv;
       for (std::size_t g = 0; g < n_absorbed.size(); ++g)
-        op.absorbed[static_cast<std::size_t>(r) * G + g] = static_cast<double>(n_absorbed[g]) * inv;
-      for (std::size_t g = 0; g < G; ++g)
-        op.impacts[static_cast<std::size_t>(r) * G + g] = static_cast<double>(n_fired[g]) * inv;
-      std::sort(dest.begin(), dest.end());
-      for (std::size_t k = 0; k < dest.size();) {
-        double w = 0.0;
-        std::size_t e = k;
-        for (; e < dest.size() && dest[e].first == dest[k].first; ++e) w += dest[e].second;
-        emit(Triplet{static_cast<std::int32_t>(dest[k].first), static_cast<std::int32_t>(r),
-                     w * inv});
-        k = e;
+        op.absorbed[ru * G + g] = n_absorbed[g] * inv;
+      for (std::size_t g = 0; g < G; ++g) op.impacts[ru * G + g] = n_fired[g] * inv;
+      // The summed entries of one column, (row, weight) pairs in any order.
+      const auto emit_column = [&](std::vector<std::pair<std::size_t, double>>& d,
+                                   std::vector<std::vector<Triplet>>& to) {
+        std::sort(d.begin(), d.end());
+        for (std::size_t k = 0; k < d.size();) {
+          double w = 0.0;
+          std::size_t e = k;
+          for (; e < d.size() && d[e].first == d[k].first; ++e) w += d[e].second;
+          emit_to(to, Triplet{static_cast<std::int32_t>(d[k].first), static_cast<std::int32_t>(r),
+                              w * inv});
+          k = e;
+        }
+      };
+      emit_column(dest, chunks);
+      if (galerkin) {
+        emit_column(mdest, mchunks);
+        op.column_mass[ru] = column_mass;
       }
     }
 #pragma omp critical(hybgen_rt_transfer_zeno)
@@ -744,48 +897,10 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
       throw std::logic_error("transfer: a backend of several ranks without distributed matrices");
     return op;
   }
-  // CSR by target rows: count, prefix sum, scatter (serial: O(nnz) moves), then sort each
-  // row's columns (parallel; rows are short).
-  std::vector<int> outer(static_cast<std::size_t>(R) + 1, 0);
-  std::size_t nnz = 0;
-  for (const auto& chunks : trip)
-    for (const auto& c : chunks) {
-      nnz += c.size();
-      for (const Triplet& e : c) ++outer[static_cast<std::size_t>(e.row) + 1];
-    }
-  if (nnz > static_cast<std::size_t>(std::numeric_limits<int>::max()))
-    throw std::length_error("transfer: more than 2^31 nonzeros (int32 CSR indices)");
-  for (std::size_t r = 0; r < static_cast<std::size_t>(R); ++r) outer[r + 1] += outer[r];
-  op.P.resize(static_cast<Eigen::Index>(R), static_cast<Eigen::Index>(R));
-  op.P.resizeNonZeros(static_cast<Eigen::Index>(nnz));
-  int* po = op.P.outerIndexPtr();
-  int* pi = op.P.innerIndexPtr();
-  double* pv = op.P.valuePtr();
-  std::copy(outer.begin(), outer.end(), po);
-  std::vector<int> fill(outer.begin(), outer.end() - 1);
-  for (auto& chunks : trip)
-    for (auto& c : chunks) {
-      for (const Triplet& e : c) {
-        const auto dst = static_cast<std::size_t>(fill[static_cast<std::size_t>(e.row)]++);
-        pi[dst] = e.col;
-        pv[dst] = e.value;
-      }
-      std::vector<Triplet>().swap(c);  // free as we go: the triplets are ~1.3× the matrix
-    }
-#pragma omp parallel
-  {
-    std::vector<std::pair<int, double>> row;
-#pragma omp for schedule(static)
-    for (std::int64_t r = 0; r < R; ++r) {
-      const int b = po[r], e = po[r + 1];
-      row.clear();
-      for (int k = b; k < e; ++k) row.emplace_back(pi[k], pv[k]);
-      std::sort(row.begin(), row.end());
-      for (int k = b; k < e; ++k) {
-        pi[k] = row[static_cast<std::size_t>(k - b)].first;
-        pv[k] = row[static_cast<std::size_t>(k - b)].second;
-      }
-    }
+  op.P = csr_by_rows(trip, static_cast<std::size_t>(R));
+  if (galerkin) {
+    op.mass = csr_by_rows(mtrip, static_cast<std::size_t>(R));
+    op.mass_solve = std::make_shared<const MassSolve>(op.mass);
   }
   return op;
 }
@@ -880,7 +995,8 @@ inline long steps_to(double t, double h) {
 /// if set, is advanced once per step. A distributed operator is marched by every rank on
 /// its owned entries (one collective mat-vec and one sum of the three budget terms per
 /// step); each rank's `solution` keeps its own entries of every frame (distributed: nothing
-/// is gathered).
+/// is gathered). `galerkin`: x = M u0 are the moments, each step x ← P u, u = M⁻¹ x; a
+/// solve that fails stops the march with `failure`.
 template <std::size_t N>
 TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
                      std::span<const double> times, Progress* progress = nullptr) {
@@ -902,21 +1018,31 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   sol.n_point = op.n_node;
   if (op.distributed) sol.distributed = true, sol.owned = own;
   sol.u.assign(sol.n_time * L, 0.0);
-  // x: the owned node masses weight·u.
-  std::vector<double> x(L), y(L);
+  // x: the owned node masses weight·u (`galerkin`: the moments M u, and u the values).
+  const bool galerkin = op.mass_solve != nullptr;
+  if (galerkin && op.distributed)
+    throw std::invalid_argument("transfer: scheme=galerkin runs in one process");
+  std::vector<double> x(L), y(L), u(galerkin ? L : 0);
   const double* w = op.weight.data() + own.begin;
   const double* outflow = op.outflow.data() + own.begin;
   const double* atom = op.atom.data() + own.begin;
   double mass0 = 0.0;
   const auto Li = static_cast<std::int64_t>(L);
+  if (galerkin) {
+    std::copy(u0.begin(), u0.end(), u.begin());
+    Eigen::Map<Eigen::VectorXd>(x.data(), static_cast<Eigen::Index>(L)) =
+        op.mass * Eigen::Map<const Eigen::VectorXd>(u.data(), static_cast<Eigen::Index>(L));
+  }
 #pragma omp parallel for schedule(static) reduction(+ : mass0) if (Li > detail::kParallelRows)
   for (std::int64_t r = 0; r < Li; ++r) {
     const auto ru = static_cast<std::size_t>(r);
-    x[ru] = w[ru] * u0[own.begin + ru];
+    if (!galerkin) x[ru] = w[ru] * u0[own.begin + ru];
     y[ru] = 0.0;
     mass0 += x[ru];
   }
   mass0 = b.sum(mass0);
+  // What the operator acts on: the masses, or the values (`galerkin`).
+  const std::vector<double>& src = galerkin ? u : x;
   run.step_mass.reserve(static_cast<std::size_t>(run.n_steps) + 1);
   run.step_mass.push_back(mass0);
   std::size_t k = 0;
@@ -934,15 +1060,15 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   const std::size_t GI = op.impacts.empty() ? 0 : op.zeno_guard.size();
   std::vector<double> impacts_cum(GI, 0.0), impacts_step(GI, 0.0);
   // One step's per-guard totals of a column table (`table`[r·n + g] per unit mass in column
-  // r, n = step.size(): op.absorbed, op.impacts) applied to the marched masses x, summed
-  // over the ranks, and added to `cum`.
+  // r, n = step.size(): op.absorbed, op.impacts) applied to the marched masses x (`galerkin`:
+  // per unit value, to the values u), summed over the ranks, and added to `cum`.
   const auto per_guard = [&](const std::vector<double>& table, std::vector<double>& step,
                              std::vector<double>& cum) {
     const std::size_t n = step.size();
     std::fill(step.begin(), step.end(), 0.0);
     const double* t = table.data() + own.begin * n;
     for (std::size_t r = 0; r < L; ++r)
-      for (std::size_t g = 0; g < n; ++g) step[g] += t[r * n + g] * x[r];
+      for (std::size_t g = 0; g < n; ++g) step[g] += t[r * n + g] * src[r];
     if (op.distributed) b.sum(std::span<double>(step));
     for (std::size_t g = 0; g < n; ++g) cum[g] += step[g];
   };
@@ -956,7 +1082,7 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
 #pragma omp parallel for schedule(static) if (Li > detail::kParallelRows)
       for (std::int64_t r = 0; r < Li; ++r) {
         const auto ru = static_cast<std::size_t>(r);
-        dst[ru] = x[ru] / w[ru];
+        dst[ru] = galerkin ? u[ru] : x[ru] / w[ru];
       }
       mb.mass.push_back(run.step_mass.back());
       mb.outflow.push_back(out_cum);
@@ -974,20 +1100,20 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   for (long n = 0; n < run.n_steps; ++n) {
     detail::StepSums s;
     if (op.distributed) {
-      op.distributed->multiply(x, y);
+      op.distributed->multiply(src, y);
       double sm = 0.0, so = 0.0, sa = 0.0;
 #pragma omp parallel for schedule(static) reduction(+ : sm, so, sa) if (Li > detail::kParallelRows)
       for (std::int64_t r = 0; r < Li; ++r) {
         const auto ru = static_cast<std::size_t>(r);
         sm += y[ru];
-        so += outflow[ru] * x[ru];
-        sa += atom[ru] * x[ru];
+        so += outflow[ru] * src[ru];
+        sa += atom[ru] * src[ru];
       }
       std::array<double, 3> sums{sm, so, sa};
       b.sum(std::span<double>(sums));
       s = {sums[0], sums[1], sums[2]};
     } else {
-      s = detail::csr_step(op.P, x.data(), y.data(), outflow, atom);
+      s = detail::csr_step(op.P, src.data(), y.data(), outflow, atom);
     }
     const double defect = std::fabs(s.mass + s.outflow + s.atom - run.step_mass.back()) / scale;
     run.budget_defect = std::max(run.budget_defect, std::isnan(defect) ? HUGE_VAL : defect);
@@ -1014,6 +1140,10 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
     if (G > 0) per_guard(op.absorbed, absorbed_step, absorbed_cum);
     if (GI > 0) per_guard(op.impacts, impacts_step, impacts_cum);
     std::swap(x, y);
+    if (galerkin && !op.mass_solve->solve(x.data(), u.data())) {
+      run.failure = "at step " + std::to_string(n + 1) + ": " + op.mass_solve->error();
+      break;
+    }
     out_cum += s.outflow;
     atom_cum += s.atom;
     run.step_outflow.push_back(s.outflow);
