@@ -30,15 +30,18 @@ MassSolve::MassSolve(const CsrMatrix& M) : impl_(std::make_unique<Impl>()) {
   for (Eigen::Index k = 0; k < M.nonZeros(); ++k)
     impl_->c[static_cast<std::size_t>(M.innerIndexPtr()[k])] += M.valuePtr()[k];
   for (const double v : impl_->c) impl_->c_total += v;
-  // An empty row and column (a node that holds no state of its mode) is the identity there.
+  // An empty row (a node that holds no state of its mode) is the identity there: M plus a
+  // diagonal of those rows, one sparse sum (inserting into a compressed matrix row by row
+  // would move its entries once per row).
   CsrMatrix& A = impl_->M;
-  bool patched = false;
+  std::vector<Eigen::Triplet<double>> ones;
   for (Eigen::Index r = 0; r < A.rows(); ++r)
-    if (A.outerIndexPtr()[r] == A.outerIndexPtr()[r + 1]) {
-      A.coeffRef(r, r) = 1.0;
-      patched = true;
-    }
-  if (patched) A.makeCompressed();
+    if (A.outerIndexPtr()[r] == A.outerIndexPtr()[r + 1]) ones.emplace_back(r, r, 1.0);
+  if (!ones.empty()) {
+    CsrMatrix D(A.rows(), A.cols());
+    D.setFromTriplets(ones.begin(), ones.end());
+    A = CsrMatrix(A + D);
+  }
   impl_->solver.setTolerance(kMassSolveTol);
   impl_->solver.setMaxIterations(1000);
   impl_->solver.compute(A);
