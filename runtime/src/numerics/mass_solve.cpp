@@ -5,7 +5,9 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 // See hybgen/rt/core/sparse.hpp: GCC 12's flow-sensitive warnings misfire inside Eigen.
@@ -17,18 +19,19 @@ namespace hybgen::rt {
 
 struct MassSolve::Impl {
   CsrMatrix M;            ///< M with 1 on the diagonal of its empty rows.
-  std::vector<double> c;  ///< Mᵀ1 (before the patch): the mass of a unit value per node.
+  std::vector<double> c;  ///< The column sums of M: the mass of a unit value per node.
   double c_total = 0.0;   ///< Σ c.
   Eigen::BiCGSTAB<CsrMatrix, Eigen::DiagonalPreconditioner<double>> solver;
   mutable std::string error;
   mutable long iterations = 0;
 };
 
-MassSolve::MassSolve(const CsrMatrix& M) : impl_(std::make_unique<Impl>()) {
+MassSolve::MassSolve(const CsrMatrix& M, std::vector<double> column_mass)
+    : impl_(std::make_unique<Impl>()) {
+  if (M.rows() != M.cols() || column_mass.size() != static_cast<std::size_t>(M.cols()))
+    throw std::invalid_argument("MassSolve: a square matrix and one column mass per column");
   impl_->M = M;
-  impl_->c.assign(static_cast<std::size_t>(M.cols()), 0.0);
-  for (Eigen::Index k = 0; k < M.nonZeros(); ++k)
-    impl_->c[static_cast<std::size_t>(M.innerIndexPtr()[k])] += M.valuePtr()[k];
+  impl_->c = std::move(column_mass);
   for (const double v : impl_->c) impl_->c_total += v;
   // An empty row (a node that holds no state of its mode) is the identity there: M plus a
   // diagonal of those rows, one sparse sum (inserting into a compressed matrix row by row

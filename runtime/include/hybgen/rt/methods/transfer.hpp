@@ -900,7 +900,7 @@ TransferOperator<state_dim_v<M>> assemble_forward(const TensorGrid<state_dim_v<M
   op.P = csr_by_rows(trip, static_cast<std::size_t>(R));
   if (galerkin) {
     op.mass = csr_by_rows(mtrip, static_cast<std::size_t>(R));
-    op.mass_solve = std::make_shared<const MassSolve>(op.mass);
+    op.mass_solve = std::make_shared<const MassSolve>(op.mass, op.column_mass);
   }
   return op;
 }
@@ -1019,9 +1019,8 @@ TransferRun<N> march(const TransferOperator<N>& op, std::span<const double> u0,
   if (op.distributed) sol.distributed = true, sol.owned = own;
   sol.u.assign(sol.n_time * L, 0.0);
   // x: the owned node masses weight·u (`galerkin`: the moments M u, and u the values).
+  // (`galerkin` runs in one process: assemble_forward refuses it over several ranks.)
   const bool galerkin = op.mass_solve != nullptr;
-  if (galerkin && op.distributed)
-    throw std::invalid_argument("transfer: scheme=galerkin runs in one process");
   std::vector<double> x(L), y(L), u(galerkin ? L : 0);
   const double* w = op.weight.data() + own.begin;
   const double* outflow = op.outflow.data() + own.begin;
