@@ -940,15 +940,26 @@ MethodResult<state_dim_v<M>> solve_by_transfer(const TensorGrid<state_dim_v<M>>&
   return r;
 }
 
+/// Most state dimensions in which scheme=auto of the invariant method takes the
+/// finite-volume generator (see detail::fv_unavailable).
+inline constexpr std::size_t kFvAutoMaxDim = 2;
+
 namespace detail {
 
 /// Why scheme=auto of the invariant method cannot take the finite-volume generator on this
-/// model and run, or "" when it can: it runs in one process, on guards that are coordinate
-/// planes (generator_geometry.hpp, `fv_guard_planes`, whose planes go to `planes`).
+/// model and run, or "" when it can: it runs in one process, in 1-D or 2-D, on guards that
+/// are coordinate planes (generator_geometry.hpp, `fv_guard_planes`, whose planes go to
+/// `planes`). In 3-D its sparse LU and shift-invert Arnoldi cost far more than hat: the shipped
+/// models/chaplygin.model (21³ nodes) took 38.7 s by fv, whose density then oscillated and was
+/// dropped for hat's 1.4 s (2026-12-01); scheme=fv still asks for it there.
 template <HybridModel M>
 std::string fv_unavailable(const TensorGrid<state_dim_v<M>>& grid, const double* par,
                            const MethodSettings& s, std::vector<FvGuardPlane>& planes) {
   if (s.backend && s.backend->ranks() > 1) return "the generator runs in one process";
+  if constexpr (state_dim_v < M >> kFvAutoMaxDim)
+    return "the generator's direct solve is taken by scheme=auto in 1-D and 2-D only (in " +
+           std::to_string(state_dim_v<M>) +
+           "-D it costs tens of times hat's; --set scheme=fv asks for it)";
   try {
     planes = fv_guard_planes<M>(grid, par);
   } catch (const std::invalid_argument& e) {
