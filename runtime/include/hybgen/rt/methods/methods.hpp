@@ -956,7 +956,7 @@ template <HybridModel M>
 std::string fv_unavailable(const TensorGrid<state_dim_v<M>>& grid, const double* par,
                            const MethodSettings& s, std::vector<FvGuardPlane>& planes) {
   if (s.backend && s.backend->ranks() > 1) return "the generator runs in one process";
-  if constexpr (state_dim_v < M >> kFvAutoMaxDim)
+  if constexpr (kFvAutoMaxDim < state_dim_v<M>)
     return "the generator's direct solve is taken by scheme=auto in 1-D and 2-D only (in " +
            std::to_string(state_dim_v<M>) +
            "-D it costs tens of times hat's; --set scheme=fv asks for it)";
