@@ -37,9 +37,11 @@
 #include <cmath>
 #include <complex>
 #include <cstddef>
+#include <cstdio>
 #include <limits>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "hybgen/rt/core/grid.hpp"
@@ -105,20 +107,16 @@ struct FvInvariantResult {
   std::vector<double> coarse_density, quarter_density;
 };
 
-/// Solve the generator of M on `grid` (see the file comment).
-template <HybridModel M>
-FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const double* par,
-                             const std::vector<FvGuardPlane>& planes, const FvOptions& o) {
+namespace detail {
+
+/// The bordered system's solution (see the file comment): u, and σ as its last entry; empty,
+/// with `failure` set, when the LU finds it singular.
+template <std::size_t N>
+std::optional<Eigen::VectorXd> fv_bordered_solve(const FvOperator<N>& op, std::string& failure) {
   using SpMat = Eigen::SparseMatrix<double>;
-  const FvOperator<state_dim_v<M>> op = assemble_fv_generator<M>(grid, par, planes, o.order);
-  FvGridSolution s;
   const auto n = static_cast<Eigen::Index>(op.size());
-  s.unknowns = op.size();
-  s.nonzeros = static_cast<std::size_t>(op.B.nonZeros());
-  s.rate = op.rate > 0.0 ? op.rate : 1.0;
-  // Bordered null-vector system.
   std::vector<Eigen::Triplet<double>> t;
-  t.reserve(s.nonzeros + 2 * op.size());
+  t.reserve(static_cast<std::size_t>(op.B.nonZeros()) + 2 * op.size());
   for (Eigen::Index c = 0; c < op.B.outerSize(); ++c)
     for (SpMat::InnerIterator it(op.B, c); it; ++it) t.emplace_back(it.row(), it.col(), it.value());
   for (Eigen::Index r = 0; r < n; ++r) {
@@ -131,13 +129,29 @@ FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const doubl
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n + 1);
   rhs[n] = 1.0;
   std::string lu_error;
-  const std::optional<Eigen::VectorXd> solved = sparse_lu_solve(A, rhs, &lu_error);
-  if (!solved) {
-    s.failure = "the bordered generator is singular (" + lu_error +
-                "): the null space has several dimensions (a region the flow never leaves, "
-                "or a rest point on a face?)";
-    return s;
-  }
+  std::optional<Eigen::VectorXd> solved = sparse_lu_solve(A, rhs, &lu_error);
+  if (!solved)
+    failure = "the bordered generator is singular (" + lu_error +
+              "): the null space has several dimensions (a region the flow never leaves, "
+              "or a rest point on a face?)";
+  return solved;
+}
+
+}  // namespace detail
+
+/// Solve the generator of M on `grid` (see the file comment).
+template <HybridModel M>
+FvGridSolution fv_solve_grid(const TensorGrid<state_dim_v<M>>& grid, const double* par,
+                             const std::vector<FvGuardPlane>& planes, const FvOptions& o) {
+  using SpMat = Eigen::SparseMatrix<double>;
+  const FvOperator<state_dim_v<M>> op = assemble_fv_generator<M>(grid, par, planes, o.order);
+  FvGridSolution s;
+  const auto n = static_cast<Eigen::Index>(op.size());
+  s.unknowns = op.size();
+  s.nonzeros = static_cast<std::size_t>(op.B.nonZeros());
+  s.rate = op.rate > 0.0 ? op.rate : 1.0;
+  const std::optional<Eigen::VectorXd> solved = detail::fv_bordered_solve(op, s.failure);
+  if (!solved) return s;
   const Eigen::VectorXd& sol = *solved;
   std::vector<double> u(sol.data(), sol.data() + n);
   s.sigma = sol[n];
@@ -233,6 +247,78 @@ std::optional<TensorGrid<N>> fv_half_grid(const TensorGrid<N>& g) {
 }
 
 }  // namespace detail
+
+/// A density whose positive part u⁺ has a residual ‖B u⁺‖₁ / (rate · Σ vol·u⁺) below this is
+/// itself a null vector: u mixes the densities of disjoint invariant sets (the null space has
+/// several dimensions; tests/validation/models/two_sawtooths.model), rather than oscillating.
+inline constexpr double kFvSplitTolerance = 1e-8;
+
+namespace detail {
+
+/// The minimum and maximum of the node values of the cell averages `u` of `op` on `grid` when
+/// they oscillate: the minimum is below −kFvNegativeTolerance × the maximum and the positive
+/// part u⁺ is not a null vector of B (kFvSplitTolerance); else nothing.
+template <std::size_t N>
+std::optional<std::pair<double, double>> fv_oscillation(const FvOperator<N>& op,
+                                                        const TensorGrid<N>& grid,
+                                                        const std::vector<double>& u) {
+  const std::vector<double> nodes = fv_node_values(op, grid, u, nullptr);
+  const auto [lo, hi] = std::minmax_element(nodes.begin(), nodes.end());
+  if (lo == nodes.end() || !(*lo < -kFvNegativeTolerance * *hi)) return std::nullopt;
+  const auto n = static_cast<Eigen::Index>(op.size());
+  const Eigen::VectorXd plus = Eigen::Map<const Eigen::VectorXd>(u.data(), n).cwiseMax(0.0);
+  const Eigen::VectorXd Bplus = op.B * plus;
+  double den = 0.0;
+  for (Eigen::Index r = 0; r < n; ++r) den += op.vol[static_cast<std::size_t>(r)] * plus[r];
+  const double rate = op.rate > 0.0 ? op.rate : 1.0;
+  if (Bplus.lpNorm<1>() <= kFvSplitTolerance * rate * den) return std::nullopt;
+  return std::pair{*lo, *hi};
+}
+
+}  // namespace detail
+
+/// Why scheme=auto should not solve the generator on `grid`, judged on the probe grid of
+/// max(kFvMinNodes, (n+3)/4) nodes per axis, or "" when it should (or the probe does not
+/// apply). The probe costs one bordered LU on about 4^−N of the unknowns and no eigen-solve,
+/// where the run's grid costs the LU, a shift-invert Arnoldi (most of the time) and the
+/// coarse grids: on the shipped 2-D models whose invariant measure concentrates on an
+/// attracting cycle or point (models/integrate_and_fire.model, 129 × 167), the full solve took
+/// 8.7 s before its density was found to oscillate and dropped for hat's 1.3 s.
+///
+/// The density oscillates when a node value is below −kFvNegativeTolerance × the maximum and
+/// its positive part is not a null vector (kFvSplitTolerance). A density resolved on the run's
+/// grid but not on the probe's is then left to hat, which is first order but non-negative and
+/// carries its own error estimate; `--set scheme=fv` still solves it on the run's grid. In 1-D
+/// (where every solve is cheap) and on grids too small for a probe of kFvMinNodes per axis the
+/// probe does not apply: the run's grid decides (methods.hpp, `solve_by_invariant_fv`).
+template <HybridModel M>
+std::string fv_probe_oscillation(const TensorGrid<state_dim_v<M>>& grid, const double* par,
+                                 const std::vector<FvGuardPlane>& planes, const FvOptions& o) {
+  constexpr std::size_t N = state_dim_v<M>;
+  if constexpr (N < 2) return "";
+  TensorGrid<N> probe = grid;
+  std::string shape;
+  for (GridAxis& a : probe.axes) {
+    a.n = (a.n + 3) / 4;
+    if (a.n < kFvMinNodes) return "";
+    shape += (shape.empty() ? "" : " x ") + std::to_string(a.n);
+  }
+  const FvOperator<N> op = assemble_fv_generator<M>(probe, par, planes, o.order);
+  std::string failure;
+  const std::optional<Eigen::VectorXd> solved = detail::fv_bordered_solve(op, failure);
+  if (!solved) return "";  // the run's grid reports it
+  const std::vector<double> u(solved->data(), solved->data() + solved->size() - 1);
+  const auto range = detail::fv_oscillation(op, probe, u);
+  if (!range) return "";
+  char b[480];
+  std::snprintf(b, sizeof b,
+                "on the probe grid of %s nodes the finite-volume generator's density oscillated "
+                "(min %.3g against max %.3g), as it does where the density has features below "
+                "the grid spacing (a measure concentrated near an attracting cycle); hat keeps "
+                "it non-negative (--set scheme=fv solves it on the run's grid)",
+                shape.c_str(), range->first, range->second);
+  return b;
+}
 
 /// The invariant density of M by the finite-volume generator on `grid`, cut at `planes`
 /// (fv_guard_planes of the same grid), its spectrum as the transfer operator's over `o.step`,

@@ -1098,6 +1098,11 @@ MethodResult<state_dim_v<M>> solve_by_invariant(const TensorGrid<state_dim_v<M>>
     std::vector<FvGuardPlane> planes;
     fallback = detail::fv_unavailable<M>(grid, par, s, planes);
     if (fallback.empty()) {
+      FvOptions probe;
+      probe.order = static_cast<int>(s.settings.integer<"fv_order">());
+      fallback = fv_probe_oscillation<M>(grid, par, planes, probe);
+    }
+    if (fallback.empty()) {
       MethodResult<N> fv = solve_by_invariant_fv<M>(grid, dt, par, s, &fallback, &planes);
       if (fallback.empty()) return fv;
     }

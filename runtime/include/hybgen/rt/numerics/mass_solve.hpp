@@ -19,11 +19,10 @@ namespace hybgen::rt {
 /// u = M⁻¹ x by BiCGSTAB with M's diagonal as preconditioner (Eigen), relative residual
 /// kMassSolveTol, then shifted by a constant on the nodes that carry mass so that the mass
 /// is exact: cᵀu = 1ᵀx, c the mass of a unit value per node (the column sums of M, which
-/// the assembly computes and checks: TransferOperator::column_mass; the scheme's mass is
-/// Σ_k c_k u_k, and its budget is
-/// checked each step to 1e-12 of the initial mass: transfer.hpp, kStepBudgetTol; the
-/// residual alone would leave 1ᵀ(x − M u), up to √rows times its norm). A row of M without
-/// entries (a node no sample of its mode reaches) is solved as u = x there.
+/// the assembly computes and checks: TransferOperator::column_mass). The scheme's mass is
+/// Σ_k c_k u_k, whose budget transfer.hpp checks each step to 1e-12 of the initial mass
+/// (kStepBudgetTol); the residual alone would leave 1ᵀ(x − M u), up to √rows times its norm.
+/// A row of M without entries (a node no sample of its mode reaches) is solved as u = x there.
 class MassSolve {
  public:
   /// Relative residual ‖x − M u‖/‖x‖ the solve asks for (it fails above 100 times this).

@@ -51,6 +51,17 @@ inline std::size_t max_atom_checks(const AdaptiveOptions& aopt) {
   return std::max<std::size_t>(aopt.max_points / 4, 1);
 }
 
+/// Most points of a check lattice finer than the grid's nodes: budget=full's check points
+/// (max_atom_checks of the default options), which the runner's budgets never exceed. A caller
+/// that raises the cubature's point cap far beyond it (a test asking 4·10⁶ for a tight
+/// tolerance) raises what the adaptive cubature may spend where its integrand needs it, but
+/// the lattice is spent in full on every run: under that cap alone a 41² grid's lattice is 24
+/// points per spacing, about 9·10⁵ forward flows (tests/validation/test_shear_reset.cpp ran
+/// 176 s), where budget=full's is 7, about 8·10⁴.
+inline std::size_t max_fine_lattice_points() {
+  return max_atom_checks(AdaptiveOptions{});
+}
+
 namespace detail {
 
 /// The forward integrand, V = (2 + G)·K values per point (K output times, G guards): the
@@ -334,7 +345,7 @@ ForwardCubature<M> forward_cubature(const TensorGrid<state_dim_v<M>>& box, const
   CheckPoints<N>* checks = res.checks.get();
   {
     std::vector<double> weight;
-    fine_lattice(box, max_atom_checks(aopt), slo, shi, *checks, weight);
+    fine_lattice(box, max_atom_checks(aopt), max_fine_lattice_points(), slo, shi, *checks, weight);
     const std::size_t V = values.values_per_point();
     std::vector<double> v(checks->x.size() * V, 0.0);
     if (values(std::span<const Cell<N>>{}, std::span<const std::array<double, N>>(checks->x), 1,

@@ -101,19 +101,11 @@ std::vector<std::size_t> check_lattice(const TensorGrid<N>& grid, std::size_t ca
 /// Largest number of lattice points per grid spacing of `fine_lattice`.
 inline constexpr std::size_t kMaxLatticeRefinement = 64;
 
-/// Most points of a `fine_lattice` finer than the grid's nodes: budget=full's cap on the
-/// check points (a quarter of its 400000 points, budget/atom.hpp), which the runner's budgets
-/// never exceed. A caller that raises the cubature's point cap far beyond it (a test asking
-/// 4·10⁶ for a tight tolerance) raises what the adaptive cubature may spend where its integrand
-/// needs it, but the lattice is spent in full on every run: under that cap alone a 41² grid's
-/// lattice is 24 points per spacing, about 9·10⁵ forward flows
-/// (tests/validation/test_shear_reset.cpp ran 176 s), where budget=full's is 7, about 8·10⁴.
-inline constexpr std::size_t kMaxFineLatticePoints = 100000;
-
 /// A lattice of points in the box [lo, hi] whose integrand the caller computes (the forward
 /// flows', budget/atom.hpp), not the grid's solved nodes: spacing h/r through the grid's
 /// nodes (h the grid's spacing per axis), r ≤ kMaxLatticeRefinement the largest that keeps
-/// the points to `cap` and, for r > 1, to kMaxFineLatticePoints; where the nodes alone exceed
+/// the points to `cap` and, for r > 1, to `fine_cap` (budget/atom.hpp, `max_fine_lattice_points`);
+/// where the nodes alone exceed
 /// `cap`, `check_lattice`'s every s-th node.
 /// Sets `checks.x` and `checks.spacing`, and `weights` to each point's weight in the
 /// lattice's trapezoid sum over [lo, hi]: the spacings' product, halved per axis where the
@@ -122,9 +114,9 @@ inline constexpr std::size_t kMaxFineLatticePoints = 100000;
 /// count) is off by about the step's jump times r/h-th of the cells its jump crosses, so the
 /// finer lattice is the sharper check (budget/atom.hpp, `collect_step`).
 template <std::size_t N>
-void fine_lattice(const TensorGrid<N>& grid, std::size_t cap, const std::array<double, N>& lo,
-                  const std::array<double, N>& hi, CheckPoints<N>& checks,
-                  std::vector<double>& weights) {
+void fine_lattice(const TensorGrid<N>& grid, std::size_t cap, std::size_t fine_cap,
+                  const std::array<double, N>& lo, const std::array<double, N>& hi,
+                  CheckPoints<N>& checks, std::vector<double>& weights) {
   checks = {};
   weights.clear();
   std::array<std::size_t, N> first{}, last{};
@@ -138,8 +130,7 @@ void fine_lattice(const TensorGrid<N>& grid, std::size_t cap, const std::array<d
     check_lattice(grid, cap, lo, hi, checks);
   } else {
     std::size_t r = 1;
-    const std::size_t fine_cap = std::min(cap, kMaxFineLatticePoints);
-    while (r < kMaxLatticeRefinement && count(r + 1) <= fine_cap) ++r;
+    while (r < kMaxLatticeRefinement && count(r + 1) <= std::min(cap, fine_cap)) ++r;
     std::array<std::size_t, N> n{};
     for (std::size_t a = 0; a < N; ++a) {
       const GridAxis& ax = grid.axes[a];
