@@ -163,6 +163,8 @@ TEST(InvariantFv, SawtoothDensityAndPeriodWithNoDecayClaimed) {
                               std::fabs(l2["im"].get<double>()) - std::sin(exact_phase));
   EXPECT_GE(l2["error"].get<double>(), d);
   expect_calibrated(r, e, "sawtooth 401");
+  EXPECT_EQ(inv["oscillates"], false);
+  EXPECT_EQ(inv["growing_modes"], 0);
 }
 
 TEST(InvariantFv, ProductOfTwoCyclesInTwoDimensions) {
@@ -193,6 +195,26 @@ TEST(InvariantFv, ProductOfTwoCyclesInTwoDimensions) {
   EXPECT_LE(worst, 1e-3);
   EXPECT_NEAR(lambda1(r), 1.0, 1e-9);
   expect_calibrated(r, worst, "product 141 x 101");
+  EXPECT_EQ(r.summary["invariant"]["oscillates"], false);
+  EXPECT_EQ(r.summary["invariant"]["growing_modes"], 0);
+}
+
+// scheme=fv by name where the invariant measure concentrates on an attracting point
+// (models/sir.model: the epidemic's endemic equilibrium): the fifth-order reconstruction
+// oscillates and the discrete generator has growing modes. The run keeps what it was asked
+// for, but says both, in the terminal and in summary.json (a density from −1.2e5 to 3.4e5
+// and |λ₁| = 1.0187 went out with neither, before).
+TEST(InvariantFv, ADensityThatOscillatesAndGrowingModesAreToldNotSilent) {
+  const FvRun r = run(std::string(HYBGEN_SOURCE_DIR) + "/models/sir.model", "sir", "");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const json& inv = r.summary["invariant"];
+  EXPECT_LT(inv["min_value"].get<double>(), 0.0);
+  EXPECT_EQ(inv["oscillates"], true);
+  EXPECT_GT(inv["growing_modes"].get<int>(), 0);
+  EXPECT_GT(lambda1(r), 1.0);  // the growing mode is really there
+  EXPECT_NE(r.out.find("density oscillates"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("growing mode(s)"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("scheme=hat"), std::string::npos) << r.out;
 }
 
 TEST(InvariantFv, OrderOfConvergenceIsThreeAndOrderOneIsOne) {

@@ -1031,8 +1031,8 @@ template <HybridModel M>
     if (const auto quarter = detail::fv_half_grid(*half); quarter && r.coarse.size() == 1)
       detail::keep_coarse_frame(r, *quarter, inv.quarter_density, r.solution.n_mode);
   }
-  double low = std::numeric_limits<double>::infinity();
-  for (const double u : inv.fine.density) low = std::min(low, u);
+  double low = std::numeric_limits<double>::infinity(), high = -low;
+  for (const double u : inv.fine.density) low = std::min(low, u), high = std::max(high, u);
   nlohmann::json j = {{"scheme", "fv"},
                       {"step", o.step},
                       {"order", o.order},
@@ -1069,6 +1069,38 @@ template <HybridModel M>
       "; each eigenvalue's error likewise (docs/methods.md, \"invariant\")";
   for (const std::string& n : notes) note += ". " + n;
   j["note"] = note;
+  // scheme=fv asked for by name keeps what it found, but never silently: a density that
+  // oscillates (what scheme=auto leaves to hat) and growing modes (Re μ > 0, which the
+  // generator of a transfer operator has none of: the high-order reconstruction is not
+  // positive and, on such a density, not stable either; models/sir.model gave |λ| = 1.0187 and
+  // a density from −1.2e5 to 3.4e5) say so.
+  const bool oscillating = unique && low < -kFvNegativeTolerance * high;
+  j["oscillates"] = oscillating;
+  if (oscillating) {
+    char b[400];
+    std::snprintf(b, sizeof b,
+                  "the finite-volume generator's density oscillates (min %.3g against max %.3g): "
+                  "it has features below the grid spacing (a measure concentrated near an "
+                  "attracting cycle): its values are not a density, nor need its eigenvalues "
+                  "be the model's; scheme=hat keeps it non-negative",
+                  low, high);
+    r.warnings.push_back(b);
+  }
+  double top = 0.0;
+  int growing = 0;
+  for (std::size_t k = 0; k < inv.lambda.size(); ++k)
+    if (inv.fine.mu[k].real() > kFvTie * inv.fine.rate)
+      ++growing, top = std::max(top, std::abs(inv.lambda[k]));
+  j["growing_modes"] = growing;
+  if (growing > 0) {
+    char b[400];
+    std::snprintf(b, sizeof b,
+                  "the finite-volume generator has %d growing mode(s) (|lambda| up to %.6g > 1), "
+                  "which a transfer operator cannot have: the scheme is unstable on this model "
+                  "and grid, and its spectrum is not the model's; scheme=hat",
+                  growing, top);
+    r.warnings.push_back(b);
+  }
   detail::spectrum_warnings(inv.spectrum, r.warnings);
   if (inv.fine.leaks && inv.spectrum.leaks != true)
     r.warnings.push_back(
