@@ -253,6 +253,18 @@ std::optional<TensorGrid<N>> fv_half_grid(const TensorGrid<N>& g) {
 /// several dimensions; tests/validation/models/two_sawtooths.model), rather than oscillating.
 inline constexpr double kFvSplitTolerance = 1e-8;
 
+/// Why a density that oscillates is not kept: `where` it oscillated (empty for the run's grid,
+/// else ending in a space), its minimum `lo` and maximum `hi`.
+inline std::string fv_oscillation_reason(const std::string& where, double lo, double hi) {
+  char b[400];
+  std::snprintf(b, sizeof b,
+                "the finite-volume generator's density oscillated (min %.3g against max %.3g), "
+                "as it does where the density has features below the grid spacing (a measure "
+                "concentrated near an attracting cycle); hat keeps it non-negative",
+                lo, hi);
+  return where + b;
+}
+
 namespace detail {
 
 /// The minimum and maximum of the node values of the cell averages `u` of `op` on `grid` when
@@ -278,18 +290,18 @@ std::optional<std::pair<double, double>> fv_oscillation(const FvOperator<N>& op,
 }  // namespace detail
 
 /// Why scheme=auto should not solve the generator on `grid`, judged on the probe grid of
-/// max(kFvMinNodes, (n+3)/4) nodes per axis, or "" when it should (or the probe does not
-/// apply). The probe costs one bordered LU on about 4^−N of the unknowns and no eigen-solve,
-/// where the run's grid costs the LU, a shift-invert Arnoldi (most of the time) and the
-/// coarse grids: on the shipped 2-D models whose invariant measure concentrates on an
-/// attracting cycle or point (models/integrate_and_fire.model, 129 × 167), the full solve took
-/// 8.7 s before its density was found to oscillate and dropped for hat's 1.3 s.
+/// (n+3)/4 nodes per axis, or "" when it should (or the probe does not apply). The probe costs one
+/// bordered LU on about 4^−N of the unknowns and no eigen-solve, where the run's grid costs the LU,
+/// a shift-invert Arnoldi (most of the time) and the coarse grids: on the shipped 2-D models whose
+/// invariant measure concentrates on an attracting cycle or point (models/integrate_and_fire.model,
+/// 129 × 167), the full solve took 8.7 s before its density was found to oscillate and dropped for
+/// hat's 1.3 s.
 ///
 /// The density oscillates when a node value is below −kFvNegativeTolerance × the maximum and
 /// its positive part is not a null vector (kFvSplitTolerance). A density resolved on the run's
 /// grid but not on the probe's is then left to hat, which is first order but non-negative and
 /// carries its own error estimate; `--set scheme=fv` still solves it on the run's grid. In 1-D
-/// (where every solve is cheap) and on grids too small for a probe of kFvMinNodes per axis the
+/// (where every solve is cheap) and where (n+3)/4 is below kFvMinNodes on an axis the
 /// probe does not apply: the run's grid decides (methods.hpp, `solve_by_invariant_fv`).
 template <HybridModel M>
 std::string fv_probe_oscillation(const TensorGrid<state_dim_v<M>>& grid, const double* par,
@@ -310,14 +322,9 @@ std::string fv_probe_oscillation(const TensorGrid<state_dim_v<M>>& grid, const d
   const std::vector<double> u(solved->data(), solved->data() + solved->size() - 1);
   const auto range = detail::fv_oscillation(op, probe, u);
   if (!range) return "";
-  char b[480];
-  std::snprintf(b, sizeof b,
-                "on the probe grid of %s nodes the finite-volume generator's density oscillated "
-                "(min %.3g against max %.3g), as it does where the density has features below "
-                "the grid spacing (a measure concentrated near an attracting cycle); hat keeps "
-                "it non-negative (--set scheme=fv solves it on the run's grid)",
-                shape.c_str(), range->first, range->second);
-  return b;
+  return fv_oscillation_reason("on the probe grid of " + shape + " nodes ", range->first,
+                               range->second) +
+         " (--set scheme=fv solves it on the run's grid)";
 }
 
 /// The invariant density of M by the finite-volume generator on `grid`, cut at `planes`

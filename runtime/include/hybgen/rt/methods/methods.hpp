@@ -1001,18 +1001,14 @@ template <HybridModel M>
   // vector of that null space, possibly of both signs: not an oscillation.
   const bool unique =
       inv.fine.mu.size() < 2 || std::abs(inv.fine.mu[1] - inv.fine.mu[0]) > kFvTie * inv.fine.rate;
-  // scheme=auto: a density with features below the grid spacing (a measure concentrated near
-  // an attracting cycle) makes the high-order reconstruction oscillate.
-  if (const auto [lo, hi] = std::minmax_element(inv.fine.density.begin(), inv.fine.density.end());
-      oscillates && unique && inv.fine.failure.empty() && lo != inv.fine.density.end() &&
-      *lo < -kFvNegativeTolerance * *hi) {
-    char b[400];
-    std::snprintf(b, sizeof b,
-                  "the finite-volume generator's density oscillated (min %.3g against max %.3g), "
-                  "as it does where the density has features below the grid spacing (a measure "
-                  "concentrated near an attracting cycle); hat keeps it non-negative",
-                  *lo, *hi);
-    *oscillates = b;
+  // A density with features below the grid spacing (a measure concentrated near an attracting
+  // cycle) makes the high-order reconstruction oscillate: scheme=auto drops it for hat, and
+  // scheme=fv by name keeps it with a warning (below).
+  double low = std::numeric_limits<double>::infinity(), high = -low;
+  for (const double u : inv.fine.density) low = std::min(low, u), high = std::max(high, u);
+  const bool oscillating = unique && inv.fine.failure.empty() && low < -kFvNegativeTolerance * high;
+  if (oscillates && oscillating) {
+    *oscillates = fv_oscillation_reason("", low, high);
     return r;
   }
   r.solve_s = detail::seconds_since(t0);
@@ -1031,8 +1027,6 @@ template <HybridModel M>
     if (const auto quarter = detail::fv_half_grid(*half); quarter && r.coarse.size() == 1)
       detail::keep_coarse_frame(r, *quarter, inv.quarter_density, r.solution.n_mode);
   }
-  double low = std::numeric_limits<double>::infinity(), high = -low;
-  for (const double u : inv.fine.density) low = std::min(low, u), high = std::max(high, u);
   nlohmann::json j = {{"scheme", "fv"},
                       {"step", o.step},
                       {"order", o.order},
@@ -1074,7 +1068,6 @@ template <HybridModel M>
   // generator of a transfer operator has none of: the high-order reconstruction is not
   // positive and, on such a density, not stable either; models/sir.model gave |λ| = 1.0187 and
   // a density from −1.2e5 to 3.4e5) say so.
-  const bool oscillating = unique && low < -kFvNegativeTolerance * high;
   j["oscillates"] = oscillating;
   if (oscillating) {
     char b[400];

@@ -104,9 +104,9 @@ inline constexpr std::size_t kMaxLatticeRefinement = 64;
 /// A lattice of points in the box [lo, hi] whose integrand the caller computes (the forward
 /// flows', budget/atom.hpp), not the grid's solved nodes: spacing h/r through the grid's
 /// nodes (h the grid's spacing per axis), r ≤ kMaxLatticeRefinement the largest that keeps
-/// the points to `cap` and, for r > 1, to `fine_cap` (budget/atom.hpp, `max_fine_lattice_points`);
-/// where the nodes alone exceed
-/// `cap`, `check_lattice`'s every s-th node.
+/// the points to `cap` and, for r > 1, to `fine_cap` (budget/atom.hpp,
+/// `max_fine_lattice_points`); where the nodes alone exceed `cap`, `check_lattice`'s every
+/// s-th node.
 /// Sets `checks.x` and `checks.spacing`, and `weights` to each point's weight in the
 /// lattice's trapezoid sum over [lo, hi]: the spacings' product, halved per axis where the
 /// point lies on lo or hi (a box's face, where the integrand need not vanish: a full weight
