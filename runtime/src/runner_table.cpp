@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <utility>
 
+#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/exit_codes.hpp"
 #include "hybgen/rt/table_model.hpp"
 
@@ -35,6 +36,10 @@ int table_runner_main(const ModelTable& table, int argc, char** argv, const Back
     return exit_status(ExitCode::Internal);
   }
   return dispatch(std::make_integer_sequence<int, kTableMaxState>{}, table, argc, argv, backend);
+}
+
+int table_runner_main(const ModelTable& table, int argc, char** argv) {
+  return table_runner_main(table, argc, argv, serial_backend());
 }
 
 }  // namespace hybgen::rt

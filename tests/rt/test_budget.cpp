@@ -560,11 +560,11 @@ TEST(AdaptiveBudget, ZeroDensityIsNotRefined) {
 
 TEST(AdaptiveBudget, RunnerConfigurationAtomWithinItsEstimate) {
   // The runner's set-up (models/bouncing_ball.model): 75×75 box, t = 0, 0.2, …, 10 (51
-  // times), here with e = 0.8; rel_tol 3e-4 (suggested for the runner) and the default 1e-4.
-  // The time is printed, not asserted (the budget's cost is benchmarked by
-  // bench/budget_cost.sh).
+  // times), here with e = 0.8, at rel_tol 3e-4 (budget=full's). The default 1e-4 is
+  // ZenoAtomIsTheZenoMass's, above, at 21 of these times. The time is printed, not asserted (the
+  // budget's cost is benchmarked by bench/budget_cost.sh).
   const auto times = output_times(51, 0.2);
-  for (const double tol : {3e-4, 1e-4}) {
+  for (const double tol : {3e-4}) {
     rt::AdaptiveOptions ao;
     ao.rel_tol = tol;
     const BallRun r = ball_budget(0.8, times, ao);

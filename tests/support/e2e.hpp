@@ -21,6 +21,16 @@
 
 namespace hybgen::testing {
 
+/// Whether this test is compiled under AddressSanitizer (CI's hardening stage,
+/// scripts/ci-hardening.sh, where a runner compiled at -Og under ASan + UBSan takes 10-20× its
+/// Release time): such a test may keep every code path and leave out a repeat of it.
+inline constexpr bool kSanitized =
+#ifdef __SANITIZE_ADDRESS__
+    true;
+#else
+    false;
+#endif
+
 /// The test's work directory under the build tree (created).
 inline std::filesystem::path e2e_dir(const std::string& name) {
   const std::filesystem::path d = std::filesystem::path(HYBGEN_BINARY_DIR) / name;

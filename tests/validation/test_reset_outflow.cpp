@@ -177,7 +177,12 @@ TEST(ResetOutflow, ImagesOnAFaceAndAtomsOutsideTheBoxAreCountedOnce) {
 }
 
 TEST(ResetOutflow, TheTiltedFloorRunsWithEveryMethodAndItsBudgetsAgree) {
-  for (const char* e : {"0.8", "1"}) {
+  // Sanitized, e = 0.8 alone: the characteristics' 4-D budget at budget_tol 1e-3 took 34 s of
+  // each e's 47 s there (2026-12-01), and e = 1 takes the same code paths.
+  const std::vector<const char*> restitutions = hybgen::testing::kSanitized
+                                                    ? std::vector<const char*>{"0.8"}
+                                                    : std::vector<const char*>{"0.8", "1"};
+  for (const char* e : restitutions) {
     const std::string tag = std::string("e") + e;
     std::string out;
     // budget=full: budget=fast's point cap leaves its mass 5 % off in 4-D (within its wide

@@ -18,13 +18,18 @@
 /// again at start).
 
 #include <array>
+#include <concepts>
 #include <cstddef>
 #include <span>
 
-#include "hybgen/rt/core/backend.hpp"
 #include "hybgen/rt/model.hpp"
 
 namespace hybgen::rt {
+
+// Declared, not included (core/backend.hpp): every runner's one translation unit includes this
+// header, and backend.hpp's standard headers were two thirds of its compile (1.05 s of 1.5 s
+// of CPU on 2026-12-01; 0.3 s without them).
+class Backend;
 
 /// State dimensions 1..kTableMaxState the library is instantiated for (runtime/CMakeLists.txt).
 inline constexpr int kTableMaxState = 6;
@@ -198,7 +203,10 @@ int table_runner_main_dim(const ModelTable& table, int argc, char** argv, const 
 /// a table the library cannot run (`table_fits`) is exit 70, since the builder checks it.
 /// `backend`: the ranks of the run (core/backend.hpp; a runner built with backend=mpi
 /// passes hybgen::mpi's, through mpi_main in hybgen/rt/mpi.hpp).
-int table_runner_main(const ModelTable& table, int argc, char** argv,
-                      const Backend& backend = serial_backend());
+int table_runner_main(const ModelTable& table, int argc, char** argv, const Backend& backend);
+
+/// `table_runner_main` on one process (core/backend.hpp, `serial_backend`): a serial runner's
+/// entry point.
+int table_runner_main(const ModelTable& table, int argc, char** argv);
 
 }  // namespace hybgen::rt
