@@ -27,8 +27,8 @@
 namespace hybgen::rt {
 
 // Declared, not included (core/backend.hpp): every runner's one translation unit includes this
-// header, and backend.hpp's standard headers were two thirds of its compile (1.05 s of 1.5 s
-// of CPU on 2026-12-01; 0.3 s without them).
+// header, and backend.hpp's standard headers were about 70 % of its compile (1.05 s of CPU with
+// them, 0.30 s without, 2026-12-01).
 class Backend;
 
 /// State dimensions 1..kTableMaxState the library is instantiated for (runtime/CMakeLists.txt).
