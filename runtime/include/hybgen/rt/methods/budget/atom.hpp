@@ -38,6 +38,7 @@
 #include "hybgen/rt/methods/budget/check_points.hpp"
 #include "hybgen/rt/methods/budget/cubature.hpp"
 #include "hybgen/rt/methods/budget/faces.hpp"
+#include "hybgen/rt/methods/budget/step_lines.hpp"
 #include "hybgen/rt/methods/characteristics.hpp"
 #include "hybgen/rt/methods/forward.hpp"
 #include "hybgen/rt/methods/impacts.hpp"
@@ -94,9 +95,13 @@ struct ZenoValues {
   std::array<double, N> lo{};                       ///< The grid box's lower corner.
   std::array<double, N> hi{};                       ///< The grid box's upper corner.
   ForwardOptions fopt{};                            ///< Options of the forward flows.
-  const Backend* backend = nullptr;      ///< Ranks sharing the points (null: this process).
-  std::string failure;                   ///< First failure (describe), or empty.
-  bool impacts = false;                  ///< Count impacts instead (see above).
+  const Backend* backend = nullptr;  ///< Ranks sharing the points (null: this process).
+  std::string failure;               ///< First failure (describe), or empty.
+  bool impacts = false;              ///< Count impacts instead (see above).
+  /// Also the counts: V more values per point, each slot's with 1 in place of u0 (summed over
+  /// the modes with u0 > 0), for locating the steps' jumps (budget/step_lines.hpp). Set for
+  /// the check lattice alone, whose values it doubles; not for the cubature's own points.
+  bool with_counts = false;
   std::vector<std::size_t> count_until;  ///< With `impacts`: per guard, the frames counted.
   /// Per guard, the earliest Zeno time of a flow ending on it (+∞: none); all ranks agree.
   std::vector<double> zeno_time =
@@ -147,23 +152,19 @@ struct ZenoValues {
     return from_in == to_in ? 0 : (from_in ? 1 : -1);
   }
 
-  /// Values per point: V = (2 + G)·K, or G·K with `impacts`.
-  std::size_t values_per_point() const {
+  /// The integrand's values per point: V = (2 + G)·K, or G·K with `impacts`.
+  std::size_t slots() const {
     const auto G = static_cast<std::size_t>(M::n_guard);
     return (impacts ? G : 2 + G) * times.size();
   }
 
-  /// Add u0 to the impact count of guard g from the first frame at or after t (`impacts`).
-  void count(double* counts, int g, double t, double u0) const {
-    const std::size_t K = times.size(), G = static_cast<std::size_t>(g);
-    double* c = counts + G * K;
-    for (std::size_t k = std::min(K, count_until[G]); k-- > 0 && times[k] >= t;) c[k] += u0;
-  }
+  /// Values per point: `slots()`, twice that `with_counts`.
+  std::size_t values_per_point() const { return (with_counts ? 2 : 1) * slots(); }
 
   /// U[i·V + j] as above, OpenMP over the points.
   bool operator()(std::span<const Cell<N>>, std::span<const std::array<double, N>> pts, std::size_t,
                   std::vector<double>& U) {
-    const std::size_t K = times.size(), V = values_per_point();
+    const std::size_t K = times.size(), S = slots(), V = values_per_point();
     const auto P = static_cast<long long>(pts.size());
     const Backend& b = backend ? *backend : serial_backend();
     const Block mine = b.block(pts.size());
@@ -179,20 +180,30 @@ struct ZenoValues {
         const auto i = static_cast<std::size_t>(ii);
         const std::array<double, N>& x = pts[i];
         if (!M::in_support(x.data(), par)) continue;
-        double* atom = U.data() + i * V;
-        double* reset_out = atom + K;
+        double* row = U.data() + i * V;
+        double* counts = with_counts ? row + S : nullptr;
         for (int m = 0; m < M::n_mode; ++m) {
           const double u0 = M::initial_density(m, x.data(), par);
           if (u0 == 0.0) continue;  // no mass: its fate does not matter
+          // Slot j gains u0·c (and its count c).
+          auto add = [&](std::size_t j, double c) {
+            row[j] += c * u0;
+            if (counts != nullptr) counts[j] += c;
+          };
+          // Guard g's impact count from the first frame at or after t (`impacts`).
+          auto count = [&](int g, double t) {
+            const auto G = static_cast<std::size_t>(g);
+            for (std::size_t k = std::min(K, count_until[G]); k-- > 0 && times[k] >= t;)
+              add(G * K + k, 1.0);
+          };
           // A reset across the box's boundary at time t counts from the first t_k ≥ t on
           // (trajectories are right-continuous: forward.hpp).
           auto on_reset = [&](double t, int g, const std::array<double, N>& before,
                               const std::array<double, N>& after) {
-            if (impacts) return count(atom, g, t, u0);
+            if (impacts) return count(g, t);
             const int c = crossing(g, before, after);
             if (c == 0) return;
-            for (std::size_t k = K; k-- > 0 && times[k] >= t;)
-              reset_out[k] += static_cast<double>(c) * u0;
+            for (std::size_t k = K; k-- > 0 && times[k] >= t;) add(K + k, static_cast<double>(c));
           };
           const ForwardResult<N> r = flow.run(
               m, x, times, [](std::size_t, int, const std::array<double, N>&) {}, on_reset);
@@ -214,17 +225,17 @@ struct ZenoValues {
             }
           }
           if (impacts) {
-            if (r.status == ForwardStatus::absorbed) count(atom, r.guard, r.t_stop, u0);
+            if (r.status == ForwardStatus::absorbed) count(r.guard, r.t_stop);
             continue;
           }
           if (r.status == ForwardStatus::absorbed) {
             // Absorbed at r.x: per guard; and out of the box, where the faces' integral does
             // not see it leave (inside the box, off its faces).
-            double* taken = atom + (2 + static_cast<std::size_t>(r.guard)) * K;
+            const std::size_t taken = (2 + static_cast<std::size_t>(r.guard)) * K;
             const bool inside = in_box<N>(r.x.data(), lo, hi) && !on_faces(r.x);
             for (std::size_t k = K; k-- > 0 && times[k] >= r.t_stop;) {
-              taken[k] += u0;
-              if (inside) reset_out[k] += u0;
+              add(taken + k, 1.0);
+              if (inside) add(K + k, 1.0);
             }
             continue;
           }
@@ -232,7 +243,7 @@ struct ZenoValues {
           // the outflow counts already (as the particles count it: particles.hpp).
           if (r.status != ForwardStatus::zeno || !in_box<N>(r.x.data(), lo, hi)) continue;
           for (std::size_t k = 0; k < K; ++k)
-            if (times[k] >= r.t_stop) atom[k] += u0;
+            if (times[k] >= r.t_stop) add(k, 1.0);
         }
       }
     }
@@ -272,7 +283,8 @@ inline constexpr std::size_t zeno_roots_per_axis(std::size_t n) {
 /// over the part of the box where the grid's nodes see u0 > 0 (widened by a cell, clipped to
 /// the box), all slots targeted at rel_tol·scale, with a lattice through the grid's nodes
 /// there as check points (`fine_lattice`). `lattice` gets the check lattice's trapezoid sums of
-/// every slot (empty without check points). Returns no cubature when no node carries mass (every
+/// every slot, their jumps located along its lines (`locate_steps`; empty without check
+/// points). Returns no cubature when no node carries mass (every
 /// integral is 0), else the finished one; `ok` is false on a failed forward flow (values.failure).
 template <HybridModel M>
 struct ForwardCubature {
@@ -345,19 +357,38 @@ ForwardCubature<M> forward_cubature(const TensorGrid<state_dim_v<M>>& box, const
   CheckPoints<N>* checks = res.checks.get();
   {
     std::vector<double> weight;
-    fine_lattice(box, max_atom_checks(aopt), max_fine_lattice_points(), slo, shi, *checks, weight);
-    const std::size_t V = values.values_per_point();
-    std::vector<double> v(checks->x.size() * V, 0.0);
-    if (values(std::span<const Cell<N>>{}, std::span<const std::array<double, N>>(checks->x), 1,
-               v)) {
+    std::array<std::size_t, N> shape{};
+    fine_lattice(box, max_atom_checks(aopt), max_fine_lattice_points(), slo, shi, *checks, weight,
+                 shape);
+    // The integrand and its counts (ZenoValues::with_counts): W = 2V values per point.
+    values.with_counts = true;
+    const std::size_t V = values.slots(), W = values.values_per_point();
+    const std::span<const std::array<double, N>> pts(checks->x);
+    std::vector<double> v(pts.size() * W, 0.0);
+    if (values(std::span<const Cell<N>>{}, pts, 1, v)) {
       lattice.assign(V, 0.0);
-      for (std::size_t j = 0; j < checks->x.size(); ++j)
-        for (std::size_t q = 0; q < V; ++q) lattice[q] += weight[j] * v[j * V + q];
+      for (std::size_t j = 0; j < pts.size(); ++j)
+        for (std::size_t q = 0; q < V; ++q) lattice[q] += weight[j] * v[j * W + q];
+      // The steps' jumps located along the lattice's lines (budget/step_lines.hpp), for at
+      // most the cubature's own cap of points more: on the elastic ball at budget=full
+      // (tests/validation/test_calibration.cpp), 2.7·10⁵ flows beside the lattice's
+      // 8.4·10⁴ and the cubature's 1.3·10⁵, for jumps held to 2^(−10) of its spacing.
+      auto eval = [&](std::span<const std::array<double, N>> p, std::vector<double>& out) {
+        return values(std::span<const Cell<N>>{}, p, 1, out);
+      };
+      locate_steps<N>(pts, shape, checks->spacing, slo, shi, v, V, eval, aopt.max_points, lattice);
+      values.failure.clear();  // a failed flow there: the sums keep what was located before
+      // The integrand's values alone, as check points.
+      for (std::size_t j = 0; j < pts.size(); ++j)
+        std::copy_n(v.begin() + static_cast<std::ptrdiff_t>(j * W), V,
+                    v.begin() + static_cast<std::ptrdiff_t>(j * V));
+      v.resize(pts.size() * V);
       keep_samples<M>(*checks, std::move(v), V, par);
     } else {
       *checks = {};
       values.failure.clear();
     }
+    values.with_counts = false;
   }
   const std::size_t V = values.values_per_point();
   res.cub = std::make_unique<Cubature>(std::move(roots), V, V, aopt, scale, values, checks);
@@ -375,12 +406,16 @@ ForwardCubature<M> forward_cubature(const TensorGrid<state_dim_v<M>>& box, const
 /// lattice saw. Measured on x' = 0.7x absorbed at x = 1 (the face) on 201 nodes
 /// (tests/validation/test_absorbing.cpp): at t = 2, 0.84375 against 0.84756 with an estimate
 /// of 1.2e-11 before; the jump at e^(−1.4) = 0.2466 lay in the cell [0.125, 0.25] above its
-/// last node 0.241. Where the cubature is right, the floor is the lattice's own error, about
-/// the jump times its cells' width: the lattice is as fine as the cap allows (`fine_lattice`,
-/// up to 64 points per grid spacing), not the grid's nodes, so that the floor is not 10²–10³×
-/// the error (the shuttle's impacts at t = 0.5, tests/validation/test_impacts.cpp: a bar of
-/// 2.8e-3 on the nodes for an error of 3.4e-6, 5.3e-5 on the finer lattice). The same lattice
-/// as check points now finds the face's jump above: 5.6e-4 off at t = 2 with a bar of 4.0e-3.
+/// last node 0.241. Where the cubature is right, the floor is the lattice's own error. Of the
+/// trapezoid rule on the lattice's points, that is about the jump times its cells' width, so
+/// the lattice is as fine as the cap allows (`fine_lattice`, up to 64 points per grid
+/// spacing), not the grid's nodes (the shuttle's impacts at t = 0.5,
+/// tests/validation/test_impacts.cpp: a bar of 2.8e-3 on the nodes for an error of 3.4e-6,
+/// 5.3e-5 on the finer lattice), and its jumps are located along its lines
+/// (budget/step_lines.hpp): in two dimensions the rule's error, one per line a jump crosses,
+/// had kept the elastic ball's impact bars 14–60× their errors on 10 of its 48 frames
+/// (tests/validation/test_calibration.cpp). The same lattice as check points finds the face's
+/// jump above: 5.6e-4 off at t = 2 with a bar of 4.0e-3.
 template <class Cubature>
 void collect_step(const Cubature& cub, bool ok, std::size_t first, std::size_t K,
                   const std::vector<double>& lattice, AdaptiveOutflow& a) {

@@ -62,11 +62,13 @@ bool node_range(const TensorGrid<N>& grid, const std::array<double, N>& lo,
 
 /// The grid's nodes in the box [lo, hi], every s-th per axis (node indices divisible by s)
 /// with the smallest s that keeps them to `cap`: their flat indices, in C order;
-/// `checks.x` and `checks.spacing` (s times the grid's) are set.
+/// `checks.x` and `checks.spacing` (s times the grid's) are set, and `*shape` (when given) to
+/// their number per axis.
 template <std::size_t N>
 std::vector<std::size_t> check_lattice(const TensorGrid<N>& grid, std::size_t cap,
                                        const std::array<double, N>& lo,
-                                       const std::array<double, N>& hi, CheckPoints<N>& checks) {
+                                       const std::array<double, N>& hi, CheckPoints<N>& checks,
+                                       std::array<std::size_t, N>* shape = nullptr) {
   std::array<std::size_t, N> first{}, last{};  // node index range in [lo, hi] per axis
   if (!node_range(grid, lo, hi, 0.0, first, last)) return {};
   std::size_t stride = 1;
@@ -76,6 +78,9 @@ std::vector<std::size_t> check_lattice(const TensorGrid<N>& grid, std::size_t ca
       count *= last[a] / stride - (first[a] + stride - 1) / stride + 1;
     if (count <= cap) break;
   }
+  if (shape != nullptr)
+    for (std::size_t a = 0; a < N; ++a)
+      (*shape)[a] = last[a] / stride - (first[a] + stride - 1) / stride + 1;
   std::vector<std::size_t> flat;
   for (std::size_t i = 0; i < grid.size(); ++i) {
     std::size_t rem = i;
@@ -107,7 +112,8 @@ inline constexpr std::size_t kMaxLatticeRefinement = 64;
 /// the points to `cap` and, for r > 1, to `fine_cap` (budget/atom.hpp,
 /// `max_fine_lattice_points`); where the nodes alone exceed `cap`, `check_lattice`'s every
 /// s-th node.
-/// Sets `checks.x` and `checks.spacing`, and `weights` to each point's weight in the
+/// Sets `checks.x` (in C order) and `checks.spacing`, `shape` to the lattice's points per
+/// axis, and `weights` to each point's weight in the
 /// lattice's trapezoid sum over [lo, hi]: the spacings' product, halved per axis where the
 /// point lies on lo or hi (a box's face, where the integrand need not vanish: a full weight
 /// there counts half a cell outside the box). The lattice sum of a step function (an impact
@@ -116,9 +122,11 @@ inline constexpr std::size_t kMaxLatticeRefinement = 64;
 template <std::size_t N>
 void fine_lattice(const TensorGrid<N>& grid, std::size_t cap, std::size_t fine_cap,
                   const std::array<double, N>& lo, const std::array<double, N>& hi,
-                  CheckPoints<N>& checks, std::vector<double>& weights) {
+                  CheckPoints<N>& checks, std::vector<double>& weights,
+                  std::array<std::size_t, N>& shape) {
   checks = {};
   weights.clear();
+  shape.fill(0);
   std::array<std::size_t, N> first{}, last{};
   if (!node_range(grid, lo, hi, 1e-9, first, last)) return;
   auto count = [&](std::size_t r) {
@@ -127,11 +135,11 @@ void fine_lattice(const TensorGrid<N>& grid, std::size_t cap, std::size_t fine_c
     return c;
   };
   if (count(1) > cap) {
-    check_lattice(grid, cap, lo, hi, checks);
+    check_lattice(grid, cap, lo, hi, checks, &shape);
   } else {
     std::size_t r = 1;
     while (r < kMaxLatticeRefinement && count(r + 1) <= std::min(cap, fine_cap)) ++r;
-    std::array<std::size_t, N> n{};
+    std::array<std::size_t, N>& n = shape;
     for (std::size_t a = 0; a < N; ++a) {
       const GridAxis& ax = grid.axes[a];
       n[a] = (last[a] - first[a]) * r + 1;
