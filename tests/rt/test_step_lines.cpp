@@ -67,7 +67,8 @@ struct Step {
   // The lattice's trapezoid sums (first), then corrected (second).
   std::pair<std::vector<double>, std::vector<double>> sums(const Lattice<N>& L,
                                                            std::size_t max_evals,
-                                                           std::size_t* used = nullptr) {
+                                                           std::size_t* used = nullptr,
+                                                           double target = 0.0) {
     std::vector<double> v;
     fill(L.x, v);
     std::vector<double> s(V, 0.0);
@@ -81,7 +82,7 @@ struct Step {
           fill(p, out);
           return true;
         },
-        max_evals, corrected);
+        target, max_evals, corrected);
     EXPECT_EQ(n, calls);
     if (used != nullptr) *used = n;
     return {s, corrected};
@@ -210,12 +211,31 @@ TEST(StepLines, AFailedEvaluationKeepsWhatWasLocatedBefore) {
         }
         return true;
       },
-      100, sums);
+      0.0, 100, sums);
   EXPECT_EQ(used, 2u);
   // Two halvings of [0.25, 0.375], then a failure: the jump at 0.3, which the lattice's
   // trapezoid rule put at 0.3125, is put at 0.296875, the midpoint of [0.28125, 0.3125]; the
   // sum (of 1 from the jump on) gains the difference.
   EXPECT_NEAR(sums[0], 0.3125 - 0.296875, 1e-15);
+}
+
+TEST(StepLines, HalvingStopsOnceWhatIsLeftIsWithinTheTarget) {
+  // One jump of e^s on [0, 1], s = 1/√7, 33 nodes: what its segment can still be off by is
+  // ℓ/2·e^s, 0.0284 on the lattice, halved by each halving; a target of 0.01 stops after two
+  // (0.0071), a target above 0.0284 before any.
+  const double s0 = 1.0 / std::sqrt(7.0);
+  auto st = step<1>(
+      1,
+      [=](const std::array<double, 1>& x, std::size_t) {
+        return x[0] >= s0 ? std::exp(x[0]) : 0.0;
+      },
+      [=](const std::array<double, 1>& x, std::size_t) { return x[0] >= s0 ? 1.0 : 0.0; });
+  const Lattice<1> L(33, 0.0, 1.0);
+  std::size_t used = 0;
+  st.sums(L, 1000, &used, 0.01);
+  EXPECT_EQ(used, 2u);
+  st.sums(L, 1000, &used, 0.03);
+  EXPECT_EQ(used, 0u);
 }
 
 }  // namespace

@@ -195,7 +195,7 @@ TEST(Calibration, TheForwardFlowsBarsOnImpactsAndTraps) {
   // by about the jump's length times its spacing. Now (2026-12-02, `ctest -R
   // Calibration.TheForwardFlows -V`) every bar of the four is within twice what was asked
   // (the ball's widest 6.5e-5, for 4.2e-5 asked, is 16.5× an error of 3.9e-6; its largest
-  // error, 2.2e-5, has a bar of 4.4e-5). Before, this test judged the bars beyond twice what
+  // error, 2.2e-5, has a bar of 3.9e-5). Before, this test judged the bars beyond twice what
   // was asked by their RMS of 2·error/bar (at least 0.05), not frame by frame.
   constexpr double kForwardBarRatio = 10.0;
   struct Case {

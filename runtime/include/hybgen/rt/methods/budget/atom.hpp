@@ -369,14 +369,18 @@ ForwardCubature<M> forward_cubature(const TensorGrid<state_dim_v<M>>& box, const
       lattice.assign(V, 0.0);
       for (std::size_t j = 0; j < pts.size(); ++j)
         for (std::size_t q = 0; q < V; ++q) lattice[q] += weight[j] * v[j * W + q];
-      // The steps' jumps located along the lattice's lines (budget/step_lines.hpp), for at
-      // most the cubature's own cap of points more: on the elastic ball at budget=full
-      // (tests/validation/test_calibration.cpp), 2.7·10⁵ flows beside the lattice's
-      // 8.4·10⁴ and the cubature's 1.3·10⁵, for jumps held to 2^(−10) of its spacing.
+      // The steps' jumps located along the lattice's lines (budget/step_lines.hpp) until the
+      // segments left could be off by at most the cubature's target (their signs vary: far
+      // less), for at most twice the lattice's flows (and the cubature's own cap). On the
+      // elastic ball at budget=full, dt = 0.125 (tests/validation/test_calibration.cpp):
+      // six halvings, 1.5·10⁵ flows beside the lattice's 8.4·10⁴ and the cubature's 1.3·10⁵.
+      // On the paper's ball at budget=fast (a Zeno point, where the counts' jumps accumulate
+      // and no halving ends them), the cap: one halving, 1315 flows beside the lattice's 1444.
       auto eval = [&](std::span<const std::array<double, N>> p, std::vector<double>& out) {
         return values(std::span<const Cell<N>>{}, p, 1, out);
       };
-      locate_steps<N>(pts, shape, checks->spacing, slo, shi, v, V, eval, aopt.max_points, lattice);
+      locate_steps<N>(pts, shape, checks->spacing, slo, shi, v, V, eval, aopt.rel_tol * scale,
+                      std::min(aopt.max_points, 2 * pts.size()), lattice);
       values.failure.clear();  // a failed flow there: the sums keep what was located before
       // The integrand's values alone, as check points.
       for (std::size_t j = 0; j < pts.size(); ++j)

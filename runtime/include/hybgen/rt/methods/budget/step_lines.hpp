@@ -15,7 +15,8 @@
 ///
 /// Here every segment along the lattice's last axis whose ends have different counts is
 /// halved, and again where its halves' ends differ, breadth first, each level one batch of
-/// evaluations: a segment halved L times holds its jump to h·2^(−L), and the sum changes by
+/// evaluations, until what the segments left could still be off is below a target (or a cap
+/// on the evaluations): a segment halved L times holds its jump to h·2^(−L), and the sum changes by
 /// the refined trapezoid rule's difference, w·ℓ/4·(2 v_m − v_a − v_b) per halving of a
 /// segment [a, b] of length ℓ with midpoint m and transverse weight w. The line sums of the
 /// step are then exact but for h·2^(−L)-th of their jumps and the smooth part's O(h²); what
@@ -54,6 +55,8 @@ inline bool counts_differ(const double* a, const double* b, std::size_t V) {
 ///  * v: 2V values per point: the V values of the integrand, then the V counts.
 ///  * eval(points, out): out ← 2V values per point, as v; false on a failure (the sums keep
 ///    what was located before it).
+///  * target: enough located: halving stops once, in every slot, the most the segments left
+///    can be off, Σ w·ℓ/2·|v_b − v_a| (a jump anywhere in [a, b]), is at most `target`.
 ///  * max_evals: the most points evaluated in all.
 /// Returns the number of points evaluated.
 template <std::size_t N, class Eval>
@@ -61,7 +64,8 @@ std::size_t locate_steps(std::span<const std::array<double, N>> x,
                          const std::array<std::size_t, N>& shape,
                          const std::array<double, N>& spacing, const std::array<double, N>& lo,
                          const std::array<double, N>& hi, std::span<const double> v, std::size_t V,
-                         Eval&& eval, std::size_t max_evals, std::vector<double>& sums) {
+                         Eval&& eval, double target, std::size_t max_evals,
+                         std::vector<double>& sums) {
   std::size_t count = 1;
   for (const std::size_t n : shape) count *= n;
   if (count != x.size() || v.size() != 2 * V * x.size() || shape[N - 1] < 2) return 0;
@@ -97,7 +101,15 @@ std::size_t locate_steps(std::span<const std::array<double, N>> x,
   std::size_t used = 0;
   std::vector<std::array<double, N>> mids;
   std::vector<double> mv;
+  std::vector<double> left(V);
   for (int level = 0; level < kMaxStepHalvings && !segments.empty(); ++level) {
+    std::fill(left.begin(), left.end(), 0.0);
+    for (const Segment& g : segments) {
+      const double half = 0.5 * g.w * (point(g.b)[N - 1] - point(g.a)[N - 1]);
+      const double *va = values(g.a), *vb = values(g.b);
+      for (std::size_t q = 0; q < V; ++q) left[q] += half * std::fabs(vb[q] - va[q]);
+    }
+    if (*std::max_element(left.begin(), left.end()) <= target) break;
     if (used + segments.size() > max_evals) break;
     mids.resize(segments.size());
     for (std::size_t s = 0; s < segments.size(); ++s) {
