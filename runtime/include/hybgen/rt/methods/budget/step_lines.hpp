@@ -15,10 +15,10 @@
 ///
 /// Here every segment along the lattice's last axis whose ends have different counts is
 /// halved, and again where its halves' ends differ, breadth first, each level one batch of
-/// evaluations, until what the segments left could still be off is below a target (or a cap
-/// on the evaluations): a segment halved L times holds its jump to h·2^(−L), and the sum changes by
-/// the refined trapezoid rule's difference, w·ℓ/4·(2 v_m − v_a − v_b) per halving of a
-/// segment [a, b] of length ℓ with midpoint m and transverse weight w. The line sums of the
+/// evaluations, until what the segments left could still be off by is within a target (or a
+/// cap on the evaluations): a segment halved L times holds its jump to h·2^(−L), and the sum
+/// changes by the refined trapezoid rule's difference, w·ℓ/4·(2 v_m − v_a − v_b) per halving
+/// of a segment [a, b] of length ℓ with midpoint m and transverse weight w. The line sums of the
 /// step are then exact but for h·2^(−L)-th of their jumps and the smooth part's O(h²); what
 /// is left is the transverse rule's error over the line integrals, which are continuous
 /// (kinks where a jump's curve is tangent to the lines).
@@ -68,7 +68,7 @@ std::size_t locate_steps(std::span<const std::array<double, N>> x,
                          std::vector<double>& sums) {
   std::size_t count = 1;
   for (const std::size_t n : shape) count *= n;
-  if (count != x.size() || v.size() != 2 * V * x.size() || shape[N - 1] < 2) return 0;
+  if (V == 0 || count != x.size() || v.size() != 2 * V * x.size() || shape[N - 1] < 2) return 0;
   const std::size_t W = 2 * V;
   // The points halving created that the segments still end on, after the lattice's: index
   // P + j is new point j.
