@@ -93,26 +93,33 @@ Step<N, F, C> step(std::size_t V, F f, C c) {
   return {V, f, c};
 }
 
+/// Where exp_step jumps: 1/√7, between the nodes of the lattices below.
+const double kJump = 1.0 / std::sqrt(7.0);
+
+/// One slot on [0, 1]: e^x·[x ≥ kJump], its count [x ≥ kJump].
+auto exp_step() {
+  return step<1>(
+      1,
+      [](const std::array<double, 1>& x, std::size_t) {
+        return x[0] >= kJump ? std::exp(x[0]) : 0.0;
+      },
+      [](const std::array<double, 1>& x, std::size_t) { return x[0] >= kJump ? 1.0 : 0.0; });
+}
+
 TEST(StepLines, OneJumpInOneDimensionIsHeldToItsLastHalving) {
   // ∫₀¹ e^x·[x ≥ s] dx = e − e^s, s = 1/√7 between nodes: the trapezoid rule puts the jump
   // at its segment's midpoint, off by up to h/2; halved kMaxStepHalvings times, by at most
   // h·2^(−11) (times the jump e^s), beside the smooth part's O(h²).
-  const double s0 = 1.0 / std::sqrt(7.0);
-  auto st = step<1>(
-      1,
-      [=](const std::array<double, 1>& x, std::size_t) {
-        return x[0] >= s0 ? std::exp(x[0]) : 0.0;
-      },
-      [=](const std::array<double, 1>& x, std::size_t) { return x[0] >= s0 ? 1.0 : 0.0; });
+  auto st = exp_step();
   const Lattice<1> L(33, 0.0, 1.0);
   std::size_t used = 0;
   const auto [plain, located] = st.sums(L, 1000, &used);
-  const double exact = std::numbers::e - std::exp(s0), h = L.spacing[0];
+  const double exact = std::numbers::e - std::exp(kJump), h = L.spacing[0];
   const double smooth = h * h / 12.0 * std::numbers::e;         // the trapezoid rule's e^x term
   EXPECT_EQ(used, static_cast<std::size_t>(kMaxStepHalvings));  // one segment per halving
   EXPECT_GT(std::fabs(plain[0] - exact), 1e-3 * h);             // the jump between nodes counts
   EXPECT_LE(std::fabs(located[0] - exact),
-            std::exp(s0) * h * std::ldexp(1.0, -kMaxStepHalvings - 1) + 2.0 * smooth);
+            std::exp(kJump) * h * std::ldexp(1.0, -kMaxStepHalvings - 1) + 2.0 * smooth);
 }
 
 TEST(StepLines, ADiscsLinesAreIntegratedExactly) {
@@ -223,13 +230,7 @@ TEST(StepLines, HalvingStopsOnceWhatIsLeftIsWithinTheTarget) {
   // One jump of e^s on [0, 1], s = 1/√7, 33 nodes: what its segment can still be off by is
   // ℓ/2·e^s, 0.0284 on the lattice, halved by each halving; a target of 0.01 stops after two
   // (0.0071), a target above 0.0284 before any.
-  const double s0 = 1.0 / std::sqrt(7.0);
-  auto st = step<1>(
-      1,
-      [=](const std::array<double, 1>& x, std::size_t) {
-        return x[0] >= s0 ? std::exp(x[0]) : 0.0;
-      },
-      [=](const std::array<double, 1>& x, std::size_t) { return x[0] >= s0 ? 1.0 : 0.0; });
+  auto st = exp_step();
   const Lattice<1> L(33, 0.0, 1.0);
   std::size_t used = 0;
   st.sums(L, 1000, &used, 0.01);

@@ -137,13 +137,14 @@ inline nlohmann::json run_summary(const std::string& model, const std::filesyste
   return read_json_file(dir / "summary.json");
 }
 
-/// How wide a bar of the budget's cubatures may be whatever its error: twice the tolerance
-/// the run asked for, summary.json's budget rel_tol (`fallback_tol` without one) times its
-/// initial mass. The cubature stops near that tolerance, each estimate a little above or below
-/// it, however much smaller its error is by luck (docs/hardening.md, "Calibrated bars").
-inline double asked_width(const nlohmann::json& s, double fallback_tol = 0.0) {
+/// How wide a bar of the budget's cubatures may be whatever its error: `margin` (twice by
+/// default) times the tolerance the run asked for, summary.json's budget rel_tol
+/// (`fallback_tol` without one) times its initial mass. The cubature stops near that
+/// tolerance, each estimate a little above or below it, however much smaller its error is by
+/// luck (docs/hardening.md, "Calibrated bars").
+inline double asked_width(const nlohmann::json& s, double fallback_tol = 0.0, double margin = 2.0) {
   const bool tol = s.contains("budget") && s["budget"].contains("rel_tol");
-  return 2.0 * (tol ? s["budget"]["rel_tol"].get<double>() : fallback_tol) *
+  return margin * (tol ? s["budget"]["rel_tol"].get<double>() : fallback_tol) *
          s["initial_mass"].get<double>();
 }
 

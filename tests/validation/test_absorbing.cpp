@@ -55,11 +55,12 @@ json run(const std::string& dir, const std::string& model, const std::string& me
 
 /// summary["absorbed"][guard]'s values and errors against `exact(t)`: each within
 /// `cover` × its error plus `floor`, and the error at most `width` × the true one or within
-/// twice the tolerance the run was asked for (`asked_width`: the budget's rel_tol, else 1e-3,
-/// times the initial mass). Prints what it compares.
+/// the tolerance the run was asked for (`asked_width` with a margin of 1: the budget's rel_tol,
+/// else 1e-3, times the initial mass; the characteristics' bars here measured at most 0.97 of
+/// it on 2026-12-02). Prints what it compares.
 void expect_absorbed(const json& s, const std::string& guard, double (*exact)(double),
                      const std::string& what, double cover, double width, double floor) {
-  const double asked = hybgen::testing::asked_width(s, 1e-3);
+  const double asked = hybgen::testing::asked_width(s, 1e-3, 1.0);
   ASSERT_TRUE(s.contains("absorbed") && s["absorbed"].contains(guard)) << what << ": " << s.dump();
   const json& a = s["absorbed"][guard];
   const json& times = s["times"];
