@@ -72,15 +72,14 @@ std::vector<std::size_t> check_lattice(const TensorGrid<N>& grid, std::size_t ca
   std::array<std::size_t, N> first{}, last{};  // node index range in [lo, hi] per axis
   if (!node_range(grid, lo, hi, 0.0, first, last)) return {};
   std::size_t stride = 1;
+  std::array<std::size_t, N> kept{};  // the nodes kept per axis at this stride
   for (;; ++stride) {
     std::size_t count = 1;
     for (std::size_t a = 0; a < N; ++a)
-      count *= last[a] / stride - (first[a] + stride - 1) / stride + 1;
+      count *= kept[a] = last[a] / stride - (first[a] + stride - 1) / stride + 1;
     if (count <= cap) break;
   }
-  if (shape != nullptr)
-    for (std::size_t a = 0; a < N; ++a)
-      (*shape)[a] = last[a] / stride - (first[a] + stride - 1) / stride + 1;
+  if (shape != nullptr) *shape = kept;
   std::vector<std::size_t> flat;
   for (std::size_t i = 0; i < grid.size(); ++i) {
     std::size_t rem = i;
@@ -101,6 +100,14 @@ std::vector<std::size_t> check_lattice(const TensorGrid<N>& grid, std::size_t ca
         ax.n > 1 ? static_cast<double>(stride) * (ax.max - ax.min) / (ax.n - 1) : ax.max - ax.min;
   }
   return flat;
+}
+
+/// A lattice coordinate y's factor in the trapezoid weight over [lo, hi] on an axis of
+/// spacing h: h, halved where y lies on lo or hi (to 1e-9·h; a box's face, where the
+/// integrand need not vanish: a full weight there counts half a cell outside the box).
+inline double trapezoid_factor(double y, double lo, double hi, double h) {
+  const double tol = 1e-9 * h;
+  return (std::fabs(y - lo) <= tol || std::fabs(y - hi) <= tol ? 0.5 : 1.0) * h;
 }
 
 /// Largest number of lattice points per grid spacing of `fine_lattice`.
@@ -160,11 +167,8 @@ void fine_lattice(const TensorGrid<N>& grid, std::size_t cap, std::size_t fine_c
   }
   weights.assign(checks.x.size(), 1.0);
   for (std::size_t j = 0; j < checks.x.size(); ++j)
-    for (std::size_t a = 0; a < N; ++a) {
-      const double tol = 1e-9 * checks.spacing[a], y = checks.x[j][a];
-      const bool end = std::fabs(y - lo[a]) <= tol || std::fabs(y - hi[a]) <= tol;
-      weights[j] *= (end ? 0.5 : 1.0) * checks.spacing[a];
-    }
+    for (std::size_t a = 0; a < N; ++a)
+      weights[j] *= trapezoid_factor(checks.x[j][a], lo[a], hi[a], checks.spacing[a]);
 }
 
 /// Whether x lies on the boundary of M's support, to the resolution `h`: one of the probes

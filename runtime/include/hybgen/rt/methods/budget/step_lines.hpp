@@ -33,6 +33,8 @@
 #include <span>
 #include <vector>
 
+#include "hybgen/rt/methods/budget/check_points.hpp"
+
 namespace hybgen::rt::detail {
 
 /// Most halvings of a segment by `locate_steps`: a jump held to 2^(−10) of the lattice's
@@ -90,11 +92,8 @@ std::size_t locate_steps(std::span<const std::array<double, N>> x,
   for (std::size_t line = 0; line < P; line += n_last) {
     // The transverse weight: the spacings of the other axes, halved on the box's faces.
     double w = 1.0;
-    for (std::size_t a = 0; a + 1 < N; ++a) {
-      const double tol = 1e-9 * spacing[a], y = x[line][a];
-      const bool face = std::fabs(y - lo[a]) <= tol || std::fabs(y - hi[a]) <= tol;
-      w *= (face ? 0.5 : 1.0) * spacing[a];
-    }
+    for (std::size_t a = 0; a + 1 < N; ++a)
+      w *= trapezoid_factor(x[line][a], lo[a], hi[a], spacing[a]);
     for (std::size_t i = line; i + 1 < line + n_last; ++i)
       if (counts_differ(values(i) + V, values(i + 1) + V, V)) segments.push_back({i, i + 1, w});
   }
