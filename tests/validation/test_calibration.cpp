@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "support/ball_closed_form.hpp"
+#include "support/bars.hpp"
 #include "support/e2e.hpp"
 #include "support/line_closed_forms.hpp"
 
@@ -65,32 +66,12 @@ json run_particles(const std::string& model, int seed) {
   return hybgen::testing::read_json_file(out / "summary.json");
 }
 
-/// Errors and their bars of one term, collected over runs.
-struct Term {
-  std::string name;
-  std::vector<double> error, bar;
-
-  /// Add the frames of `values` ± `bars` against exact(t), leaving out exact zeros.
+/// Errors and their bars of one Monte-Carlo term, collected over runs (exact zeros left out).
+struct Term : hybgen::testing::BarSeries {
+  /// Add the frames of `values` ± `bars` against exact(t).
   void add(const json& times, const json& values, const json& bars,
            const std::function<double(double)>& exact) {
-    ASSERT_EQ(values.size(), times.size()) << name;
-    ASSERT_EQ(bars.size(), times.size()) << name;
-    for (std::size_t k = 0; k < times.size(); ++k) {
-      const double ref = exact(times[k].get<double>());
-      if (ref == 0.0) continue;
-      error.push_back(values[k].get<double>() - ref);
-      bar.push_back(bars[k].get<double>());
-    }
-  }
-
-  /// The root mean square of z = 2·error/bar (error/σ̂ for a 2σ bar) over the frames.
-  double rms_z() const {
-    double z2 = 0.0;
-    for (std::size_t i = 0; i < error.size(); ++i) {
-      const double z = 2.0 * error[i] / bar[i];
-      z2 += z * z;
-    }
-    return std::sqrt(z2 / static_cast<double>(error.size()));
+    BarSeries::add(times, values, bars, exact, true);
   }
 
   /// The calibration's assertions (file comment), with what they measured.
@@ -117,9 +98,10 @@ struct Term {
 };
 
 TEST(Calibration, ParticleBudgetBarsAreTwoSigmaOfTheirErrors) {
-  Term mass{"mass in the box (leap_out, shuttle_trap)", {}, {}};
-  Term absorbed{"mass absorbed by the trap (shuttle_trap)", {}, {}};
-  Term atom{"atom at the Zeno point (zeno_ball)", {}, {}};
+  Term mass, absorbed, atom;
+  mass.name = "mass in the box (leap_out, shuttle_trap)";
+  absorbed.name = "mass absorbed by the trap (shuttle_trap)";
+  atom.name = "atom at the Zeno point (zeno_ball)";
   for (int seed = 1; seed <= kSeeds; ++seed) {
     const json leap = run_particles("leap_out", seed);
     ASSERT_TRUE(leap.contains("mass_error")) << leap.dump();
@@ -144,34 +126,60 @@ TEST(Calibration, ParticleBudgetBarsAreTwoSigmaOfTheirErrors) {
 }
 
 TEST(Calibration, TheBudgetsCubatureBarsOnALeapOutOfTheBox) {
-  // The characteristics' budget (adaptive cubature, budget/cubature.hpp) on leap_out at 32
-  // output times (dt = 0.025), `fast` and `full`, against the closed forms of the mass in the
-  // box and the outflow. Its errors are deterministic but come from where the jumps at the guard
-  // (x = 1) and at x = 1 + t fall between the Gauss nodes, which no estimate can know: over
-  // the frames they behave as a sample, and the bars are judged as the particles' are. Every
-  // bar covers its error; the RMS of 2·error/bar is at least kBudgetZRmsLow. Measured
-  // (2026-11-30): 0.18 and 0.17 for the mass, 0.19 and 0.28 for the outflow (fast, full): the
-  // bars are about 11× the errors' RMS (7–200× single errors), short of the 10× that
-  // docs/hardening.md ("Calibrated bars") aims at, with the reason there.
-  for (const std::string budget : {"fast", "full"}) {
-    const fs::path out = hybgen::testing::own_dir(kWork) / ("leap_budget_" + budget);
+  // The characteristics' budget (adaptive cubature, budget/cubature.hpp) on leap_out at 33
+  // output times (dt = 0.025), at `fast`, `full` and `full` to budget_tol 1e-6, against the
+  // closed forms of the mass in the box and the outflow (support/line_closed_forms.hpp), and
+  // the defect against 0 (leap_out loses mass only through its faces and its reset). Judged
+  // frame by frame (support/bars.hpp): every bar covers its error (the run's own closure test
+  // allows the defect twice its bar: methods.hpp, kDefectFactor), and a bar wider than twice the
+  // tolerance asked is at most 10× its error; and over the frames the RMS of 2·error/bar is
+  // at least kBudgetZRmsLow.
+  //
+  // Measured (2026-12-02, `ctest -R Calibration.TheBudgets -V`): every bar of the mass and
+  // the outflow within twice what was asked at the three tolerances, RMS of 2·error/bar
+  // 0.16–0.41 (the bars about 5–12× the errors' RMS); single bars are up to 10⁵× errors that
+  // are 0 by luck (t = 0, where a smooth density is integrated to 1e-6 of the tolerance).
+  // The defect's bar was the sum mass0_error + mass_error + outflow_error + atom_error; at
+  // `fast`, 13 of its 33 frames were beyond twice what was asked, 5.1e-3 at t = 0 for a defect
+  // that is exactly 0: the two masses' errors counted twice. It now takes the drop
+  // mass0 − mass as one integral (budget/volume.hpp): 2.5e-4 at t = 0, and the widest 5.1e-3
+  // at t = 0.125 (the two masses' estimates do not cancel where the density has moved), 0.5 of
+  // the defect's tolerance and 1.02 times twice the tolerance of one term.
+  struct Budget {
+    const char* label;
+    const char* sets;
+  };
+  for (const Budget& b : {Budget{"fast", "--set budget=fast"}, Budget{"full", "--set budget=full"},
+                          Budget{"full to 1e-6", "--set budget=full --set budget_tol=1e-6"}}) {
+    const fs::path out =
+        hybgen::testing::own_dir(kWork) / ("leap_budget_" + std::string(b.label).substr(0, 4) +
+                                           (std::string(b.label).size() > 4 ? "_tight" : ""));
     fs::remove_all(out);
     const auto r =
         hybgen_cli("run tests/validation/models/leap_out.model --quiet --out '" + out.string() +
-                   "' --set budget=" + budget + " --set dt=0.025 --set outputs=netcdf");
+                   "' " + b.sets + " --set dt=0.025 --set outputs=netcdf");
     ASSERT_EQ(r.code, 0) << r.out;
     const json s = hybgen::testing::read_json_file(out / "summary.json");
-    for (const std::string term : {"mass", "outflow"}) {
-      Term t{term + " by characteristics, budget=" + budget, {}, {}};
-      t.add(s["times"], s[term], s["budget"][term + "_error"],
-            term == "mass" ? hybgen::testing::leap_mass : hybgen::testing::leap_outflow);
-      ASSERT_GE(t.error.size(), 30u);
-      for (std::size_t i = 0; i < t.error.size(); ++i)
-        EXPECT_LE(std::fabs(t.error[i]), t.bar[i]) << t.name << " frame " << i;
-      const double rms = t.rms_z();
-      std::printf("[ calibration ] %s: %zu frames, RMS of 2 error/bar %.3f\n", t.name.c_str(),
-                  t.error.size(), rms);
-      EXPECT_GE(rms, kBudgetZRmsLow) << t.name << ": bars wider than about 17x the errors' RMS";
+    ASSERT_TRUE(s["budget"]["closes"].get<bool>()) << s["budget"].dump();
+    const double asked = hybgen::testing::asked_width(s);
+    for (const std::string term : {"mass", "outflow", "defect"}) {
+      hybgen::testing::BarSeries t;
+      t.name = term + " by characteristics, budget " + b.label;
+      if (term == "defect")
+        t.add(s["times"], s["budget"]["defect"], s["budget"]["defect_error"],
+              [](double) { return 0.0; });
+      else
+        t.add(s["times"], s[term], s["budget"][term + "_error"],
+              term == "mass" ? hybgen::testing::leap_mass : hybgen::testing::leap_outflow);
+      ASSERT_EQ(t.error.size(), 33u) << t.name;
+      // The defect sums four measured terms (the two masses of the drop, the outflow, the
+      // atom), each asked for rel_tol·mass: its tolerance is their sum.
+      const hybgen::testing::BarVerdict v = hybgen::testing::expect_bars_cover_and_tight(
+          t, term == "defect" ? hybgen::testing::asked_width(s, 0.0, 4.0) : asked);
+      // The defect's true value is 0: its errors do not behave as a sample of its bar's.
+      if (term != "defect") {
+        EXPECT_GE(v.rms, kBudgetZRmsLow) << t.name << ": bars wider than about 17x the errors' RMS";
+      }
     }
   }
 }
@@ -180,7 +188,7 @@ TEST(Calibration, TheForwardFlowsBarsOnImpactsAndTraps) {
   // The impacts on the guards and the masses the traps absorbed, by characteristics: the
   // budget's forward flows integrated by their own cubature (budget/atom.hpp), each bar at
   // least twice the cubature's distance from its check lattice's sum (collect_step). Every
-  // bar covers its error, and is at most kForwardBarRatio times it or within twice the
+  // bar covers its error, and is at most kBarRatio times it (support/bars.hpp) or within twice the
   // tolerance the run asked for (support/e2e.hpp, asked_width).
   //  * shuttle_trap (budget=full): the turn's impacts (the mass that started above 1 − t) and
   //    the trap's (absorbed);
@@ -197,7 +205,6 @@ TEST(Calibration, TheForwardFlowsBarsOnImpactsAndTraps) {
   // (the ball's widest 6.5e-5, for 4.2e-5 asked, is 16.5× an error of 3.9e-6; its largest
   // error, 2.2e-5, has a bar of 3.9e-5). Before, this test judged the bars beyond twice what
   // was asked by their RMS of 2·error/bar (at least 0.05), not frame by frame.
-  constexpr double kForwardBarRatio = 10.0;
   struct Case {
     const char* model;
     const char* sets;
@@ -224,26 +231,11 @@ TEST(Calibration, TheForwardFlowsBarsOnImpactsAndTraps) {
     const json s = hybgen::testing::read_json_file(out / "summary.json");
     ASSERT_TRUE(s.contains(c.group) && s[c.group].contains(c.guard)) << s.dump();
     const json& a = s[c.group][c.guard];
-    Term all{std::string(c.group) + " on '" + c.guard + "' (" + c.model + ")", {}, {}};
-    all.add(s["times"], a["values"], a["errors"], c.exact);
+    hybgen::testing::BarSeries all;
+    all.name = std::string(c.group) + " on '" + c.guard + "' (" + c.model + ")";
+    all.add(s["times"], a["values"], a["errors"], c.exact, true);
     ASSERT_GE(all.error.size(), 10u) << all.name;
-    const double asked = hybgen::testing::asked_width(s);
-    std::size_t wide = 0;  // frames whose bar is wider than twice what was asked
-    double widest = 0.0;   // their largest bar/error
-    for (std::size_t i = 0; i < all.error.size(); ++i) {
-      const double err = std::fabs(all.error[i]), bar = all.bar[i];
-      EXPECT_LE(err, bar) << all.name << " frame " << i;
-      if (bar <= asked) continue;
-      ++wide;
-      widest = std::max(widest, bar / err);
-      EXPECT_LE(bar, kForwardBarRatio * err)
-          << all.name << " frame " << i << ": a bar wider than " << asked
-          << " (twice what was asked) and " << kForwardBarRatio << "x its error";
-    }
-    std::printf(
-        "[ calibration ] %s: %zu frames, %zu with a bar wider than %.1e (twice what was asked), "
-        "largest bar/error among them %.1f\n",
-        all.name.c_str(), all.error.size(), wide, asked, widest);
+    hybgen::testing::expect_bars_cover_and_tight(all, hybgen::testing::asked_width(s));
   }
 }
 

@@ -178,7 +178,10 @@ struct MassBudget {
   std::vector<double> atom;
   /// Estimated |error| of mass[k] (`adaptive_mass_budget`, budget.hpp); empty for fixed rules.
   std::vector<double> mass_error;
-  double mass0_error = 0.0;           ///< Estimated |error| of mass0 (adaptive only).
+  double mass0_error = 0.0;  ///< Estimated |error| of mass0 (adaptive only).
+  /// Estimated |error| of mass0 − mass[k], measured as one integral (adaptive only,
+  /// budget/volume.hpp); empty: mass0_error + mass_error[k].
+  std::vector<double> drop_error;
   std::vector<double> outflow_error;  ///< Estimated |error| of outflow[k] (adaptive only).
   std::vector<double> atom_error;     ///< Estimated |error| of atom[k] (adaptive only).
   /// Per guard g: the mass that g absorbed (`reset absorb`, model.hpp) by each output time —
@@ -207,12 +210,17 @@ inline std::vector<double> budget_defect(const MassBudget& b) {
   return d;
 }
 
-/// Estimated |error| of budget_defect(b)[k]: the sum of its terms' estimates.
+/// Estimated |error| of budget_defect(b)[k]: the sum of its terms' estimates, mass0 − mass[k]
+/// taken as one term where the budget measured it so (`drop_error`: the two masses' errors
+/// come from the same cubature cells, and at t = 0 the drop is exactly 0).
 inline std::vector<double> budget_defect_error(const MassBudget& b) {
   std::vector<double> e(b.mass.size(), 0.0);
   auto at = [](const std::vector<double>& v, std::size_t k) { return k < v.size() ? v[k] : 0.0; };
-  for (std::size_t k = 0; k < e.size(); ++k)
-    e[k] = at(b.mass_error, k) + b.mass0_error + at(b.outflow_error, k) + at(b.atom_error, k);
+  for (std::size_t k = 0; k < e.size(); ++k) {
+    const double drop =
+        k < b.drop_error.size() ? b.drop_error[k] : at(b.mass_error, k) + b.mass0_error;
+    e[k] = drop + at(b.outflow_error, k) + at(b.atom_error, k);
+  }
   return e;
 }
 

@@ -129,6 +129,7 @@ BudgetResult<state_dim_v<M>> adaptive_mass_budget(const TensorGrid<state_dim_v<M
   mb.mass = am.mass;
   mb.mass_error = am.error;
   mb.mass0_error = am.mass0_error;
+  mb.drop_error = am.drop_error;
   mb.outflow = ao.outflow;
   mb.reset_outflow = reset.outflow;
   for (std::size_t k = 0; k < times.size(); ++k) mb.outflow[k] += reset.outflow[k];

@@ -618,8 +618,9 @@ MethodResult<state_dim_v<M>> solve_by_characteristics(const TensorGrid<state_dim
   // dominated; a strip of density 49 thinner than the grid's spacing that no cubature node
   // saw).
   std::vector<double> widened(defect.size(), 0.0);
-  std::vector<std::vector<double>*> bars = {&r.budget.mass_error, &r.budget.outflow_error,
-                                            &r.budget.atom_error};
+  // Without guards there is no Zeno point: the atom is 0 by construction, and so is its bar.
+  std::vector<std::vector<double>*> bars = {&r.budget.mass_error, &r.budget.outflow_error};
+  if (M::n_guard > 0) bars.push_back(&r.budget.atom_error);
   for (std::vector<double>& a : r.budget.absorbed_error) bars.push_back(&a);
   for (std::size_t k = 0; k < defect.size(); ++k) {
     const double d = std::fabs(defect[k]);

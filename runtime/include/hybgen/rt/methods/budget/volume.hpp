@@ -4,6 +4,15 @@
 /// by the adaptive cubature (budget/cubature.hpp) of the density traced exactly (to the ODE
 /// tolerance) by backward characteristics at its nodes, with the grid's nodes as check
 /// points (budget/check_points.hpp). mass0 is the same cubature at t = 0.
+///
+/// The drops mass0 − mass[k] are integrated by the same cubature too, as passive slots of the
+/// integrand u(0) − u(t_k): the cubature is linear, so the slot's integral is mass0 − mass[k]
+/// and its estimate is the error model (cubature.hpp) applied to the difference. The errors of
+/// mass0 and mass[k] come from the same cells and partly cancel in it (exactly at t = 0, where
+/// the drop is 0); the budget's defect (core/solution.hpp, `budget_defect_error`) takes this
+/// estimate instead of the sum mass0_error + error[k], which counted them twice. The estimate
+/// is at most that sum: each part of the error model is subadditive (|Σ(d₀ − d_k)| ≤ |Σd₀| +
+/// |Σd_k|, Minkowski for the square roots, the null-rule indicators' triangle inequality).
 
 #include <algorithm>
 #include <array>
@@ -24,9 +33,11 @@ namespace hybgen::rt {
 
 /// Result of `adaptive_mass` (`error[k]` is the estimated |error| of mass[k]).
 struct AdaptiveMass : CubatureStats {
-  std::vector<double> mass;      ///< Σ_modes ∫_box u(t_k), per output time.
-  double mass0 = 0.0;            ///< Σ_modes ∫_box u0 by the same cubature.
-  double mass0_error = 0.0;      ///< Estimated |error| of mass0 (also in error_estimate).
+  std::vector<double> mass;  ///< Σ_modes ∫_box u(t_k), per output time.
+  double mass0 = 0.0;        ///< Σ_modes ∫_box u0 by the same cubature.
+  double mass0_error = 0.0;  ///< Estimated |error| of mass0 (also in error_estimate).
+  /// Estimated |error| of mass0 − mass[k], per output time (the file comment).
+  std::vector<double> drop_error;
   std::size_t check_points = 0;  ///< Grid nodes the cubature checked itself against.
 };
 
@@ -43,10 +54,17 @@ struct VolumeValues {
   const CharacteristicsOptions* opt = nullptr;      ///< Characteristics options.
   TraceFailure<N> failure{};                        ///< First failure.
   bool per_mode = false;                            ///< See the struct comment.
+  /// Also the drops (the file comment): with S = 2K − 1 values per point,
+  /// U[i·S + K + j] = U[i·S] − U[i·S + 1 + j] for j < K − 1 (not with per_mode).
+  bool drops = false;
 
-  /// U[i·K + k] = Σ_m u(slots[k], m, pts[i]); per_mode, with S = K·(n_mode + n_obs) values
-  /// per point: U[i·S + k·n_mode + m] = u(slots[k], m, pts[i]) and
-  /// U[i·S + K·n_mode + k·n_obs + o] = Σ_m f_o(m, pts[i])·u(slots[k], m, pts[i]).
+  /// Values per point: K slots, the drops' K − 1 with `drops`.
+  std::size_t width() const { return drops ? 2 * slots.size() - 1 : slots.size(); }
+
+  /// U[i·S + k] = Σ_m u(slots[k], m, pts[i]), S = width(); per_mode, with
+  /// S = K·(n_mode + n_obs) values per point:
+  ///   U[i·S + k·n_mode + m] = u(slots[k], m, pts[i]),
+  ///   U[i·S + K·n_mode + k·n_obs + o] = Σ_m f_o(m, pts[i])·u(slots[k], m, pts[i]).
   bool operator()(std::span<const Cell<N>>, std::span<const std::array<double, N>> pts, std::size_t,
                   std::vector<double>& U) {
     const Solution<N> sol = evaluate<M>(pts, slots, par, *opt);
@@ -56,14 +74,14 @@ struct VolumeValues {
     }
     const std::size_t K = slots.size(), Mn = sol.n_mode;
     const std::size_t n_obs = per_mode ? static_cast<std::size_t>(observable_count<M>()) : 0;
-    const std::size_t S = K * (Mn + n_obs);
-    for (std::size_t i = 0; i < pts.size(); ++i)
+    const std::size_t S = per_mode ? K * (Mn + n_obs) : width();
+    for (std::size_t i = 0; i < pts.size(); ++i) {
       for (std::size_t m = 0; m < Mn; ++m) {
         for (std::size_t k = 0; k < K; ++k) {
           if (per_mode)
             U[i * S + k * Mn + m] = sol.at(k, m, i);
           else
-            U[i * K + k] += sol.at(k, m, i);
+            U[i * S + k] += sol.at(k, m, i);
         }
         for (std::size_t o = 0; o < n_obs; ++o) {
           const double f =
@@ -72,6 +90,9 @@ struct VolumeValues {
             U[i * S + K * Mn + k * n_obs + o] += f * sol.at(k, m, i);
         }
       }
+      if (drops && !per_mode)
+        for (std::size_t j = 0; j + 1 < K; ++j) U[i * S + K + j] = U[i * S] - U[i * S + 1 + j];
+    }
     return true;
   }
 };
@@ -93,11 +114,12 @@ namespace detail {
 /// computed here (characteristics; u0). A characteristic traced here that fails (a flow that
 /// is singular on the box's boundary, which the cubature's interior nodes never touch)
 /// leaves the cubature without check points: its own nodes report the failures that matter.
+/// With `drops`, each point also carries the drops' values (VolumeValues).
 template <HybridModel M>
 void volume_checks(const TensorGrid<state_dim_v<M>>& grid, std::span<const double> slots,
                    std::size_t off, const Solution<state_dim_v<M>>* nodes, const double* par,
                    const CharacteristicsOptions& opt, const AdaptiveOptions& aopt,
-                   CheckPoints<state_dim_v<M>>& checks) {
+                   CheckPoints<state_dim_v<M>>& checks, bool drops) {
   constexpr std::size_t N = state_dim_v<M>;
   const std::size_t K = slots.size();
   if (nodes != nullptr &&
@@ -144,7 +166,18 @@ void volume_checks(const TensorGrid<state_dim_v<M>>& grid, std::span<const doubl
       for (std::size_t k = 0; k < K; ++k)
         for (std::size_t m = 0; m < sol.n_mode; ++m) v[j * K + k] += sol.at(k, m, j);
   }
-  keep_samples<M>(checks, std::move(v), K, par);
+  if (!drops || K < 2) {
+    keep_samples<M>(checks, std::move(v), K, par);
+    return;
+  }
+  const std::size_t S = 2 * K - 1;
+  std::vector<double> w(flat.size() * S);
+  for (std::size_t j = 0; j < flat.size(); ++j) {
+    std::copy_n(v.begin() + static_cast<std::ptrdiff_t>(j * K), K,
+                w.begin() + static_cast<std::ptrdiff_t>(j * S));
+    for (std::size_t i = 0; i + 1 < K; ++i) w[j * S + K + i] = v[j * K] - v[j * K + 1 + i];
+  }
+  keep_samples<M>(checks, std::move(w), S, par);
 }
 
 }  // namespace detail
@@ -172,11 +205,13 @@ AdaptiveMass adaptive_mass(const TensorGrid<state_dim_v<M>>& box, std::span<cons
     root.hi[a] = box.axes[a].max;
   }
   detail::CheckPoints<N> checks;
-  detail::volume_checks<M>(box, slots, off, nodes, par, opt, aopt, checks);
-  detail::VolumeValues<M> values{slots, par, &opt, {}};
-  const std::size_t per_point = slots.size() * static_cast<std::size_t>(M::n_mode);
-  detail::AdaptiveCubature<N, detail::VolumeValues<M>> cub({root}, slots.size(), per_point, aopt,
-                                                           0.0, values, &checks);
+  detail::volume_checks<M>(box, slots, off, nodes, par, opt, aopt, checks, true);
+  detail::VolumeValues<M> values{slots, par, &opt, {}, false, true};
+  const std::size_t K = slots.size(), S = values.width();
+  const std::size_t per_point = K * static_cast<std::size_t>(M::n_mode) + (S - K);
+  // Only the K masses steer the cubature; the drops ride on its cells.
+  detail::AdaptiveCubature<N, detail::VolumeValues<M>> cub({root}, S, per_point, aopt, 0.0, values,
+                                                           &checks, K);
   const bool ok = cub.run();
   if (!ok) failure = values.failure;
   AdaptiveMass res;
@@ -185,6 +220,16 @@ AdaptiveMass adaptive_mass(const TensorGrid<state_dim_v<M>>& box, std::span<cons
   res.mass0_error = cub.error(0);
   res.error_estimate = res.mass0_error;
   detail::collect(cub, ok, off, times.size(), res.mass, res);
+  // The drops' estimates (0 at t = 0: the same slot). A cubature stopped short (`collect`
+  // widened every time's estimate to the largest) keeps the sum.
+  res.drop_error.assign(times.size(), 0.0);
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    const std::size_t slot = k + off;
+    const double sum = res.mass0_error + res.error[k];
+    res.drop_error[k] = slot == 0       ? 0.0
+                        : res.converged ? std::min(cub.error(K + slot - 1), sum)
+                                        : sum;
+  }
   return res;
 }
 
