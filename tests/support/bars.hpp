@@ -88,10 +88,12 @@ inline BarVerdict expect_bars_cover_and_tight(const BarSeries& s, double asked, 
         << ") and " << kBarRatio << "x its error " << err;
   }
   v.rms = s.rms_z();
+  char widest[48] = "-";
+  if (v.wide > 0) std::snprintf(widest, sizeof widest, "%.1f", v.widest);
   std::printf(
       "[ bars ] %s: %zu frames, %zu with a bar wider than %.1e (what was asked), largest "
-      "bar/error among them %.1f; RMS of 2 error/bar %.3f\n",
-      s.name.c_str(), v.frames, v.wide, asked, v.widest, v.rms);
+      "bar/error among them %s; RMS of 2 error/bar %.3f\n",
+      s.name.c_str(), v.frames, v.wide, asked, widest, v.rms);
   return v;
 }
 

@@ -156,8 +156,10 @@ TEST(Absorbing, TheShuttlesTrapByParticles) {
 TEST(Absorbing, TheShuttlesTrapByTransfer) {
   const json s = run("shuttle_transfer", "shuttle_trap", "transfer");
   ASSERT_FALSE(s.empty());
-  // The hat scheme's absorbed mass against the closed form, with its two-grid estimate.
-  expect_absorbed(s, "trap", shuttle_absorbed, "transfer", 1.0, 100.0, 1e-9);
+  // The hat scheme's absorbed mass against the closed form, with its two-grid estimate: at
+  // most 10× the error (measured 2026-12-02: 1.1×, 3.5× and 5.3× at t = 1.25, 1.5 and ≥ 1.75;
+  // held to 100× before).
+  expect_absorbed(s, "trap", shuttle_absorbed, "transfer", 1.0, 10.0, 1e-9);
 }
 
 TEST(Absorbing, GrowthAbsorbedAtTheFaceAndItsEscapeRate) {
