@@ -2,8 +2,8 @@
 /// \file bars.hpp
 /// How the tests judge a reported error bar against the true error of its value, frame by
 /// frame (docs/hardening.md, "Calibrated bars"):
-///  * it covers: |error| ≤ cover·bar + floor (cover 1 for a bar meant as a bound, more for an
-///    estimate the run itself uses with a factor: the budget's defect, kDefectFactor);
+///  * it covers: |error| ≤ cover·bar + floor (cover 1 by default; more for a bar that is an
+///    estimate of a standard deviation, which a run's error may exceed now and then);
 ///  * it is tight: at most kBarRatio times |error|, or within `asked`, the width the run was
 ///    asked for (e2e.hpp, `asked_width`). An adaptive cubature stops as soon as its estimate
 ///    meets the tolerance, so a bar below it says "as accurate as asked" and no more, however

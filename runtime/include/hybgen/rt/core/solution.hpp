@@ -182,6 +182,9 @@ struct MassBudget {
   /// Estimated |error| of mass0 − mass[k], measured as one integral (adaptive only,
   /// budget/volume.hpp); empty: mass0_error + mass_error[k].
   std::vector<double> drop_error;
+  /// Estimated |error| of the defect as the budget measured it, before its terms' bars were
+  /// widened by it (methods.hpp); empty: `budget_defect_error` sums the terms' bars.
+  std::vector<double> defect_error;
   std::vector<double> outflow_error;  ///< Estimated |error| of outflow[k] (adaptive only).
   std::vector<double> atom_error;     ///< Estimated |error| of atom[k] (adaptive only).
   /// Per guard g: the mass that g absorbed (`reset absorb`, model.hpp) by each output time —
@@ -210,10 +213,12 @@ inline std::vector<double> budget_defect(const MassBudget& b) {
   return d;
 }
 
-/// Estimated |error| of budget_defect(b)[k]: the sum of its terms' estimates, mass0 − mass[k]
+/// Estimated |error| of budget_defect(b)[k]: `defect_error` where the budget kept it, else the
+/// sum of its terms' estimates, mass0 − mass[k]
 /// taken as one term where the budget measured it so (`drop_error`: the two masses' errors
 /// come from the same cubature cells, and at t = 0 the drop is exactly 0).
 inline std::vector<double> budget_defect_error(const MassBudget& b) {
+  if (!b.defect_error.empty()) return b.defect_error;
   std::vector<double> e(b.mass.size(), 0.0);
   auto at = [](const std::vector<double>& v, std::size_t k) { return k < v.size() ? v[k] : 0.0; };
   for (std::size_t k = 0; k < e.size(); ++k) {

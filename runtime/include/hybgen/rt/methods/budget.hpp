@@ -69,7 +69,8 @@ struct AdaptiveBudgetInfo {
 ///  * absorbed: the same flows, the mass each absorbing guard took (part of the outflow);
 ///  * impacts: forward flows too, the firings of every guard (`adaptive_impacts`; not a term
 ///    of the budget, methods/impacts.hpp).
-/// Each has its estimated error (mass_error, outflow_error, atom_error); the DEFECT
+/// Each has its estimated error (mass_error, outflow_error, atom_error, and drop_error for
+/// mass0 − mass: `adaptive_mass`); the DEFECT
 /// mass0 − mass − outflow − atom (`budget_defect`) checks them against each other: it is what
 /// no term accounts for (mass that started outside the box and is reset into it, or an error
 /// the estimates missed). `grid` gives the box and the

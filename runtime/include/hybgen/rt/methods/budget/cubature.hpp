@@ -63,7 +63,8 @@
 ///    their values stay in the sums, their storage is freed. Cells where the integrand is 0
 ///    (outside the support) freeze at once. Cells narrower than 2⁻⁴⁰ of the box are frozen
 ///    too (an unresolvable singularity keeps its honest share of E_k).
-///  * Memory: 8·5K bytes per live leaf (K slots), at most max_points/q^D leaves, plus one
+///  * Memory: 8·5K bytes per live leaf (K slots, the passive ones included: the volume's
+///    2·(times) − 1 with its drops, budget/volume.hpp), at most max_points/q^D leaves, plus one
 ///    batch of ≤ 2²¹ (point, time, mode) values (the initial cells are traced in batches of
 ///    that size too).
 ///  * Per-root integrals (`per_root`): the integral and the error model above are also kept
