@@ -149,13 +149,14 @@ TEST(Calibration, TheBudgetsCubatureBarsOnALeapOutOfTheBox) {
   // of the defect's tolerance and 1.02 times twice the tolerance of one term.
   struct Budget {
     const char* label;
+    const char* dir;  // under the test's own directory
     const char* sets;
   };
-  for (const Budget& b : {Budget{"fast", "--set budget=fast"}, Budget{"full", "--set budget=full"},
-                          Budget{"full to 1e-6", "--set budget=full --set budget_tol=1e-6"}}) {
-    const fs::path out =
-        hybgen::testing::own_dir(kWork) / ("leap_budget_" + std::string(b.label).substr(0, 4) +
-                                           (std::string(b.label).size() > 4 ? "_tight" : ""));
+  for (const Budget& b : {Budget{"fast", "leap_budget_fast", "--set budget=fast"},
+                          Budget{"full", "leap_budget_full", "--set budget=full"},
+                          Budget{"full to 1e-6", "leap_budget_full_tight",
+                                 "--set budget=full --set budget_tol=1e-6"}}) {
+    const fs::path out = hybgen::testing::own_dir(kWork) / b.dir;
     fs::remove_all(out);
     const auto r =
         hybgen_cli("run tests/validation/models/leap_out.model --quiet --out '" + out.string() +
