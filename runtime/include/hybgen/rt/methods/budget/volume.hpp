@@ -47,6 +47,12 @@ struct AdaptiveMass : CubatureStats {
 
 namespace detail {
 
+/// The drops of one point's row of 2K − 1 values whose first K are the slots' (the file
+/// comment): row[K + j] = row[0] − row[1 + j] for j < K − 1.
+inline void fill_drops(double* row, std::size_t K) {
+  for (std::size_t j = 0; j + 1 < K; ++j) row[K + j] = row[0] - row[1 + j];
+}
+
 /// Volume integrand: Σ_modes u(t_k) at the points, for the time slots `slots`, or each mode's
 /// u on its own and then each observable's Σ_m f_o u (`per_mode`: the cell averages,
 /// budget/cell_averages.hpp).
@@ -94,8 +100,7 @@ struct VolumeValues {
             U[i * S + K * Mn + k * n_obs + o] += f * sol.at(k, m, i);
         }
       }
-      if (drops && !per_mode)
-        for (std::size_t j = 0; j + 1 < K; ++j) U[i * S + K + j] = U[i * S] - U[i * S + 1 + j];
+      if (drops && !per_mode) fill_drops(&U[i * S], K);
     }
     return true;
   }
@@ -136,7 +141,8 @@ void volume_checks(const TensorGrid<state_dim_v<M>>& grid, std::span<const doubl
   }
   const std::vector<std::size_t> flat =
       check_lattice(grid, max_volume_checks(aopt), lo, hi, checks);
-  std::vector<double> v(flat.size() * K, 0.0);
+  const std::size_t S = drops ? 2 * K - 1 : K;  // values per point
+  std::vector<double> v(flat.size() * S, 0.0);
   if (nodes != nullptr) {
     // A distributed solution (several ranks) holds each (mode, node) on one rank: the values
     // at the check points are summed over the ranks per mode (0 + u: exact), then over the
@@ -152,12 +158,13 @@ void volume_checks(const TensorGrid<state_dim_v<M>>& grid, std::span<const doubl
             u[(j * K + k + off) * n_mode + m] = nodes->at(k, m, flat[j]);
     if (nodes->distributed && opt.backend != nullptr)
       opt.backend->sum_disjoint(std::span<double>(u));
-    for (std::size_t jk = 0; jk < flat.size() * K; ++jk)
-      for (std::size_t m = 0; m < n_mode; ++m) v[jk] += u[jk * n_mode + m];
+    for (std::size_t j = 0; j < flat.size(); ++j)
+      for (std::size_t k = 0; k < K; ++k)
+        for (std::size_t m = 0; m < n_mode; ++m) v[j * S + k] += u[(j * K + k) * n_mode + m];
     for (std::size_t j = 0; j < flat.size(); ++j) {
       if (off == 1 && M::in_support(checks.x[j].data(), par))
         for (int m = 0; m < M::n_mode; ++m)
-          v[j * K] += M::initial_density(m, checks.x[j].data(), par);
+          v[j * S] += M::initial_density(m, checks.x[j].data(), par);
     }
   } else {
     const Solution<N> sol =
@@ -168,20 +175,11 @@ void volume_checks(const TensorGrid<state_dim_v<M>>& grid, std::span<const doubl
     }
     for (std::size_t j = 0; j < flat.size(); ++j)
       for (std::size_t k = 0; k < K; ++k)
-        for (std::size_t m = 0; m < sol.n_mode; ++m) v[j * K + k] += sol.at(k, m, j);
+        for (std::size_t m = 0; m < sol.n_mode; ++m) v[j * S + k] += sol.at(k, m, j);
   }
-  if (!drops || K < 2) {
-    keep_samples<M>(checks, std::move(v), K, par);
-    return;
-  }
-  const std::size_t S = 2 * K - 1;
-  std::vector<double> w(flat.size() * S);
-  for (std::size_t j = 0; j < flat.size(); ++j) {
-    std::copy_n(v.begin() + static_cast<std::ptrdiff_t>(j * K), K,
-                w.begin() + static_cast<std::ptrdiff_t>(j * S));
-    for (std::size_t i = 0; i + 1 < K; ++i) w[j * S + K + i] = v[j * K] - v[j * K + 1 + i];
-  }
-  keep_samples<M>(checks, std::move(w), S, par);
+  if (drops)
+    for (std::size_t j = 0; j < flat.size(); ++j) fill_drops(&v[j * S], K);
+  keep_samples<M>(checks, std::move(v), S, par);
 }
 
 }  // namespace detail
